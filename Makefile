@@ -1,0 +1,42 @@
+# Developer entry points. `make venv` is idempotent: it (re)installs only when
+# requirements.txt, setup.py, setup.cfg or package.xml changed since the last install.
+SHELL := /bin/bash
+.SHELLFLAGS := -euo pipefail -c
+
+VENV := .venv
+PY := $(VENV)/bin/python
+STAMP := $(VENV)/.hexapod_vibration.installed
+BASE_PYTHON ?= $(shell command -v python3.11 || command -v python3)
+
+.PHONY: venv test lint demo bench clean
+
+venv: $(STAMP)
+
+$(PY):
+	$(BASE_PYTHON) -m venv $(VENV)
+
+$(STAMP): requirements.txt setup.py setup.cfg package.xml | $(PY)
+	$(PY) -m pip install --disable-pip-version-check -q -r requirements.txt
+	$(PY) -m pip install --disable-pip-version-check -q -e .
+	cd / && $(CURDIR)/$(PY) -c 'import hexapod_vibration'
+	test -x $(VENV)/bin/pph_recorder
+	touch $@
+
+# Each run picks its own base ROS_DOMAIN_ID (test/conftest.py adds a per-test offset), so
+# concurrent runs on one machine do not see each other's nodes.
+test: venv
+	HEXAPOD_TEST_DOMAIN_BASE=$${HEXAPOD_TEST_DOMAIN_BASE:-$$((20 + RANDOM % 181))} \
+	  $(PY) -m pytest -q test
+
+lint: venv
+	$(VENV)/bin/ruff check .
+
+demo: venv
+	$(VENV)/bin/experiment --demo --out out/demo
+
+bench: venv
+	$(VENV)/bin/hexapod_bench --out bench
+
+clean:
+	rm -rf build install log out .pytest_cache .ruff_cache *.egg-info
+	find . -path ./$(VENV) -prune -o -name __pycache__ -type d -prune -exec rm -rf {} +

@@ -1,0 +1,1 @@
+"""Pure numerical core: no rclpy or ROS message imports."""

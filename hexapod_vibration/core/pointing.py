@@ -1,0 +1,158 @@
+"""Low-pass pointing law: hold the top plate's pose from the eddy-current sensors.
+
+Per sample (1 kHz): pose = S^-1 gaps (relative to the bottom plate); error = target - pose;
+a Cartesian PID law per axis, then the Stewart statics and a Butterworth low-pass:
+
+    wrench = Kp e + Ki integral(e) - D pose_rate,   strut forces = J^-T wrench.
+
+The cubic configuration decouples the six axes (J^T J and the payload's mass matrix are
+diagonal), so each axis is a mass m on the suspension stiffness k = k_strut (J^T J)_ii.
+The gains place that axis' closed-loop poles at
+
+    (s + w_c)(s^2 + 2 zeta w_n s + w_n^2),   w_c = 2 pi bandwidth_hz,  w_n = max(w_r, 2 w_c)
+
+with w_r = sqrt(k/m) the axis' suspension mode: the integral pole sets the pointing
+bandwidth (a few Hz, far below the vibration tones), the suspension mode keeps its
+frequency and gets ``damping_ratio``. The low-pass on the forces keeps the pointing law out
+of the vibration band. The integral carries the payload's weight.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from hexapod_vibration.core.filters import SosFilterBank
+from hexapod_vibration.core.geometry import CubicHexapodGeometry
+from hexapod_vibration.core.sensors import pose_from_gaps
+
+MAX_TILT_RAD = np.deg2rad(2.5)
+MAX_TWIST_RAD = np.deg2rad(10.0)
+MAX_TRANSLATION_M = 1.0e-3
+# Rate feedback is capped at D/m = 2 pi * 3 Hz per axis: beyond that the 1 ms loop delay
+# and the output low-pass eat its phase margin (the stiff vertical axis would otherwise
+# ask for D/m ~ 17 Hz).
+MAX_RATE_GAIN_HZ = 3.0
+
+
+@dataclass(frozen=True)
+class PointingGains:
+    """Design of the pointing loop.
+
+    bandwidth_hz: the integral pole (Hz), a few Hz, well below the vibration tones.
+    damping_ratio: damping ratio given to each axis' suspension mode (-).
+    output_lowpass_hz: corner of the 2nd-order Butterworth on the strut forces (Hz).
+    force_limit_n: the integral is clamped so its strut forces stay within this (N).
+    """
+
+    bandwidth_hz: float = 1.5
+    damping_ratio: float = 0.7
+    output_lowpass_hz: float = 15.0
+    force_limit_n: float = 70.0
+
+    def __post_init__(self) -> None:
+        """Validate ranges (positive, finite)."""
+        for name in ("bandwidth_hz", "output_lowpass_hz", "force_limit_n"):
+            value = getattr(self, name)
+            if not np.isfinite(value) or value <= 0.0:
+                raise ValueError(f"{name} must be > 0, got {value!r}")
+        if not np.isfinite(self.damping_ratio) or not 0.0 < self.damping_ratio <= 2.0:
+            raise ValueError(f"damping_ratio must be in (0, 2], got {self.damping_ratio!r}")
+
+
+def validate_target_pose(pose: np.ndarray, geometry: CubicHexapodGeometry,
+                         stroke_limit_m: float) -> np.ndarray:
+    """Check a commanded pose ``[x, y, z, rx, ry, rz]`` (m, rad); raise ValueError if out of range.
+
+    Tilt (norm of rx, ry) within 2.5 deg, twist within 10 deg, translations within 1 mm, and
+    the exact strokes the pose needs within 95 % of the actuator stroke.
+    """
+    pose = np.asarray(pose, float)
+    if pose.shape != (6,) or not np.all(np.isfinite(pose)):
+        raise ValueError(f"target pose must be 6 finite values, got {pose!r}")
+    tilt = float(np.hypot(pose[3], pose[4]))
+    if tilt > MAX_TILT_RAD + 1e-12:
+        raise ValueError(f"tilt {np.rad2deg(tilt):.3f} deg exceeds the +-2.5 deg range")
+    if abs(pose[5]) > MAX_TWIST_RAD + 1e-12:
+        raise ValueError(f"twist {np.rad2deg(pose[5]):.3f} deg exceeds the +-10 deg range")
+    if np.max(np.abs(pose[:3])) > MAX_TRANSLATION_M + 1e-12:
+        raise ValueError(f"translation {pose[:3]} m exceeds +-{MAX_TRANSLATION_M} m")
+    stroke = float(np.max(np.abs(geometry.stroke_for_pose(pose))))
+    if stroke > 0.95 * stroke_limit_m:
+        raise ValueError(f"pose needs {stroke * 1e3:.2f} mm of stroke, more than 95 % of "
+                         f"the {stroke_limit_m * 1e3:.1f} mm available")
+    return pose
+
+
+class PointingController:
+    """Cartesian PI + damping pointing law on the eddy-sensor pose (see module docstring)."""
+
+    def __init__(self, geometry: CubicHexapodGeometry, sensing_matrix: np.ndarray,
+                 strut_stiffness_n_per_m: float, top_mass_matrix: np.ndarray,
+                 sample_rate_hz: float, gains: PointingGains | None = None) -> None:
+        """Derive the Cartesian gains from the platform's stiffness (N/m) and mass matrix."""
+        self.geometry = geometry
+        self.sensing_matrix = np.asarray(sensing_matrix, float)
+        self.dt_s = 1.0 / sample_rate_hz
+        self.sample_rate_hz = sample_rate_hz
+        self._jac_t = geometry.top_jacobian.T
+        self.stiffness = strut_stiffness_n_per_m * geometry.top_jacobian.T @ geometry.top_jacobian
+        self._mass = np.asarray(top_mass_matrix, float)
+        self.target = np.zeros(6)
+        self.set_gains(gains or PointingGains())
+
+    def set_gains(self, gains: PointingGains) -> None:
+        """Apply new gains; integral and filter states are kept (bumpless)."""
+        k, m = np.diag(self.stiffness), np.diag(self._mass)
+        w_c = 2.0 * np.pi * gains.bandwidth_hz
+        w_n = np.maximum(np.sqrt(k / m), 2.0 * w_c)
+        zeta = gains.damping_ratio
+        self.gains = gains
+        self._k_int = np.diag(m * w_c * w_n**2)
+        self._k_p = np.diag(np.maximum(m * (w_n**2 + 2.0 * zeta * w_n * w_c) - k, 0.0))
+        damping = np.minimum(m * (2.0 * zeta * w_n + w_c), m * 2.0 * np.pi * MAX_RATE_GAIN_HZ)
+        self._damping = np.diag(damping)
+        previous = getattr(self, "_lowpass", None)
+        self._lowpass = SosFilterBank.butter_lowpass(2, gains.output_lowpass_hz,
+                                                     self.sample_rate_hz, 6)
+        if previous is None:
+            self.reset()
+        else:
+            self._lowpass.reset(self._last_force)
+
+    def reset(self) -> None:
+        """Zero the integral, the rate estimate and the output filter."""
+        self._integral = np.zeros(6)
+        self._prev_pose: np.ndarray | None = None
+        self._last_force = np.zeros(6)
+        self._lowpass.reset(0.0)
+
+    def set_target(self, pose: np.ndarray, stroke_limit_m: float = 5.0e-3) -> None:
+        """Command a pose ``[x, y, z, rx, ry, rz]`` (m, rad); ValueError if out of range."""
+        self.target = validate_target_pose(pose, self.geometry, stroke_limit_m).copy()
+
+    def pose(self, gaps_m: np.ndarray) -> np.ndarray:
+        """Relative pose (m, rad) from the six eddy-sensor gaps (m)."""
+        return pose_from_gaps(self.sensing_matrix, gaps_m)
+
+    def step(self, gaps_m: np.ndarray) -> np.ndarray:
+        """One sample: eddy gaps (m) -> strut forces (N) for the same sample."""
+        pose = self.pose(gaps_m)
+        rate = np.zeros(6) if self._prev_pose is None else (pose - self._prev_pose) / self.dt_s
+        self._prev_pose = pose
+        error = self.target - pose
+        self._integrate(error)
+        wrench = self._k_p @ error + self._k_int @ self._integral - self._damping @ rate
+        force = np.linalg.solve(self._jac_t, wrench)
+        self._last_force = self._lowpass.step(force)
+        return self._last_force
+
+    def _integrate(self, error: np.ndarray) -> None:
+        """Integrate the error; clamp so the integral's strut forces stay in the limit."""
+        candidate = self._integral + error * self.dt_s
+        force = np.linalg.solve(self._jac_t, self._k_int @ candidate)
+        peak = float(np.max(np.abs(force)))
+        if peak > self.gains.force_limit_n:
+            candidate = self._integral   # anti-windup: hold the integral at the limit
+        self._integral = candidate

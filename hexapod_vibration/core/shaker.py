@@ -1,0 +1,85 @@
+"""Multi-tone shaker (Aura AST-1B-4 class): force along z on the bottom plate.
+
+The force is a sum of tones (frequency Hz, amplitude N, phase rad), each optionally with a
+slow sinusoidal frequency drift, plus white broadband noise, clipped to the shaker's force
+limit. Phases are integrated analytically, so the force at any time is exact and vectorized
+over the internal steps of a sample.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class ShakerTone:
+    """One tone: frequency (Hz), amplitude (N, peak), phase (rad), drift (Hz peak, s period)."""
+
+    frequency_hz: float
+    amplitude_n: float
+    phase_rad: float = 0.0
+    drift_hz: float = 0.0
+    drift_period_s: float = 60.0
+
+    def __post_init__(self) -> None:
+        """Validate: positive finite frequency, finite non-negative amplitude and drift."""
+        if not np.isfinite(self.frequency_hz) or self.frequency_hz <= 0.0:
+            raise ValueError(f"shaker tone frequency must be > 0 Hz, got {self.frequency_hz}")
+        if not np.isfinite(self.amplitude_n) or self.amplitude_n < 0.0:
+            raise ValueError(f"shaker tone amplitude must be >= 0 N, got {self.amplitude_n}")
+        if not np.isfinite(self.phase_rad):
+            raise ValueError("shaker tone phase must be finite")
+        if not np.isfinite(self.drift_hz) or self.drift_hz < 0.0 or self.drift_period_s <= 0.0:
+            raise ValueError("shaker drift must be >= 0 Hz with a period > 0 s")
+
+
+class Shaker:
+    """Force generator: tones + drift + broadband noise, clipped to ``force_limit_n``."""
+
+    def __init__(self, tones: Sequence[ShakerTone] = (), noise_rms_n: float = 0.0,
+                 force_limit_n: float = 100.0, seed: int = 0) -> None:
+        """Create a shaker; ``noise_rms_n`` is the RMS (N) of white noise at the step rate."""
+        if not np.isfinite(noise_rms_n) or noise_rms_n < 0.0:
+            raise ValueError(f"shaker noise RMS must be >= 0 N, got {noise_rms_n}")
+        self._rng = np.random.default_rng(seed)
+        self.force_limit_n = float(force_limit_n)
+        self.noise_rms_n = float(noise_rms_n)
+        self.set_tones(tones)
+
+    def set_tones(self, tones: Sequence[ShakerTone]) -> None:
+        """Replace the tones (already validated by :class:`ShakerTone`)."""
+        tones = list(tones)
+        self.tones = tones
+        self._f = np.array([t.frequency_hz for t in tones], float)
+        self._a = np.array([t.amplitude_n for t in tones], float)
+        self._p = np.array([t.phase_rad for t in tones], float)
+        self._df = np.array([t.drift_hz for t in tones], float)
+        self._tp = np.array([t.drift_period_s for t in tones], float)
+
+    def force_n(self, time_s: np.ndarray) -> np.ndarray:
+        """Shaker force (N) at the given times (s); one noise draw per time point."""
+        t = np.asarray(time_s, float)[:, None]
+        # Instantaneous frequency f + df sin(2 pi t / T): phase integrates it exactly.
+        phase = 2.0 * np.pi * self._f * t - self._df * self._tp * np.cos(2.0 * np.pi * t / self._tp)
+        force = np.sin(phase + self._p) @ self._a if self._a.size else np.zeros(t.shape[0])
+        if self.noise_rms_n > 0.0:
+            force = force + self._rng.normal(0.0, self.noise_rms_n, t.shape[0])
+        return np.clip(force, -self.force_limit_n, self.force_limit_n)
+
+
+def tones_from_arrays(frequencies_hz: Sequence[float], amplitudes_n: Sequence[float],
+                      phases_rad: Sequence[float] | None = None,
+                      drift_hz: float = 0.0, drift_period_s: float = 60.0) -> list[ShakerTone]:
+    """Build tones from parallel arrays (as ROS parameters give them); lengths must match."""
+    phases_rad = list(phases_rad) if phases_rad is not None and len(phases_rad) else None
+    if len(frequencies_hz) != len(amplitudes_n):
+        raise ValueError(f"{len(frequencies_hz)} shaker frequencies but {len(amplitudes_n)} "
+                         "amplitudes: the arrays must have the same length")
+    if phases_rad is not None and len(phases_rad) != len(frequencies_hz):
+        raise ValueError("shaker phases must be empty or as long as the frequencies")
+    phases = phases_rad or [0.0] * len(frequencies_hz)
+    return [ShakerTone(float(f), float(a), float(p), drift_hz, drift_period_s)
+            for f, a, p in zip(frequencies_hz, amplitudes_n, phases, strict=True)]

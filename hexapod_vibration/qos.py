@@ -1,0 +1,88 @@
+"""Named QoS profiles of the package, and why each is what it is.
+
+Compatibility rules that drive these choices (DDS request/offer): a RELIABLE publisher
+serves both RELIABLE and BEST_EFFORT subscriptions, a BEST_EFFORT publisher only
+BEST_EFFORT ones; a VOLATILE subscription matches any durability. So publishers here are
+RELIABLE and VOLATILE, and subscriptions to topics owned by others (``/clock``) ask for no
+more than those owners offer.
+"""
+
+from __future__ import annotations
+
+from rclpy.qos import (
+    DurabilityPolicy,
+    HistoryPolicy,
+    QoSProfile,
+    ReliabilityPolicy,
+    qos_profile_parameter_events,
+)
+
+LOOP_QOS = QoSProfile(
+    reliability=ReliabilityPolicy.RELIABLE,
+    history=HistoryPolicy.KEEP_LAST,
+    depth=10,
+    durability=DurabilityPolicy.VOLATILE,
+)
+"""Loop topics ``/pph/*`` at 1 kHz (driver <-> controllers).
+
+RELIABLE: in lockstep the driver waits for the command of every sample, so a dropped
+message would cost a timeout instead of 1 ms; in realtime mode a lost command is a missed
+sample. KEEP_LAST 10: a slow subscriber gets at most 10 ms of backlog, which bounds the
+latency and the memory instead of queueing stale commands. VOLATILE: a late joiner must
+not receive old samples as if they were current.
+"""
+
+RECORDER_QOS = QoSProfile(
+    reliability=ReliabilityPolicy.RELIABLE,
+    history=HistoryPolicy.KEEP_LAST,
+    depth=5000,
+    durability=DurabilityPolicy.VOLATILE,
+)
+"""Recorder subscriptions to the ``/pph/*``, ``/diagnostics`` topics.
+
+RELIABLE so that the DDS layer retransmits lost packets; KEEP_LAST 5000 (5 s at 1 kHz per
+topic) so that samples accumulate in the reader's queue, not get dropped, while the
+recorder's Python thread is busy (writer flush, garbage collection). Compatible with
+LOOP_QOS publishers (and with ``ros2 topic pub``'s RELIABLE default).
+"""
+
+CLOCK_QOS = QoSProfile(
+    reliability=ReliabilityPolicy.BEST_EFFORT,
+    history=HistoryPolicy.KEEP_LAST,
+    depth=1,
+    durability=DurabilityPolicy.VOLATILE,
+)
+"""``/clock`` (``rosgraph_msgs/Clock``), as rclpy's TimeSource subscribes to it.
+
+BEST_EFFORT, KEEP_LAST 1, VOLATILE: only the latest time matters (rclcpp's ClockQoS is the
+same). A publisher may use this profile or a RELIABLE one: both match these subscribers.
+"""
+
+RECORDER_CLOCK_QOS = QoSProfile(
+    reliability=ReliabilityPolicy.BEST_EFFORT,
+    history=HistoryPolicy.KEEP_LAST,
+    depth=5000,
+    durability=DurabilityPolicy.VOLATILE,
+)
+"""Recorder subscription to ``/clock``.
+
+BEST_EFFORT so that it matches every ``/clock`` publisher (a RELIABLE subscription would not
+match a BEST_EFFORT one such as rclcpp's ClockQoS); deep like RECORDER_QOS so a busy
+recorder keeps every tick it received.
+"""
+
+DIAGNOSTICS_QOS = QoSProfile(
+    reliability=ReliabilityPolicy.RELIABLE,
+    history=HistoryPolicy.KEEP_LAST,
+    depth=10,
+    durability=DurabilityPolicy.VOLATILE,
+)
+"""``/diagnostics`` (``diagnostic_msgs/DiagnosticArray``), published at about 1 Hz.
+
+The defaults of ``diagnostic_updater`` and of ``ros2 topic echo``: RELIABLE, KEEP_LAST 10,
+VOLATILE, so every standard diagnostics tool matches it.
+"""
+
+PARAMETER_EVENTS_QOS = qos_profile_parameter_events
+"""``/parameter_events`` (``rcl_interfaces/msg/ParameterEvent``): rclpy's own profile
+(RELIABLE, KEEP_LAST 1000, VOLATILE), so the recorder keeps every parameter change."""

@@ -1,0 +1,151 @@
+"""Tests of hexapod_vibration.core.spectrum on synthetic signals with known content."""
+
+import numpy as np
+import pytest
+
+from hexapod_vibration.core import spectrum as sp
+
+FS = 1000.0
+
+
+def _tones(t, freqs, amps, phases):
+    return sum(a * np.cos(2 * np.pi * f * t + p) for f, a, p in zip(freqs, amps, phases))
+
+
+def test_db_re_g_and_constants():
+    assert sp.G0 == 9.80665
+    assert sp.to_db_re_g(sp.G0) == pytest.approx(0.0, abs=1e-12)
+    assert sp.to_db_re_g(sp.G0 / 10.0) == pytest.approx(-20.0, abs=1e-12)
+    assert sp.main_lobe_half_width_bins('blackmanharris') == 4
+    assert sp.main_lobe_half_width_bins('hann') == 2
+
+
+def test_tone_levels_on_and_off_bin_within_0p2_db():
+    rng = np.random.default_rng(11)
+    t = np.arange(int(60 * FS)) / FS
+    freqs = np.array([40.0, 57.33, 80.05, 123.456, 200.0, 333.37])   # on-bin and off-bin
+    amps = np.array([0.5, 0.1, 0.02, 0.3, 0.05, 0.01])
+    x = _tones(t, freqs, amps, rng.uniform(0, 2 * np.pi, freqs.size))
+    x += 2e-3 * rng.standard_normal(t.size)
+    levels = sp.tone_levels_db(x, FS, freqs)
+    expected = sp.to_db_re_g(amps / np.sqrt(2))
+    assert np.max(np.abs(levels - expected)) < 0.2
+    assert np.allclose(sp.tone_rms(x, FS, freqs), amps / np.sqrt(2), rtol=0.023)
+
+
+def test_psd_integrates_to_variance():
+    rng = np.random.default_rng(2)
+    x = 0.05 * rng.standard_normal(int(40 * FS))
+    f, psd = sp.power_spectral_density(x, FS)
+    assert f[1] - f[0] == pytest.approx(1.0 / sp.DEFAULT_SEGMENT_S)
+    assert np.sum(psd) * (f[1] - f[0]) == pytest.approx(np.var(x), rel=0.02)
+
+
+@pytest.mark.parametrize('f_strong', [40.0, 40.05, 40.03, 39.95])
+def test_tones_1hz_apart_70db_apart_are_separated(f_strong):
+    rng = np.random.default_rng(5)
+    t = np.arange(int(60 * FS)) / FS
+    a_strong, a_weak = 1.0, 10 ** (-70 / 20)
+    freqs = [f_strong, f_strong + 1.0]
+    x = _tones(t, freqs, [a_strong, a_weak], [0.3, 1.1]) + 1e-6 * rng.standard_normal(t.size)
+    levels = sp.tone_levels_db(x, FS, freqs)
+    expected = sp.to_db_re_g(np.array([a_strong, a_weak]) / np.sqrt(2))
+    assert abs(levels[0] - expected[0]) < 0.2
+    assert abs(levels[1] - expected[1]) < 1.0
+    # The weak tone alone measures the same: the strong one leaks < -90 dB into it.
+    assert abs(levels[1] - expected[1]) < 0.1
+
+
+def test_noise_floor_matches_white_noise_in_tone_bandwidth():
+    rng = np.random.default_rng(8)
+    sigma = 0.01
+    x = sigma * rng.standard_normal(int(120 * FS)) + 0.2 * np.cos(2 * np.pi * 100.0
+                                                                  * np.arange(120000) / FS)
+    bins = 2 * sp.main_lobe_half_width_bins('blackmanharris') + 1
+    expected_rms = np.sqrt(sigma ** 2 / (FS / 2) * bins / sp.DEFAULT_SEGMENT_S)
+    floor = sp.noise_floor_db(x, FS, 100.0)
+    # 2 Hz band: ~12 floor bins, std 0.3 dB (30 seeds: bias -0.07 dB); 10 Hz band: 0.17 dB
+    assert floor == pytest.approx(sp.to_db_re_g(expected_rms), abs=1.0)
+    wide = sp.noise_floor_db(x, FS, 100.0, band_hz=10.0)
+    assert wide == pytest.approx(sp.to_db_re_g(expected_rms), abs=0.5)
+    # excluding another tone's main lobe does not change a white floor
+    assert sp.noise_floor_db(x, FS, 100.0, exclude_hz=[101.0]) == pytest.approx(floor, abs=1.0)
+    # a tone at the noise floor is not reported as a strong tone
+    assert sp.tone_levels_db(x, FS, [150.0])[0] < floor + 3.0
+
+
+def _clipped_sine_harmonics(clip, n_harm):
+    """Reference: Fourier sine coefficients of clip(sin(theta)) from one dense period."""
+    theta = 2 * np.pi * np.arange(2 ** 16) / 2 ** 16
+    spec = np.fft.rfft(np.clip(np.sin(theta), -clip, clip)) * 2 / theta.size
+    return np.abs(spec[1:n_harm + 1])
+
+
+def test_harmonic_distortion_of_clipped_sine():
+    fs, f0, clip, amp = 4000.0, 50.3, 0.5, 1.0
+    t = np.arange(int(30 * fs)) / fs
+    rng = np.random.default_rng(3)
+    x = amp * np.clip(np.sin(2 * np.pi * f0 * t), -clip, clip) + 1e-5 * rng.standard_normal(
+        t.size)
+    hd = sp.harmonic_distortion(x, fs, f0, n_harmonics=5)
+    ref = amp * _clipped_sine_harmonics(clip, 5)
+    ref_thd = np.sqrt(np.sum(ref[1:] ** 2)) / ref[0]
+    assert hd['frequencies_hz'] == pytest.approx([f0 * k for k in range(1, 6)])
+    odd = [0, 2, 4]
+    assert np.allclose(np.array(hd['levels_db'])[odd], sp.to_db_re_g(ref[odd] / np.sqrt(2)),
+                       atol=0.2)
+    assert np.all(np.array(hd['levels_db'])[[1, 3]] < hd['levels_db'][0] - 100)
+    assert hd['thd_ratio'] == pytest.approx(ref_thd, rel=0.01)
+    assert hd['thd_percent'] == pytest.approx(100 * ref_thd, rel=0.01)
+    assert 0.15 < hd['thd_ratio'] < 0.30   # a sine clipped at half amplitude: ~21 %
+
+
+def test_harmonics_above_nyquist_are_dropped():
+    x = np.cos(2 * np.pi * 150.0 * np.arange(20000) / FS)
+    hd = sp.harmonic_distortion(x, FS, 150.0, n_harmonics=5)
+    assert hd['frequencies_hz'] == [150.0, 300.0, 450.0]
+
+
+def test_tone_envelope_follows_amplitude_step():
+    t = np.arange(int(10 * FS)) / FS
+    amp = np.where(t < 5.0, 0.4, 0.04)
+    x = amp * np.cos(2 * np.pi * 40.0 * t + 0.5) + 0.1 * np.cos(2 * np.pi * 55.0 * t)
+    t_env, rms = sp.tone_envelope(x, FS, 40.0, window_s=0.2)
+    assert t_env.size == t.size - 199
+    assert np.allclose(rms[t_env < 4.8], 0.4 / np.sqrt(2), rtol=1e-3)
+    assert np.allclose(rms[t_env > 5.2], 0.04 / np.sqrt(2), rtol=1e-2)
+
+
+def test_convergence_time_on_exponential_within_one_step():
+    dt, t_on, tau = 0.01, 5.0, 0.5
+    t = np.arange(0.0, 30.0, dt)
+    level = np.where(t < t_on, -20.0, -60.0 + 40.0 * np.exp(-(t - t_on) / tau))
+    expected = tau * np.log(40.0 / 3.0)   # 40 dB above final decays to 3 dB: 1.295 s
+    got = sp.convergence_time_s(t, level, t_on)
+    assert abs(got - expected) <= dt
+
+
+def test_convergence_time_nan_when_never_settled():
+    t = np.arange(0.0, 20.0, 0.01)
+    level = np.where(np.floor(t * 2) % 2 == 0, 10.0, -10.0)
+    level[-1] = 10.0
+    assert np.isnan(sp.convergence_time_s(t, level, 5.0))
+    assert np.isnan(sp.convergence_time_s(t, np.zeros_like(t), 25.0))
+
+
+def test_short_signal_warns_and_uses_one_segment():
+    x = np.cos(2 * np.pi * 40.0 * np.arange(3000) / FS)
+    with pytest.warns(sp.ShortSignalWarning):
+        f, _ = sp.power_spectral_density(x, FS)
+    assert f[1] - f[0] == pytest.approx(FS / 3000)
+    with pytest.warns(sp.ShortSignalWarning):
+        level = sp.tone_levels_db(x, FS, [40.0])[0]
+    assert level == pytest.approx(sp.to_db_re_g(1 / np.sqrt(2)), abs=0.2)
+
+
+def test_bad_tone_frequency_raises():
+    x = np.zeros(20000)
+    with pytest.raises(ValueError):
+        sp.tone_rms(x, FS, [600.0])
+    with pytest.raises(ValueError):
+        sp.tone_rms(x, FS, [0.0])
