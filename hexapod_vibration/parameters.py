@@ -18,8 +18,14 @@ from rcl_interfaces.msg import (
     ParameterType,
     SetParametersResult,
 )
+from rclpy.exceptions import ParameterUninitializedException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
+
+
+def descriptor(description: str, read_only: bool = False) -> ParameterDescriptor:
+    """A plain descriptor (for types the helpers below do not cover, e.g. string arrays)."""
+    return ParameterDescriptor(description=description, read_only=read_only)
 
 
 def _descriptor(
@@ -211,5 +217,14 @@ def reject(reason: str) -> SetParametersResult:
 
 
 def parameter_value(node: Node, name: str) -> Any:
-    """Current value of a declared parameter (Python type: float, list, bool, str, ...)."""
-    return node.get_parameter(name).value
+    """Current value of a declared parameter (Python type: float, list, bool, str, ...).
+
+    A parameter declared by type only (an empty array default) that was never set reads
+    as ``None`` instead of raising.
+    """
+    if not node.has_parameter(name):
+        raise KeyError(f'parameter {name!r} is not declared')
+    try:
+        return node.get_parameter(name).value
+    except ParameterUninitializedException:
+        return None

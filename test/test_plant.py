@@ -10,7 +10,6 @@ from hexapod_vibration.core.plant import PPHPlant, saturate_commands
 from hexapod_vibration.core.sensors import AccelerometerBank
 from hexapod_vibration.core.shaker import Shaker, ShakerTone
 
-
 MODEL_PATH = Path(__file__).resolve().parents[1] / "config" / "pph_model.yaml"
 CFG = load_model_config(MODEL_PATH)
 G = CFG.simulation.gravity_m_s2

@@ -9,7 +9,8 @@ FS = 1000.0
 
 
 def _tones(t, freqs, amps, phases):
-    return sum(a * np.cos(2 * np.pi * f * t + p) for f, a, p in zip(freqs, amps, phases))
+    parts = zip(freqs, amps, phases, strict=True)
+    return sum(a * np.cos(2 * np.pi * f * t + p) for f, a, p in parts)
 
 
 def test_db_re_g_and_constants():

@@ -131,7 +131,8 @@ class CoreLoop:
         for n in range(n_samples):
             notch = self._notch_step(n, self.dc_blocker.step(sample.accel_m_s2), rec)
             if sine.amplitude_n > 0.0:
-                notch = notch + sine.amplitude_n * np.sin(2 * np.pi * sine.frequency_hz * n / self.fs)
+                phase = 2.0 * np.pi * sine.frequency_hz * n / self.fs
+                notch = notch + sine.amplitude_n * np.sin(phase)
             pointing = self.pointing.step(sample.eddy_m)
             applied = saturate_commands(notch, pointing, self.config.strut)
             rec.accel_m_s2[n], rec.eddy_m[n] = sample.accel_m_s2, sample.eddy_m

@@ -128,10 +128,10 @@ class _FadingTones:
         self._alloc()
 
     def _alloc(self) -> None:
-        k = self.phi.size
-        self._jphi = np.zeros(k, dtype=complex)
-        self._prod = np.zeros((k, self._c), dtype=complex)
-        self._contrib = np.zeros(self._c)
+        self._rot = np.zeros(self.phi.size, dtype=complex)
+        self._rot_re, self._rot_im = self._rot.real, self._rot.imag
+        self._contrib = np.zeros(self._c, dtype=complex)
+        self._contrib_re = self._contrib.real
 
     def add(self, w: np.ndarray, phi: np.ndarray, dphi: np.ndarray, ramp: int) -> None:
         """Start fading tones with weights ``w`` (K, C), phases and increments (rad)."""
@@ -150,12 +150,12 @@ class _FadingTones:
             return
         self.gain -= self.step_size
         np.maximum(self.gain, 0.0, out=self.gain)
-        np.multiply(self.phi, 1j, out=self._jphi)
-        np.exp(self._jphi, out=self._jphi)
-        self._jphi *= self.gain
-        np.multiply(self.w, self._jphi[:, None], out=self._prod)
-        np.sum(self._prod.real, axis=0, out=self._contrib)
-        out += self._contrib
+        np.cos(self.phi, out=self._rot_re)
+        np.sin(self.phi, out=self._rot_im)
+        np.multiply(self._rot_re, self.gain, out=self._rot_re)
+        np.multiply(self._rot_im, self.gain, out=self._rot_im)
+        np.matmul(self._rot, self.w, out=self._contrib)
+        np.add(out, self._contrib_re, out=out)
         self.phi += self.dphi
         np.remainder(self.phi, TWO_PI, out=self.phi)
         if not np.any(self.gain):
@@ -213,14 +213,18 @@ class AdaptiveNotchCanceller:
         self._w = w.astype(complex).copy()
         self._adapting = adapting.astype(bool).copy()
         self._set_p(p_full)
-        self._jphi = np.zeros(t, dtype=complex)
-        self._rot = np.zeros(t, dtype=complex)
-        self._rot_col = self._rot[:, None]
-        self._rotc = np.zeros(t, dtype=complex)
-        self._rotc_col = self._rotc[:, None]
+        self._rot = np.zeros(t, dtype=complex)             # e^{j phi}
+        self._rot_re, self._rot_im = self._rot.real, self._rot.imag
+        self._g_vec = np.zeros(t, dtype=complex)           # mu_t e^{-j phi}
+        self._g_col = self._g_vec[:, None]
+        self._e_row = np.zeros((1, self._c), dtype=complex)
+        self._e_row_re = self._e_row.real[0]
         self._grad = np.zeros((t, self._c), dtype=complex)
+        self._grad3 = self._grad[:, :, None]
         self._upd = np.zeros((t, self._c), dtype=complex)
-        self._prod = np.zeros((t, self._c), dtype=complex)
+        self._upd3 = self._upd[:, :, None]
+        self._uc = np.zeros(self._c, dtype=complex)
+        self._uc_re = self._uc.real
         self._update_rate()
 
     def _set_p(self, p_full: np.ndarray) -> None:
@@ -228,8 +232,8 @@ class AdaptiveNotchCanceller:
         self._p_diag = _diagonal_or_none(self._p_full)
 
     def _update_rate(self) -> None:
-        """Per-tone rate mu * adapting as a (T, 1) column."""
-        self._mu_t = (self._mu * self._adapting.astype(float))[:, None]
+        """Per-tone rate mu * adapting (T,), complex so the hot path never casts."""
+        self._mu_t = (self._mu * self._adapting).astype(complex)
 
     # ------------------------------------------------------------------ hot path
     def step(self, error: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
@@ -245,13 +249,15 @@ class AdaptiveNotchCanceller:
         e = np.asarray(error, dtype=float)
         if e.shape != (self._c,):
             raise ValueError(f'error must have shape ({self._c},), got {e.shape}')
-        np.multiply(self._phi, 1j, out=self._jphi)
-        np.exp(self._jphi, out=self._rot)
+        if not np.isfinite(e.sum()):        # a NaN would poison the weights for good
+            raise ValueError(f'error must be finite, got {e.tolist()}')
+        np.cos(self._phi, out=self._rot_re)
+        np.sin(self._phi, out=self._rot_im)
         if self._enabled and not self._frozen and self._mu > 0.0:
             self._adapt(e)
         self._advance_gain()
-        np.multiply(self._w, self._rot_col, out=self._prod)
-        np.sum(self._prod.real, axis=0, out=self._u)
+        np.matmul(self._rot, self._w, out=self._uc)
+        np.copyto(self._u, self._uc_re)
         self._fading.accumulate(self._u)
         self._u *= self._gain
         self._phi += self._dphi
@@ -262,15 +268,20 @@ class AdaptiveNotchCanceller:
         return out
 
     def _adapt(self, e: np.ndarray) -> None:
-        """W += mu * P @ (e * e^{-j phi}), masked by the per-tone adapting flags."""
-        np.conjugate(self._rot, out=self._rotc)
-        np.multiply(self._rotc_col, e, out=self._grad)
-        self._grad *= self._mu_t
+        """W += mu * P @ (e * e^{-j phi}), masked by the per-tone adapting flags.
+
+        Only matmul and same-dtype, same-shape ufuncs with ``out=``: no array is allocated
+        (broadcasting or mixed-dtype ufuncs would allocate numpy iterator buffers).
+        """
+        np.conjugate(self._rot, out=self._g_vec)
+        np.multiply(self._g_vec, self._mu_t, out=self._g_vec)
+        np.copyto(self._e_row_re, e)
+        np.matmul(self._g_col, self._e_row, out=self._grad)
         if self._p_diag is not None:
             np.multiply(self._p_diag, self._grad, out=self._upd)
         else:
-            np.einsum('tij,tj->ti', self._p_full, self._grad, out=self._upd)
-        self._w += self._upd
+            np.matmul(self._p_full, self._grad3, out=self._upd3)
+        np.add(self._w, self._upd, out=self._w)
 
     def _advance_gain(self) -> None:
         target = 1.0 if self._enabled else 0.0

@@ -1,0 +1,356 @@
+"""``notch_controller``: six decentralized Adaptive Notch Cancellers (the paper's algorithm).
+
+Subscribes to ``/pph/accel`` (raw, gravity included), removes the DC with a DC blocker,
+runs the canceller for every strut and tone, and publishes ``/pph/notch_command`` with the
+same sample index. Before adapting it identifies the plant at its tones (a few seconds of
+test tones, one strut at a time, while the shaker keeps running) and derives the
+adaptation coefficients, so that ``mu`` is a normalised convergence rate (1/sample) whose
+stability bound is known; values beyond the bound are rejected with the reason.
+Weights are published at 100 Hz on ``/pph/notch_weights``; status on ``/diagnostics``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from builtin_interfaces.msg import Time
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from std_msgs.msg import Float64MultiArray, MultiArrayDimension
+from std_srvs.srv import Trigger
+
+from hexapod_vibration import parameters as p
+from hexapod_vibration.core import adaptation
+from hexapod_vibration.core.filters import DCBlocker
+from hexapod_vibration.core.notch import AdaptiveNotchCanceller, validate_frequencies
+from hexapod_vibration.executors import run_node
+from hexapod_vibration.messages import InvalidStrutMessage, make_strut_array, parse_strut_array
+from hexapod_vibration.qos import DIAGNOSTICS_QOS, LOOP_QOS
+from hexapod_vibration.strut_layout import sample_label
+
+STRUTS = 6
+SAMPLE_RATE_HZ = 1000.0
+MAX_TONES = 16
+WEIGHTS_EVERY_SAMPLES = 10
+MAX_GAP_SAMPLES = 5000
+
+
+class NotchControllerNode(Node):
+    """Adaptive Notch Canceller node: parameters in, commands out, nothing numerical here."""
+
+    def __init__(self) -> None:
+        """Declare parameters, build the canceller, wire topics and the identify service."""
+        super().__init__("notch_controller")
+        self._declare_parameters()
+        self.fs = SAMPLE_RATE_HZ
+        self.delay = self.get_parameter("loop_delay_samples").value
+        tones = p.parameter_value(self, "tone_frequencies_hz") or []
+        raw = self.get_parameter("adaptation").value == "raw"
+        # Raw (paper as printed, P = I) adapts at once; the normalised modes wait for the
+        # identification to give them their coefficients.
+        self.canceller = AdaptiveNotchCanceller(STRUTS, tones if raw else [], self.fs,
+                                                self.get_parameter("mu").value)
+        if not raw:
+            self.canceller.set_tone_frequencies(tones, ramp_samples=0)
+        self.canceller.set_enabled(False, ramp_samples=0)
+        self._identify_delay = int(round(self.get_parameter("identify_delay_s").value * self.fs))
+        self._auto_identify = bool(self.get_parameter("auto_identify").value)
+        self.dc_blocker = DCBlocker(STRUTS, self.fs, self.get_parameter("dc_cutoff_hz").value)
+        self.identifier: adaptation.ToneResponseIdentifier | None = None
+        self.plant_response: np.ndarray | None = None
+        self.identified_tones: list[float] = []
+        self.bound = self._normalised_bound()
+        self.last_sample = -1
+        self.first_sample = -1
+        self.enabled_since_sample = -1
+        self.counters = {"invalid": 0, "gaps": 0, "missed_samples": 0, "duplicates": 0}
+        self._pub_cmd = self.create_publisher(Float64MultiArray, "/pph/notch_command", LOOP_QOS)
+        self._pub_w = self.create_publisher(Float64MultiArray, "/pph/notch_weights", LOOP_QOS)
+        self._pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", DIAGNOSTICS_QOS)
+        self.create_subscription(Float64MultiArray, "/pph/accel", self._on_accel, LOOP_QOS)
+        self.create_service(Trigger, "~/identify", self._on_identify)
+        self.add_on_set_parameters_callback(self._on_set_parameters)
+        self._want_enabled = bool(self.get_parameter("enabled").value)
+        startup = {"mu": self.canceller.mu, "tone_frequencies_hz": tones}
+        for check in (self._check_tones, self._check_mu):
+            reason = check(startup)
+            if reason:
+                raise ValueError(reason)
+        if raw or not self._auto_identify:
+            self.canceller.set_enabled(self._want_enabled, ramp_samples=0)
+        self.get_logger().info(f"notch controller up: tones {tones} Hz, mu "
+                               f"{self.canceller.mu:g}, {self.get_parameter('adaptation').value}")
+
+    # ------------------------------------------------------------------ parameters
+    def _declare_parameters(self) -> None:
+        p.declare_float(self, "mu", 0.002, "normalised adaptation rate (1/sample): the "
+                        "weights converge as (1 - mu)^n; bounded by the identified stability "
+                        "limit (eq. 18 with the loop delay)", 0.0, 1.0)
+        p.declare_float_array(self, "tone_frequencies_hz", [40.0, 80.0],
+                              "tones to cancel (Hz), each in (0, 500), at most 16", 0.0,
+                              SAMPLE_RATE_HZ / 2)
+        p.declare_bool(self, "enabled", True, "control output on (ramped, bumpless); while "
+                       "off the weights are frozen and kept")
+        p.declare_string(self, "adaptation", "decentralized", "adaptation coefficient: "
+                         "decentralized = six SISO loops, each normalised by its own strut's "
+                         "identified gain and phase (the paper); centralized = -2 G^-1 (6x6); "
+                         "raw = the paper as printed (P = I, mu unnormalised)",
+                         adaptation.COEFFICIENT_MODES)
+        p.declare_bool(self, "auto_identify", True, "identify the plant at start-up and "
+                       "whenever the tones change")
+        p.declare_float(self, "identify_delay_s", 1.0, "wait after the first sample before "
+                        "the start-up identification (s of samples)", 0.0, 60.0)
+        p.declare_float(self, "identification_amplitude_n", 2.0, "test-tone amplitude per "
+                        "tone during identification (N peak)", 0.01, 20.0)
+        p.declare_float(self, "identification_settle_s", 0.1, "discarded settling time per "
+                        "identification segment (s)", 0.0, 5.0, read_only=True)
+        p.declare_float(self, "identification_measure_s", 0.3, "fitted time per "
+                        "identification segment (s)", 0.05, 10.0, read_only=True)
+        p.declare_float(self, "dc_cutoff_hz", 0.5, "DC-blocker corner (Hz)", 0.01, 10.0,
+                        read_only=True)
+        p.declare_float(self, "loop_delay_samples", 2.0, "loop delay used in the stability "
+                        "bound (samples): 1 for the ZOH + anti-aliasing group delay", 0.0, 20.0,
+                        read_only=True)
+        p.declare_float(self, "ramp_s", 0.05, "enable/disable fade time (s)", 0.0, 5.0)
+        p.declare_string(self, "executor", "single_threaded", "rclpy executor",
+                         ("single_threaded", "events"), read_only=True)
+
+    def _on_set_parameters(self, params: list[Parameter]):
+        changes = {q.name: q.value for q in params}
+        checks = (self._check_tones, self._check_mode, self._check_mu)
+        for check in checks:
+            reason = check(changes)
+            if reason:
+                return p.reject(reason)
+        self._apply(changes)
+        return p.accept()
+
+    def _check_tones(self, changes: dict) -> str:
+        if "tone_frequencies_hz" not in changes:
+            return ""
+        tones = list(changes["tone_frequencies_hz"] or [])
+        if len(tones) > MAX_TONES:
+            return f"at most {MAX_TONES} tones, got {len(tones)}"
+        try:
+            validate_frequencies(tones, self.fs)
+        except ValueError as exc:
+            return f"tone_frequencies_hz rejected: {exc}"
+        return ""
+
+    def _check_mode(self, changes: dict) -> str:
+        mode = changes.get("adaptation")
+        if mode is not None and mode not in adaptation.COEFFICIENT_MODES:
+            return f"adaptation must be one of {adaptation.COEFFICIENT_MODES}, got {mode!r}"
+        if mode is not None and self.plant_response is not None:
+            try:
+                self._coefficients(self.plant_response, mode)
+            except ValueError as exc:
+                return f"adaptation={mode!r} rejected: {exc}"
+        return ""
+
+    def _check_mu(self, changes: dict) -> str:
+        if "mu" not in changes:
+            return ""
+        mu = changes["mu"]
+        if not np.isfinite(mu) or mu < 0.0:
+            return f"mu must be finite and >= 0, got {mu}"
+        mode = changes.get("adaptation", self.get_parameter("adaptation").value)
+        bound = self._bound_for(mode)
+        if mu >= bound:
+            return (f"mu={mu:g} is outside the stability bound {bound:.4g} ({mode} adaptation, "
+                    f"eq. 18 with a {self.delay:g}-sample loop delay)")
+        return ""
+
+    def _apply(self, changes: dict) -> None:
+        if "mu" in changes:
+            self.canceller.set_mu(changes["mu"])
+        if "tone_frequencies_hz" in changes:
+            self._change_tones(list(changes["tone_frequencies_hz"] or []))
+        if "adaptation" in changes and self.plant_response is not None:
+            coefficients, self.bound = self._coefficients(self.plant_response,
+                                                          changes["adaptation"])
+            self.canceller.set_coefficients(coefficients)
+        if "enabled" in changes:
+            self._set_enabled(bool(changes["enabled"]))
+        if "ramp_s" in changes:
+            self._ramp_samples = int(round(changes["ramp_s"] * self.fs))
+        if "identify_delay_s" in changes:
+            self._identify_delay = int(round(changes["identify_delay_s"] * self.fs))
+        if "auto_identify" in changes:
+            self._auto_identify = bool(changes["auto_identify"])
+
+    @property
+    def ramp_samples(self) -> int:
+        """Fade length (samples) for enable/disable and removed tones."""
+        return getattr(self, "_ramp_samples", int(round(self.get_parameter("ramp_s").value
+                                                        * self.fs)))
+
+    def _set_enabled(self, flag: bool) -> None:
+        self._want_enabled = flag
+        if self.identifier is None:
+            self.canceller.set_enabled(flag, self.ramp_samples)
+        self.enabled_since_sample = self.last_sample + 1 if flag else -1
+        self.publish_diagnostics()
+
+    def _change_tones(self, tones: list[float]) -> None:
+        self.canceller.set_tone_frequencies(tones, ramp_samples=self.ramp_samples)
+        if tones and self._auto_identify and self.first_sample >= 0:
+            self.start_identification(tones)
+
+    # ------------------------------------------------------------------ identification
+    def _normalised_bound(self) -> float:
+        return adaptation.delayed_mode_mu_bound(1.0, self.delay)
+
+    def _bound_for(self, mode: str) -> float:
+        if self.plant_response is None:
+            return self._normalised_bound() if mode != "raw" else np.inf
+        return self._coefficients(self.plant_response, mode)[1]
+
+    def _coefficients(self, response: np.ndarray, mode: str) -> tuple[np.ndarray, float]:
+        coefficients = adaptation.normalized_coefficients(response, mode)
+        bound = min(adaptation.mu_bound(g, c, self.delay)
+                    for g, c in zip(response, coefficients, strict=True))
+        return coefficients, bound
+
+    def start_identification(self, tones: list[float] | None = None) -> None:
+        """Begin measuring G at the tones; the canceller is frozen meanwhile."""
+        tones = [float(f) for f in (tones if tones is not None
+                                    else self.canceller.tone_frequencies_hz)]
+        if not tones:
+            return
+        self.identifier = adaptation.ToneResponseIdentifier(
+            STRUTS, tones, self.fs, self.get_parameter("identification_amplitude_n").value,
+            self.get_parameter("identification_settle_s").value,
+            self.get_parameter("identification_measure_s").value)
+        self.canceller.set_frozen(True)
+        self.get_logger().info(f"identifying the plant at {tones} Hz "
+                               f"({self.identifier.duration_s:.1f} s of samples)")
+
+    def _finish_identification(self) -> None:
+        response = self.identifier.result()
+        tones = [float(f) for f in self.identifier.tone_frequencies_hz]
+        self.identifier = None
+        self.canceller.set_frozen(False)
+        mode = self.get_parameter("adaptation").value
+        try:
+            coefficients, bound = self._coefficients(response, mode)
+        except ValueError as exc:
+            self.get_logger().error(f"identification unusable for {mode}: {exc}; not adapting")
+            return
+        self.plant_response, self.identified_tones, self.bound = response, tones, bound
+        self.canceller.set_coefficients(coefficients)
+        self._clamp_mu(bound)
+        self.canceller.set_enabled(self._want_enabled, self.ramp_samples)
+        if self._want_enabled and self.enabled_since_sample < 0:
+            self.enabled_since_sample = self.last_sample + 1
+        gains = np.abs(np.diagonal(response, axis1=1, axis2=2)).mean(axis=1)
+        self.get_logger().info(f"identified: |G_ii| {np.round(gains, 4)} (m/s^2)/N, mu bound "
+                               f"{bound:.4g}")
+        self.publish_diagnostics()
+
+    def _clamp_mu(self, bound: float) -> None:
+        mu = self.canceller.mu
+        if mu < bound:
+            return
+        clamped = 0.5 * bound
+        self.get_logger().warn(f"mu={mu:g} is outside the identified stability bound "
+                               f"{bound:.4g}: clamped to {clamped:.4g}")
+        self.set_parameters([Parameter("mu", value=clamped)])
+
+    def _on_identify(self, _request, response):
+        if not len(self.canceller.tone_frequencies_hz):
+            response.success, response.message = False, "no tones to identify"
+            return response
+        self.start_identification()
+        response.success = True
+        response.message = f"identifying for {self.identifier.duration_s:.1f} s of samples"
+        return response
+
+    # ------------------------------------------------------------------ loop
+    def _on_accel(self, msg: Float64MultiArray) -> None:
+        try:
+            accel, index = parse_strut_array(msg)
+        except InvalidStrutMessage as exc:
+            self.counters["invalid"] += 1
+            self.get_logger().warn(f"/pph/accel: rejected message ({exc})",
+                                   throttle_duration_sec=1.0)
+            return
+        index = self.last_sample + 1 if index is None else index
+        if index <= self.last_sample:
+            self.counters["duplicates"] += 1
+            return
+        self._catch_up(index)
+        command = self._step(self.dc_blocker.step(accel))
+        self._pub_cmd.publish(make_strut_array(command, index))
+        if index % WEIGHTS_EVERY_SAMPLES == 0:
+            self._publish_weights(index)
+        if index % int(self.fs) == 0:
+            self.publish_diagnostics()
+
+    def _catch_up(self, index: int) -> None:
+        """Keep the phase references on the sample grid across missing samples."""
+        if self.first_sample < 0:
+            self.first_sample = index
+        elif index > self.last_sample + 1:
+            gap = index - self.last_sample - 1
+            self.counters["gaps"] += 1
+            self.counters["missed_samples"] += gap
+            for _ in range(min(gap, MAX_GAP_SAMPLES)):
+                self.canceller.step(np.zeros(STRUTS))
+            self.get_logger().warn(f"/pph/accel: {gap} samples missing before {index}")
+            if self.identifier is not None:
+                self.get_logger().warn("samples missed during identification: restarting it")
+                self.start_identification(list(self.identifier.tone_frequencies_hz))
+        self.last_sample = index
+        if (index - self.first_sample == self._identify_delay and self.plant_response is None
+                and self.identifier is None and self._auto_identify):
+            self.start_identification()
+
+    def _step(self, error: np.ndarray) -> np.ndarray:
+        command = self.canceller.step(error)
+        if self.identifier is not None:
+            command = command + self.identifier.step(error)
+            if self.identifier.done:
+                self._finish_identification()
+        return command
+
+    def _publish_weights(self, index: int) -> None:
+        w = self.canceller.weights
+        tones = w.shape[0]
+        msg = Float64MultiArray()
+        msg.layout.dim = [MultiArrayDimension(label="tone", size=tones, stride=tones * 12),
+                          MultiArrayDimension(label="strut", size=6, stride=12),
+                          MultiArrayDimension(label="a_b", size=2, stride=2),
+                          MultiArrayDimension(label=sample_label(index), size=1, stride=1)]
+        msg.data = np.stack([w.real, -w.imag], axis=-1).ravel().tolist()
+        self._pub_w.publish(msg)
+
+    def publish_diagnostics(self) -> None:
+        """Controller state on /diagnostics (also on every enable/identify change)."""
+        state = ("identifying" if self.identifier is not None else
+                 "adapting" if self.canceller.enabled and self.plant_response is not None
+                 else "enabled" if self.canceller.enabled else "disabled")
+        values = {"state": state, "enabled": self._want_enabled,
+                  "enabled_since_sample": self.enabled_since_sample,
+                  "last_sample": self.last_sample, "mu": self.canceller.mu,
+                  "mu_bound": self.bound, "adaptation": self.get_parameter("adaptation").value,
+                  "tones_hz": [float(f) for f in self.canceller.tone_frequencies_hz],
+                  "identified_tones_hz": self.identified_tones, **self.counters}
+        if self.plant_response is not None:
+            diag = np.diagonal(self.plant_response, axis1=1, axis2=2)
+            values["plant_gain_m_s2_per_n"] = np.round(np.abs(diag).mean(axis=1), 6).tolist()
+            values["plant_phase_deg"] = np.round(np.rad2deg(np.angle(diag.mean(axis=1))),
+                                                 2).tolist()
+        level = DiagnosticStatus.WARN if self.counters["invalid"] else DiagnosticStatus.OK
+        status = DiagnosticStatus(level=level, name="notch_controller", message=state,
+                                  hardware_id="pph_sim",
+                                  values=[KeyValue(key=k, value=str(v)) for k, v in values.items()])
+        n = max(self.last_sample, 0)
+        msg = DiagnosticArray(status=[status])
+        msg.header.stamp = Time(sec=n // 1000, nanosec=(n % 1000) * 1_000_000)
+        self._pub_diag.publish(msg)
+
+
+def main(args: list[str] | None = None) -> None:
+    """Entry point of ``ros2 run hexapod_vibration notch_controller``."""
+    run_node("notch_controller", NotchControllerNode, args=args)
