@@ -481,3 +481,54 @@ def write_strut_bag(
     except (WriterError, OSError) as err:
         raise BagError(f'cannot write bag {path}: {err}') from err
     return Path(path)
+
+
+# --------------------------------------------------------------------------- other topics
+
+DIAGNOSTICS_TOPIC = '/diagnostics'
+DIAGNOSTICS_MSGTYPE = 'diagnostic_msgs/msg/DiagnosticArray'
+WEIGHTS_TOPIC = '/pph/notch_weights'
+
+
+def read_diagnostics(bag_path: str | Path, name_prefix: str = '') -> list[tuple[int, str, dict]]:
+    """Statuses on ``/diagnostics``: ``[(bag timestamp (ns), status name, {key: value})]``.
+
+    Only statuses whose name starts with ``name_prefix``; empty if not recorded.
+
+    Raises:
+        BagError: Missing, truncated or corrupt bag.
+    """
+    statuses = []
+    for timestamp, array in _read_topic(bag_path, DIAGNOSTICS_TOPIC, DIAGNOSTICS_MSGTYPE):
+        for status in array.status:
+            if status.name.startswith(name_prefix):
+                values = {kv.key: kv.value for kv in status.values}
+                statuses.append((timestamp, status.name, values))
+    return statuses
+
+
+def read_notch_weights(bag_path: str | Path) -> tuple[np.ndarray, np.ndarray]:
+    """Notch weights from ``/pph/notch_weights``: (sample index (N,), a/b (N, T, 6, 2)).
+
+    Messages whose tone count differs from the last message's (tones changed) are skipped.
+    Both arrays are empty if the topic was not recorded.
+
+    Raises:
+        BagError: Missing, truncated or corrupt bag.
+    """
+    records = _read_topic(bag_path, WEIGHTS_TOPIC, STRUT_MSGTYPE)
+    rows, index = [], []
+    tones = int(records[-1][1].layout.dim[0].size) if records else 0
+    for _, msg in records:
+        dims = msg.layout.dim
+        if len(dims) < 4 or int(dims[0].size) != tones or msg.data.size != tones * 12:
+            continue
+        try:
+            sample = parse_sample_label(dims[3].label)
+        except InvalidStrutMessage:
+            continue
+        index.append(sample)
+        rows.append(np.asarray(msg.data, dtype=float).reshape(tones, 6, 2))
+    if not rows:
+        return np.zeros(0, dtype=np.int64), np.zeros((0, tones, 6, 2))
+    return np.asarray(index, dtype=np.int64), np.stack(rows)

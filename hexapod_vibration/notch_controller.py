@@ -11,6 +11,8 @@ Weights are published at 100 Hz on ``/pph/notch_weights``; status on ``/diagnost
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -25,7 +27,7 @@ from hexapod_vibration.core.filters import DCBlocker
 from hexapod_vibration.core.notch import AdaptiveNotchCanceller, validate_frequencies
 from hexapod_vibration.executors import run_node
 from hexapod_vibration.messages import InvalidStrutMessage, make_strut_array, parse_strut_array
-from hexapod_vibration.qos import DIAGNOSTICS_QOS, LOOP_QOS
+from hexapod_vibration.qos import DIAGNOSTICS_QOS, LOOP_PUBLISHER_QOS, LOOP_QOS
 from hexapod_vibration.strut_layout import sample_label
 
 STRUTS = 6
@@ -33,6 +35,21 @@ SAMPLE_RATE_HZ = 1000.0
 MAX_TONES = 16
 WEIGHTS_EVERY_SAMPLES = 10
 MAX_GAP_SAMPLES = 5000
+
+
+def _tone_key(frequency_hz: float) -> float:
+    return round(float(frequency_hz), 6)
+
+
+@dataclass(frozen=True)
+class _Plan:
+    """A checked set of parameter changes: resulting tones, mode, response, P and bound."""
+
+    tones: list[float]
+    mode: str
+    response: np.ndarray | None
+    coefficients: np.ndarray | None
+    bound: float
 
 
 class NotchControllerNode(Node):
@@ -59,23 +76,22 @@ class NotchControllerNode(Node):
         self.identifier: adaptation.ToneResponseIdentifier | None = None
         self.plant_response: np.ndarray | None = None
         self.identified_tones: list[float] = []
+        self._responses: dict[float, np.ndarray] = {}    # tone (Hz) -> identified G (6, 6)
         self.bound = self._normalised_bound()
         self.last_sample = -1
         self.first_sample = -1
         self.enabled_since_sample = -1
         self.counters = {"invalid": 0, "gaps": 0, "missed_samples": 0, "duplicates": 0}
-        self._pub_cmd = self.create_publisher(Float64MultiArray, "/pph/notch_command", LOOP_QOS)
-        self._pub_w = self.create_publisher(Float64MultiArray, "/pph/notch_weights", LOOP_QOS)
+        pub_qos = LOOP_PUBLISHER_QOS
+        self._pub_cmd = self.create_publisher(Float64MultiArray, "/pph/notch_command", pub_qos)
+        self._pub_w = self.create_publisher(Float64MultiArray, "/pph/notch_weights", pub_qos)
         self._pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", DIAGNOSTICS_QOS)
         self.create_subscription(Float64MultiArray, "/pph/accel", self._on_accel, LOOP_QOS)
         self.create_service(Trigger, "~/identify", self._on_identify)
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self._want_enabled = bool(self.get_parameter("enabled").value)
-        startup = {"mu": self.canceller.mu, "tone_frequencies_hz": tones}
-        for check in (self._check_tones, self._check_mu):
-            reason = check(startup)
-            if reason:
-                raise ValueError(reason)
+        self.bound = self._plan({"mu": self.canceller.mu, "tone_frequencies_hz": tones,
+                                 "adaptation": self.get_parameter("adaptation").value}).bound
         if raw or not self._auto_identify:
             self.canceller.set_enabled(self._want_enabled, ramp_samples=0)
         self.get_logger().info(f"notch controller up: tones {tones} Hz, mu "
@@ -117,12 +133,11 @@ class NotchControllerNode(Node):
 
     def _on_set_parameters(self, params: list[Parameter]):
         changes = {q.name: q.value for q in params}
-        checks = (self._check_tones, self._check_mode, self._check_mu)
-        for check in checks:
-            reason = check(changes)
-            if reason:
-                return p.reject(reason)
-        self._apply(changes)
+        try:
+            plan = self._plan(changes)
+        except ValueError as exc:
+            return p.reject(str(exc))
+        self._apply(changes, plan)
         return p.accept()
 
     def _check_tones(self, changes: dict) -> str:
@@ -137,39 +152,57 @@ class NotchControllerNode(Node):
             return f"tone_frequencies_hz rejected: {exc}"
         return ""
 
-    def _check_mode(self, changes: dict) -> str:
-        mode = changes.get("adaptation")
-        if mode is not None and mode not in adaptation.COEFFICIENT_MODES:
-            return f"adaptation must be one of {adaptation.COEFFICIENT_MODES}, got {mode!r}"
-        if mode is not None and self.plant_response is not None:
-            try:
-                self._coefficients(self.plant_response, mode)
-            except ValueError as exc:
-                return f"adaptation={mode!r} rejected: {exc}"
-        return ""
+    def _plan(self, changes: dict) -> _Plan:
+        """Check a set of parameter changes as a whole, changing nothing.
 
-    def _check_mu(self, changes: dict) -> str:
-        if "mu" not in changes:
-            return ""
-        mu = changes["mu"]
-        if not np.isfinite(mu) or mu < 0.0:
-            return f"mu must be finite and >= 0, got {mu}"
+        The stability bound is that of the resulting mode and tone set (the identified
+        plant at those tones, else the normalised bound), so a change of ``adaptation`` or
+        of the tones is rejected too if it would leave the present ``mu`` unstable.
+
+        Raises:
+            ValueError: the reason to reject the changes.
+        """
+        reason = self._check_tones(changes)
+        if reason:
+            raise ValueError(reason)
+        if "tone_frequencies_hz" in changes:
+            tones = [float(f) for f in changes["tone_frequencies_hz"] or []]
+        else:
+            tones = [float(f) for f in self.canceller.tone_frequencies_hz]
         mode = changes.get("adaptation", self.get_parameter("adaptation").value)
-        bound = self._bound_for(mode)
-        if mu >= bound:
-            return (f"mu={mu:g} is outside the stability bound {bound:.4g} ({mode} adaptation, "
-                    f"eq. 18 with a {self.delay:g}-sample loop delay)")
-        return ""
+        if mode not in adaptation.COEFFICIENT_MODES:
+            raise ValueError(f"adaptation must be one of {adaptation.COEFFICIENT_MODES}, "
+                             f"got {mode!r}")
+        if "tone_frequencies_hz" in changes or "adaptation" in changes:
+            response = self._known_response(tones)
+            try:
+                coefficients, bound = self._coefficients_for(tones, response, mode)
+            except ValueError as exc:
+                raise ValueError(f"adaptation={mode!r} rejected: {exc}") from None
+        else:
+            response, coefficients, bound = self.plant_response, None, self.bound
+        mu = changes.get("mu", self.canceller.mu)
+        if not np.isfinite(mu) or mu < 0.0:
+            raise ValueError(f"mu must be finite and >= 0, got {mu}")
+        if mu >= bound and any(k in changes for k in ("mu", "adaptation",
+                                                      "tone_frequencies_hz")):
+            raise ValueError(f"mu={mu:g} is outside the stability bound {bound:.4g} ({mode} "
+                             f"adaptation at {tones} Hz, eq. 18 with a {self.delay:g}-sample "
+                             "loop delay)")
+        return _Plan(tones, mode, response, coefficients, bound)
 
-    def _apply(self, changes: dict) -> None:
+    def _apply(self, changes: dict, plan: _Plan) -> None:
         if "mu" in changes:
             self.canceller.set_mu(changes["mu"])
-        if "tone_frequencies_hz" in changes:
-            self._change_tones(list(changes["tone_frequencies_hz"] or []))
-        if "adaptation" in changes and self.plant_response is not None:
-            coefficients, self.bound = self._coefficients(self.plant_response,
-                                                          changes["adaptation"])
-            self.canceller.set_coefficients(coefficients)
+        tones_changed = "tone_frequencies_hz" in changes
+        mode_changed = "adaptation" in changes
+        if tones_changed:
+            self.canceller.set_tone_frequencies(plan.tones, coefficients=plan.coefficients,
+                                                ramp_samples=self.ramp_samples)
+        elif mode_changed and plan.coefficients is not None:
+            self.canceller.set_coefficients(plan.coefficients)
+        self.plant_response, self.bound = plan.response, plan.bound
+        self.identified_tones = plan.tones if plan.response is not None else []
         if "enabled" in changes:
             self._set_enabled(bool(changes["enabled"]))
         if "ramp_s" in changes:
@@ -178,6 +211,24 @@ class NotchControllerNode(Node):
             self._identify_delay = int(round(changes["identify_delay_s"] * self.fs))
         if "auto_identify" in changes:
             self._auto_identify = bool(changes["auto_identify"])
+        if tones_changed or mode_changed:
+            self._after_tone_or_mode_change(plan, mode_changed)
+
+    def _after_tone_or_mode_change(self, plan: _Plan, mode_changed: bool) -> None:
+        """Identify what the new tone set or mode needs; drop an identification it does not."""
+        if plan.response is not None or plan.mode == "raw" or not plan.tones:
+            if self.identifier is not None:    # nothing to measure any more: bumpless stop
+                self.get_logger().info("identification no longer needed: stopped")
+                self.identifier = None
+                self.canceller.set_frozen(False)
+                self.canceller.set_enabled(self._want_enabled, self.ramp_samples)
+            return
+        if mode_changed:      # a normalised mode must not adapt with another mode's P
+            self.canceller.set_frozen(True)
+        running = self.identifier is not None and np.array_equal(
+            self.identifier.tone_frequencies_hz, plan.tones)
+        if self._auto_identify and self.first_sample >= 0 and not running:
+            self.start_identification(plan.tones)
 
     @property
     def ramp_samples(self) -> int:
@@ -192,19 +243,26 @@ class NotchControllerNode(Node):
         self.enabled_since_sample = self.last_sample + 1 if flag else -1
         self.publish_diagnostics()
 
-    def _change_tones(self, tones: list[float]) -> None:
-        self.canceller.set_tone_frequencies(tones, ramp_samples=self.ramp_samples)
-        if tones and self._auto_identify and self.first_sample >= 0:
-            self.start_identification(tones)
-
     # ------------------------------------------------------------------ identification
     def _normalised_bound(self) -> float:
         return adaptation.delayed_mode_mu_bound(1.0, self.delay)
 
-    def _bound_for(self, mode: str) -> float:
-        if self.plant_response is None:
-            return self._normalised_bound() if mode != "raw" else np.inf
-        return self._coefficients(self.plant_response, mode)[1]
+    def _known_response(self, tones: list[float]) -> np.ndarray | None:
+        """Identified G (T, 6, 6) at ``tones``, or None if a tone was never identified."""
+        rows = [self._responses.get(_tone_key(f)) for f in tones]
+        if not rows or any(r is None for r in rows):
+            return None
+        return np.stack(rows)
+
+    def _coefficients_for(self, tones: list[float], response: np.ndarray | None,
+                          mode: str) -> tuple[np.ndarray | None, float]:
+        """Coefficients for the canceller (None: new tones wait) and the mu bound."""
+        if response is not None:
+            return self._coefficients(response, mode)
+        if mode == "raw":
+            identity = np.broadcast_to(np.eye(STRUTS, dtype=complex), (len(tones), STRUTS, STRUTS))
+            return (identity.copy() if tones else None), np.inf
+        return None, self._normalised_bound()
 
     def _coefficients(self, response: np.ndarray, mode: str) -> tuple[np.ndarray, float]:
         coefficients = adaptation.normalized_coefficients(response, mode)
@@ -228,22 +286,28 @@ class NotchControllerNode(Node):
 
     def _finish_identification(self) -> None:
         response = self.identifier.result()
-        tones = [float(f) for f in self.identifier.tone_frequencies_hz]
+        for f, g in zip(self.identifier.tone_frequencies_hz, response, strict=True):
+            self._responses[_tone_key(f)] = g
         self.identifier = None
         self.canceller.set_frozen(False)
+        tones = [float(f) for f in self.canceller.tone_frequencies_hz]
         mode = self.get_parameter("adaptation").value
+        current = self._known_response(tones)
         try:
-            coefficients, bound = self._coefficients(response, mode)
+            if current is None:
+                raise ValueError(f"no identified response at {tones} Hz")
+            coefficients, bound = self._coefficients(current, mode)
         except ValueError as exc:
+            self.canceller.set_frozen(True)
             self.get_logger().error(f"identification unusable for {mode}: {exc}; not adapting")
             return
-        self.plant_response, self.identified_tones, self.bound = response, tones, bound
+        self.plant_response, self.identified_tones, self.bound = current, tones, bound
         self.canceller.set_coefficients(coefficients)
         self._clamp_mu(bound)
         self.canceller.set_enabled(self._want_enabled, self.ramp_samples)
         if self._want_enabled and self.enabled_since_sample < 0:
             self.enabled_since_sample = self.last_sample + 1
-        gains = np.abs(np.diagonal(response, axis1=1, axis2=2)).mean(axis=1)
+        gains = np.abs(np.diagonal(current, axis1=1, axis2=2)).mean(axis=1)
         self.get_logger().info(f"identified: |G_ii| {np.round(gains, 4)} (m/s^2)/N, mu bound "
                                f"{bound:.4g}")
         self.publish_diagnostics()
@@ -354,3 +418,7 @@ class NotchControllerNode(Node):
 def main(args: list[str] | None = None) -> None:
     """Entry point of ``ros2 run hexapod_vibration notch_controller``."""
     run_node("notch_controller", NotchControllerNode, args=args)
+
+
+if __name__ == "__main__":
+    main()

@@ -8,6 +8,7 @@ the node's own ``on_set_parameters`` callback sees the value.
 
 from __future__ import annotations
 
+import copy
 from collections.abc import Sequence
 from typing import Any
 
@@ -24,7 +25,7 @@ from rclpy.parameter import Parameter
 
 
 def descriptor(description: str, read_only: bool = False) -> ParameterDescriptor:
-    """A plain descriptor (for types the helpers below do not cover, e.g. string arrays)."""
+    """A plain descriptor (for types the helpers below do not cover)."""
     return ParameterDescriptor(description=description, read_only=read_only)
 
 
@@ -120,9 +121,7 @@ def declare_float_array(
     Args:
         node: Node that owns the parameter.
         name: Parameter name.
-        default: Value when not overridden. An empty default declares the parameter by
-            type only: it stays unset (``node.get_parameter`` raises) until it is set,
-            because rclpy would type an empty list as a byte array.
+        default: Value when not overridden. May be empty (see :func:`_declare_array`).
         description: What it is, with the unit of the elements.
         min_value: Inclusive lower bound of every element, or ``None``.
         max_value: Inclusive upper bound of every element, or ``None``.
@@ -132,11 +131,45 @@ def declare_float_array(
     descriptor = _descriptor(
         ParameterType.PARAMETER_DOUBLE_ARRAY, description, read_only, constraints
     )
-    # rclpy infers an empty list as a byte array: an empty default is declared by type
-    # (value unset, read back as None) so that the parameter stays a double array.
-    initial = [float(x) for x in default] or Parameter.Type.DOUBLE_ARRAY
-    value = node.declare_parameter(name, initial, descriptor).value
-    return [float(x) for x in value or ()]
+    values = _declare_array(node, name, [float(x) for x in default], descriptor,
+                            Parameter.Type.DOUBLE_ARRAY)
+    return [float(x) for x in values]
+
+
+def declare_string_array(
+    node: Node, name: str, default: Sequence[str], description: str, read_only: bool = False
+) -> list[str]:
+    """Declare a string-array parameter (may be empty) and return its value."""
+    descriptor = _descriptor(ParameterType.PARAMETER_STRING_ARRAY, description, read_only)
+    values = _declare_array(node, name, [str(x) for x in default], descriptor,
+                            Parameter.Type.STRING_ARRAY)
+    return [str(x) for x in values]
+
+
+def _declare_array(
+    node: Node, name: str, default: list, descriptor: ParameterDescriptor,
+    array_type: Parameter.Type,
+) -> list:
+    """Declare an array parameter whose value may be an empty array of ``array_type``.
+
+    rclpy infers the type of an empty list as a byte array, and an empty list in a params
+    file or ``-p name:=[]`` arrives as "not set". Either way the parameter would stay
+    declared but unset, and then rclpy's ``get_parameters`` service answers nothing at all
+    for a request naming it (``ros2 param get``/``dump`` fail). So the parameter is declared
+    by type and, when no value came, explicitly set to an empty array of ``array_type``
+    (before the node registers its callbacks; a read-only descriptor is applied after).
+    """
+    writable = copy.deepcopy(descriptor)
+    writable.read_only = False
+    value = node.declare_parameter(name, default or array_type, writable).value
+    if value is None:
+        result = node.set_parameters([Parameter(name, array_type, [])])[0]
+        if not result.successful:
+            raise ValueError(f'{name}: cannot set an empty array ({result.reason})')
+        value = []
+    if descriptor.read_only:
+        node.set_descriptor(name, descriptor)
+    return list(value)
 
 
 def declare_bool(
@@ -219,8 +252,8 @@ def reject(reason: str) -> SetParametersResult:
 def parameter_value(node: Node, name: str) -> Any:
     """Current value of a declared parameter (Python type: float, list, bool, str, ...).
 
-    A parameter declared by type only (an empty array default) that was never set reads
-    as ``None`` instead of raising.
+    A parameter declared by type only that was never set reads as ``None`` instead of
+    raising (the array helpers above never leave one unset: they read as ``[]``).
     """
     if not node.has_parameter(name):
         raise KeyError(f'parameter {name!r} is not declared')

@@ -2,14 +2,17 @@
 
 Subscribes to ``/pph/eddy`` (six gap changes, m), recovers the top plate's pose relative
 to the bottom plate, holds the commanded pose with integral action at a bandwidth of a few
-Hz and publishes ``/pph/pointing_command`` (N, same sample index). The set-point (tilt,
-twist, translation) and the loop's bandwidth are parameters, validated against the
-platform's range (tilt within 2.5 deg, twist within 10 deg, stroke within 95 %).
+Hz and publishes ``/pph/pointing_command`` (N, same sample index); its state and the
+count of rejected ``/pph/eddy`` messages go to ``/diagnostics`` once per simulated second.
+The set-point (tilt, twist, translation) and the loop's bandwidth are parameters, validated
+against the platform's range (tilt within 2.5 deg, twist within 10 deg, stroke within 95 %).
 """
 
 from __future__ import annotations
 
 import numpy as np
+from builtin_interfaces.msg import Time
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from std_msgs.msg import Float64MultiArray
@@ -22,11 +25,12 @@ from hexapod_vibration.core.sensors import EddySensorArray
 from hexapod_vibration.executors import run_node
 from hexapod_vibration.messages import InvalidStrutMessage, make_strut_array, parse_strut_array
 from hexapod_vibration.paths import config_path
-from hexapod_vibration.qos import LOOP_QOS
+from hexapod_vibration.qos import DIAGNOSTICS_QOS, LOOP_PUBLISHER_QOS, LOOP_QOS
 
 TARGET_PARAMS = ("target_tilt_x_deg", "target_tilt_y_deg", "target_twist_deg",
                  "target_translation_m")
 GAIN_PARAMS = ("bandwidth_hz", "damping_ratio", "output_lowpass_hz")
+DIAGNOSTICS_EVERY_SAMPLES = 1000
 
 
 class PointingControllerNode(Node):
@@ -47,7 +51,9 @@ class PointingControllerNode(Node):
         self.enabled = bool(self.get_parameter("enabled").value)
         self.invalid = 0
         self.last_sample = -1
-        self._pub = self.create_publisher(Float64MultiArray, "/pph/pointing_command", LOOP_QOS)
+        self._pub = self.create_publisher(Float64MultiArray, "/pph/pointing_command",
+                                          LOOP_PUBLISHER_QOS)
+        self._pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", DIAGNOSTICS_QOS)
         self.create_subscription(Float64MultiArray, "/pph/eddy", self._on_eddy, LOOP_QOS)
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self.get_logger().info(f"pointing controller up: target {np.round(self.law.target, 6)}"
@@ -120,8 +126,28 @@ class PointingControllerNode(Node):
         self.last_sample = index
         force = self.law.step(np.array(gaps)) if self.enabled else np.zeros(6)
         self._pub.publish(make_strut_array(force, index))
+        if index % DIAGNOSTICS_EVERY_SAMPLES == 0:
+            self.publish_diagnostics()
+
+    def publish_diagnostics(self) -> None:
+        """State and the count of rejected /pph/eddy messages on /diagnostics."""
+        values = {"enabled": str(self.enabled).lower(), "last_sample": self.last_sample,
+                  "invalid": self.invalid,
+                  "target_pose_m_rad": np.round(self.law.target, 9).tolist()}
+        level = DiagnosticStatus.WARN if self.invalid else DiagnosticStatus.OK
+        status = DiagnosticStatus(level=level, name="pointing_controller", hardware_id="pph_sim",
+                                  message="enabled" if self.enabled else "disabled",
+                                  values=[KeyValue(key=k, value=str(v)) for k, v in values.items()])
+        n = max(self.last_sample, 0)
+        msg = DiagnosticArray(status=[status])
+        msg.header.stamp = Time(sec=n // 1000, nanosec=(n % 1000) * 1_000_000)
+        self._pub_diag.publish(msg)
 
 
 def main(args: list[str] | None = None) -> None:
     """Entry point of ``ros2 run hexapod_vibration pointing_controller``."""
     run_node("pointing_controller", PointingControllerNode, args=args)
+
+
+if __name__ == "__main__":
+    main()

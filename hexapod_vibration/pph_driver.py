@@ -12,6 +12,7 @@ Health and loop statistics go to ``/diagnostics`` once per simulated second.
 from __future__ import annotations
 
 import time
+from collections import deque
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -30,9 +31,11 @@ from hexapod_vibration.core.shaker import Shaker, tones_from_arrays
 from hexapod_vibration.executors import run_node
 from hexapod_vibration.messages import InvalidStrutMessage, make_strut_array, parse_strut_array
 from hexapod_vibration.paths import config_path
-from hexapod_vibration.qos import CLOCK_QOS, DIAGNOSTICS_QOS, LOOP_QOS
+from hexapod_vibration.qos import CLOCK_QOS, DIAGNOSTICS_QOS, LOOP_PUBLISHER_QOS, LOOP_QOS
 
 STREAMS = ("notch", "pointing")
+STATS_WINDOW = 60000
+"""Latencies and periods kept for the percentiles on /diagnostics (the last minute at 1 kHz)."""
 CLOCK_MODES = ("lockstep", "realtime")
 SHAKER_PARAMS = ("shaker_frequencies_hz", "shaker_amplitudes_n", "shaker_phases_rad",
                  "shaker_drift_hz", "shaker_drift_period_s", "shaker_noise_rms_n")
@@ -58,10 +61,11 @@ class LoopStats:
 
     samples: int = 0
     timeouts: int = 0
+    missed: int = 0
     late_commands: int = 0
     start_wall_s: float = 0.0
-    latencies_ms: list[float] = field(default_factory=list)
-    periods_ms: list[float] = field(default_factory=list)
+    latencies_ms: deque = field(default_factory=lambda: deque(maxlen=STATS_WINDOW))
+    periods_ms: deque = field(default_factory=lambda: deque(maxlen=STATS_WINDOW))
     last_publish_wall_s: float = 0.0
 
 
@@ -82,10 +86,11 @@ class PPHDriver(Node):
         self.sample = 0
         self.stats = LoopStats()
         self.streams = {s: CommandStream(f"/pph/{s}_command") for s in STREAMS}
-        self._pub_accel = self.create_publisher(Float64MultiArray, "/pph/accel", LOOP_QOS)
-        self._pub_eddy = self.create_publisher(Float64MultiArray, "/pph/eddy", LOOP_QOS)
+        pub_qos = LOOP_PUBLISHER_QOS
+        self._pub_accel = self.create_publisher(Float64MultiArray, "/pph/accel", pub_qos)
+        self._pub_eddy = self.create_publisher(Float64MultiArray, "/pph/eddy", pub_qos)
         self._pub_force = self.create_publisher(Float64MultiArray, "/pph/actuator_force",
-                                                LOOP_QOS)
+                                                LOOP_PUBLISHER_QOS)
         self._pub_clock = self.create_publisher(Clock, "/clock", CLOCK_QOS)
         self._pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", DIAGNOSTICS_QOS)
         for name, stream in self.streams.items():
@@ -128,18 +133,18 @@ class PPHDriver(Node):
         self._timeout_samples = p.declare_int(
             self, "command_timeout_samples", 5, "watchdog: a command stream older than this "
             "many samples is dropped to zero force", 1, 1000)
-        p.declare_float(self, "lockstep_timeout_s", 0.2, "lockstep: longest wait for the "
-                        "commands of one sample before advancing without them (s)", 0.001, 10.0)
+        self._lockstep_timeout_s = p.declare_float(
+            self, "lockstep_timeout_s", 0.2, "lockstep: longest wait for the commands of one "
+            "sample before advancing without them (s)", 0.001, 10.0)
         self._hold_at_time_s = p.declare_float(
             self, "hold_at_time_s", -1.0, "lockstep breakpoint: stop before publishing the "
             "sample at this sim time (s) until it is changed; negative = never", -1.0, 1e6)
         p.declare_string(self, "executor", "single_threaded", "rclpy executor",
                          ("single_threaded", "events"), read_only=True)
-        self._expected = [str(x) for x in self.declare_parameter(
-            "lockstep_controllers", list(STREAMS), p.descriptor(
-                "controllers the lockstep driver waits for before sample 0 and then every "
-                "sample while they are connected (subset of notch, pointing)",
-                read_only=True)).value]
+        self._expected = p.declare_string_array(
+            self, "lockstep_controllers", list(STREAMS), "controllers the lockstep driver "
+            "waits for before sample 0 and then every sample while they are connected "
+            "(subset of notch, pointing; may be empty)", read_only=True)
         unknown = set(self._expected) - set(STREAMS)
         if unknown:
             raise ValueError(f"lockstep_controllers: unknown {sorted(unknown)}, use {STREAMS}")
@@ -179,7 +184,8 @@ class PPHDriver(Node):
                 self.plant.shaker.noise_rms_n = float(changes["shaker_noise_rms_n"])
         if "command_timeout_samples" in changes:
             self._timeout_samples = int(changes["command_timeout_samples"])
-        for name in ("test_sine_frequency_hz", "test_sine_amplitude_n", "hold_at_time_s"):
+        for name in ("test_sine_frequency_hz", "test_sine_amplitude_n", "hold_at_time_s",
+                     "lockstep_timeout_s"):
             if name in changes:
                 setattr(self, f"_{name}", float(changes[name]))
         return p.accept()
@@ -206,12 +212,33 @@ class PPHDriver(Node):
                 (stream.received_wall_s - self.stats.last_publish_wall_s) * 1e3)
 
     def _refresh_connections(self) -> None:
+        """A stream is connected if the graph shows a publisher or it commanded recently.
+
+        The graph (count_publishers) can lag behind the data: a controller that answered
+        the handshake may not be listed yet, and it must be waited for all the same.
+        """
         for stream in self.streams.values():
-            stream.connected = self.count_publishers(stream.topic) > 0
+            recent = stream.sample >= 0 and self.sample - stream.sample <= self._timeout_samples
+            stream.connected = recent or self.count_publishers(stream.topic) > 0
+
+    def _waited_streams(self) -> list[CommandStream]:
+        """Expected controllers that are connected and not dropped by the watchdog.
+
+        A controller that missed more than ``command_timeout_samples`` samples (e.g. its
+        process died, which discovery may notice only many seconds later) is not waited for
+        any more, so the loop runs on without it; it is waited for again once it answers.
+        """
+        return [s for s in (self.streams[n] for n in self._expected)
+                if s.connected and self.sample - s.sample <= self._timeout_samples]
 
     def _commands_ready(self) -> bool:
-        return all(self.streams[n].sample == self.sample for n in self._expected
-                   if self.streams[n].connected)
+        return all(s.sample == self.sample for s in self._waited_streams())
+
+    def _count_missed(self) -> None:
+        """Lockstep: count the sample if a connected expected controller did not answer it."""
+        if any(self.streams[n].connected and self.streams[n].sample != self.sample
+               for n in self._expected):
+            self.stats.missed += 1
 
     def _active_force(self, name: str) -> np.ndarray:
         """The stream's force, or zero if its last valid command is too old (watchdog)."""
@@ -259,18 +286,20 @@ class PPHDriver(Node):
         hold = self._hold_at_time_s
         return self.mode == "lockstep" and hold >= 0.0 and self.sample >= round(hold * self.fs)
 
-    def publish_diagnostics(self) -> None:
-        """Loop health and statistics on /diagnostics."""
+    def publish_diagnostics(self, held: bool = False) -> None:
+        """Loop health and statistics on /diagnostics (``held``: at the breakpoint)."""
         st = self.stats
         wall = max(time.perf_counter() - st.start_wall_s, 1e-9)
-        lat = np.array(st.latencies_ms[-60000:]) if st.latencies_ms else np.array([np.nan])
-        per = np.array(st.periods_ms[-60000:]) if st.periods_ms else np.array([np.nan])
-        stale = [n for n, s in self.streams.items() if s.stale and s.connected]
+        lat = np.array(st.latencies_ms) if st.latencies_ms else np.array([np.nan])
+        per = np.array(st.periods_ms) if st.periods_ms else np.array([np.nan])
+        # Stale: connected, or sent commands before (a controller that went away).
+        stale = [n for n, s in self.streams.items()
+                 if s.stale and (s.connected or s.sample >= 0)]
         values = {
-            "mode": self.mode, "sample": self.sample, "samples": st.samples,
+            "mode": self.mode, "sample": self.sample, "samples": st.samples, "held": held,
             "rate_hz": st.samples / wall, "timeouts": st.timeouts,
             "late_commands": st.late_commands,
-            "missed_samples": st.timeouts if self.mode == "lockstep" else st.late_commands,
+            "missed_samples": st.missed if self.mode == "lockstep" else st.late_commands,
             "latency_ms_p50": np.percentile(lat, 50), "latency_ms_p99": np.percentile(lat, 99),
             "latency_ms_max": np.max(lat), "period_ms_p50": np.percentile(per, 50),
             "period_ms_p99": np.percentile(per, 99), "period_ms_max": np.max(per),
@@ -280,7 +309,9 @@ class PPHDriver(Node):
         for name, s in self.streams.items():
             values.update({f"{name}_invalid": s.invalid, f"{name}_stale_events": s.stale_events,
                            f"{name}_connected": s.connected})
-        level = DiagnosticStatus.WARN if stale or st.timeouts else DiagnosticStatus.OK
+        invalid = any(s.invalid for s in self.streams.values())
+        level = (DiagnosticStatus.WARN if stale or st.timeouts or st.missed or invalid
+                 else DiagnosticStatus.OK)
         pairs = [KeyValue(key=k, value=_fmt(v)) for k, v in values.items()]
         status = DiagnosticStatus(level=level, name="pph_driver: loop", hardware_id="pph_sim",
                                   message=f"stale: {', '.join(stale)}" if stale else "ok",
@@ -295,6 +326,23 @@ def _fmt(value: object) -> str:
     if isinstance(value, float):
         return f"{value:.6g}"
     return str(value).lower() if isinstance(value, bool) else str(value)
+
+
+def wait_while_held(node: PPHDriver, executor) -> None:
+    """Lockstep breakpoint: serve callbacks (parameters) until ``hold_at_time_s`` moves on.
+
+    On entering the hold the driver reports ``held: true`` with its sample on
+    /diagnostics, so a supervisor (the experiment runner) knows the loop stopped exactly
+    before publishing that sample.
+    """
+    if not node.held():
+        return
+    announced = 0.0
+    while node.held() and rclpy.ok():
+        if time.perf_counter() - announced > 0.5:      # late subscribers hear it too
+            node.publish_diagnostics(held=True)
+            announced = time.perf_counter()
+        executor.spin_once(timeout_sec=0.01)
 
 
 def wait_for_controllers(node: PPHDriver, executor) -> None:
@@ -320,8 +368,12 @@ def wait_for_controllers(node: PPHDriver, executor) -> None:
 
 
 def run_lockstep(node: PPHDriver, executor) -> None:
-    """Advance as soon as every connected controller answered the current sample."""
-    timeout = node.get_parameter("lockstep_timeout_s").value
+    """Advance as soon as every connected controller answered the current sample.
+
+    Only the controllers of ``lockstep_controllers`` are waited for, each up to
+    ``lockstep_timeout_s`` per sample, and not once the watchdog dropped its stream.
+    """
+    wait_while_held(node, executor)
     wait_for_controllers(node, executor)
     first = True
     while rclpy.ok():
@@ -329,10 +381,10 @@ def run_lockstep(node: PPHDriver, executor) -> None:
             first = False
             node.apply_and_step()
             continue
-        while node.held() and rclpy.ok():
-            executor.spin_once(timeout_sec=0.01)
+        wait_while_held(node, executor)
         node.publish_sample()
-        deadline = time.perf_counter() + timeout
+        deadline = time.perf_counter() + node._lockstep_timeout_s
+        spun = False
         while not node._commands_ready():
             remaining = deadline - time.perf_counter()
             if remaining <= 0.0:
@@ -340,8 +392,12 @@ def run_lockstep(node: PPHDriver, executor) -> None:
                 node._refresh_connections()
                 break
             executor.spin_once(timeout_sec=remaining)
+            spun = True
+        if not spun:    # nothing to wait for: still serve parameters and other streams
+            executor.spin_once(timeout_sec=0.0)
         if node.sample % 200 == 0:
             node._refresh_connections()
+        node._count_missed()
         node.apply_and_step()
 
 
@@ -377,3 +433,7 @@ def _run(node: PPHDriver, executor) -> None:
 def main(args: list[str] | None = None) -> None:
     """Entry point of ``ros2 run hexapod_vibration pph_driver``."""
     run_node("pph_driver", PPHDriver, _run, args=args)
+
+
+if __name__ == "__main__":
+    main()

@@ -32,6 +32,20 @@ latency and the memory instead of queueing stale commands. VOLATILE: a late join
 not receive old samples as if they were current.
 """
 
+LOOP_PUBLISHER_QOS = QoSProfile(
+    reliability=ReliabilityPolicy.RELIABLE,
+    history=HistoryPolicy.KEEP_LAST,
+    depth=1000,
+    durability=DurabilityPolicy.VOLATILE,
+)
+"""Publishers of the loop topics ``/pph/*``.
+
+Same policies as LOOP_QOS (so they match it), but a writer history of 1000 samples (1 s):
+a RELIABLE writer can only re-send what is still in its history, so a reader that falls
+behind for a moment (the recorder during a disk flush or on a loaded machine) would lose
+samples with a history of 10. The depth costs memory only; it adds no latency.
+"""
+
 RECORDER_QOS = QoSProfile(
     reliability=ReliabilityPolicy.RELIABLE,
     history=HistoryPolicy.KEEP_LAST,

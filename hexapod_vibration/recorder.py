@@ -85,6 +85,9 @@ RECORDED_TOPICS: tuple[RecordedTopic, ...] = (
         RecordedTopic(t, Float64MultiArray, 'std_msgs/msg/Float64MultiArray', RECORDER_QOS)
         for t in STRUT_TOPICS
     ),
+    RecordedTopic(
+        '/pph/notch_weights', Float64MultiArray, 'std_msgs/msg/Float64MultiArray', RECORDER_QOS
+    ),
     RecordedTopic('/clock', ClockMessage, 'rosgraph_msgs/msg/Clock', RECORDER_CLOCK_QOS),
     RecordedTopic(
         '/diagnostics', DiagnosticArray, 'diagnostic_msgs/msg/DiagnosticArray', RECORDER_QOS
@@ -299,3 +302,7 @@ def run(args: list[str] | None = None) -> int:
 def main(args: list[str] | None = None) -> None:
     """Console-script entry point of ``pph_recorder``."""
     sys.exit(run(args))
+
+
+if __name__ == "__main__":
+    main()

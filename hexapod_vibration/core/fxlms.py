@@ -41,7 +41,7 @@ from hexapod_vibration.core.scenario import Scenario
 DEFAULT_PATH_TAPS = 64
 DEFAULT_CONTROL_TAPS = 32
 PATH_TAPS_RANGE = (32, 128)
-DEFAULT_FXLMS_MU = 0.02
+DEFAULT_FXLMS_MU = 0.05
 NORMALISATION_EPS = 1e-12
 
 

@@ -1,0 +1,64 @@
+"""Bring up the simulated hexapod and its controllers, optionally with the recorder.
+
+    ros2 launch hexapod_vibration pph.launch.py
+    ros2 launch hexapod_vibration pph.launch.py clock_mode:=realtime
+    ros2 launch hexapod_vibration pph.launch.py params_file:=/path/to/my_pph.yaml
+    ros2 launch hexapod_vibration pph.launch.py record:=true bag_path:=/tmp/pph_bag
+
+Starts ``pph_driver``, ``notch_controller`` and ``pointing_controller`` (node names = the
+executable names) with the parameters of ``config/pph.yaml`` from the package's share
+directory (or ``params_file``); ``clock_mode`` overrides the driver's clock mode. With
+``record:=true`` it also starts ``pph_recorder``, which writes the contract topics into
+the bag directory ``bag_path`` (empty: ``rosbag2_<date>-<time>`` in the current directory).
+"""
+
+import os
+
+from ament_index_python.packages import get_package_share_directory
+from launch import LaunchDescription
+from launch.actions import DeclareLaunchArgument
+from launch.conditions import IfCondition
+from launch.substitutions import LaunchConfiguration
+from launch_ros.actions import Node
+from launch_ros.parameter_descriptions import ParameterValue
+
+PACKAGE = 'hexapod_vibration'
+PARAMS_FILE = 'pph.yaml'
+
+
+def generate_launch_description() -> LaunchDescription:
+    """The launch description: arguments, the three nodes and the optional recorder."""
+    default_params = os.path.join(get_package_share_directory(PACKAGE), 'config', PARAMS_FILE)
+    params_file = LaunchConfiguration('params_file')
+    clock_mode = LaunchConfiguration('clock_mode')
+    record = LaunchConfiguration('record')
+    bag_path = LaunchConfiguration('bag_path')
+    arguments = [
+        DeclareLaunchArgument(
+            'params_file', default_value=default_params,
+            description='ROS params file for pph_driver, notch_controller, pointing_controller'),
+        DeclareLaunchArgument(
+            'clock_mode', default_value='lockstep', choices=['lockstep', 'realtime'],
+            description='driver clock: lockstep (deterministic, as fast as the controllers '
+                        'answer) or realtime (paced at 1 kHz wall clock)'),
+        DeclareLaunchArgument(
+            'record', default_value='false', choices=['true', 'false'],
+            description='also start pph_recorder (rosbag2 bag of the contract topics)'),
+        DeclareLaunchArgument(
+            'bag_path', default_value='',
+            description='bag directory of the recorder (must not exist); empty: '
+                        'rosbag2_<date>-<time> in the current directory'),
+    ]
+    nodes = [
+        Node(package=PACKAGE, executable='pph_driver', name='pph_driver', output='screen',
+             parameters=[params_file,
+                         {'clock_mode': ParameterValue(clock_mode, value_type=str)}]),
+        Node(package=PACKAGE, executable='notch_controller', name='notch_controller',
+             output='screen', parameters=[params_file]),
+        Node(package=PACKAGE, executable='pointing_controller', name='pointing_controller',
+             output='screen', parameters=[params_file]),
+        Node(package=PACKAGE, executable='pph_recorder', name='pph_recorder', output='screen',
+             parameters=[{'bag_path': ParameterValue(bag_path, value_type=str)}],
+             condition=IfCondition(record)),
+    ]
+    return LaunchDescription([*arguments, *nodes])

@@ -1,0 +1,194 @@
+"""Helpers for the tests that run the three nodes as processes (imported, not collected).
+
+Recorders of the ``/pph/*`` topics keyed by the in-band sample index, the latest
+``/diagnostics`` status of every node, a blocking wrapper around rclpy's parameter client
+(the services ``ros2 param`` uses) and a least-squares tone amplitude. Nothing here
+measures or asserts time: every wait has a generous hang guard only.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+from diagnostic_msgs.msg import DiagnosticArray
+from rcl_interfaces.msg import SetParametersResult
+from rclpy.node import Node
+from rclpy.parameter import Parameter, parameter_value_to_python
+from rclpy.parameter_client import AsyncParameterClient
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rosgraph_msgs.msg import Clock
+from std_msgs.msg import Float64MultiArray
+
+from hexapod_vibration.messages import parse_strut_array
+from hexapod_vibration.qos import DIAGNOSTICS_QOS
+
+HANG_GUARD_S = 90.0
+"""Longest wait for anything (s): a guard against hangs, never a timing requirement."""
+
+FS_HZ = 1000.0
+
+RECORD_QOS = QoSProfile(
+    reliability=ReliabilityPolicy.RELIABLE,
+    history=HistoryPolicy.KEEP_LAST,
+    depth=20000,
+    durability=DurabilityPolicy.VOLATILE,
+)
+"""Test-side subscriptions: deep enough that a busy test process loses nothing it needs."""
+
+STRUT_TOPICS = ('/pph/accel', '/pph/eddy', '/pph/notch_command', '/pph/pointing_command',
+                '/pph/actuator_force')
+
+
+class StrutTopic:
+    """Everything received on one ``/pph/*`` topic, by sample index."""
+
+    def __init__(self, node: Node, topic: str):
+        self.topic = topic
+        self.by_index: dict[int, np.ndarray] = {}
+        self.first_message: Float64MultiArray | None = None
+        self.messages = 0
+        self.unindexed = 0
+        self.subscription = node.create_subscription(
+            Float64MultiArray, topic, self._on_message, RECORD_QOS)
+
+    def _on_message(self, msg: Float64MultiArray) -> None:
+        values, index = parse_strut_array(msg)
+        self.messages += 1
+        if self.first_message is None:
+            self.first_message = msg
+        if index is None:
+            self.unindexed += 1
+            return
+        self.by_index[index] = np.array(values)
+
+    @property
+    def last_index(self) -> int:
+        """Highest sample index received, -1 before any."""
+        return max(self.by_index, default=-1)
+
+    def window(self, start: int, stop: int) -> tuple[np.ndarray, np.ndarray]:
+        """(indices, values (n, 6)) received for start <= index < stop."""
+        idx = np.array(sorted(i for i in self.by_index if start <= i < stop), dtype=int)
+        values = np.array([self.by_index[i] for i in idx]).reshape(-1, 6)
+        return idx, values
+
+
+class ClockTopic:
+    """Sim times received on /clock (ns)."""
+
+    def __init__(self, node: Node):
+        self.times_ns: list[int] = []
+        qos = QoSProfile(reliability=ReliabilityPolicy.BEST_EFFORT,
+                         history=HistoryPolicy.KEEP_LAST, depth=1000)
+        node.create_subscription(Clock, '/clock', self._on_clock, qos)
+
+    def _on_clock(self, msg: Clock) -> None:
+        self.times_ns.append(msg.clock.sec * 1_000_000_000 + msg.clock.nanosec)
+
+
+class Diagnostics:
+    """Latest ``/diagnostics`` status of each status name, and every status received."""
+
+    def __init__(self, node: Node):
+        self.latest: dict[str, Any] = {}
+        self.history: list[Any] = []
+        node.create_subscription(DiagnosticArray, '/diagnostics', self._on_diag,
+                                 DIAGNOSTICS_QOS)
+
+    def _on_diag(self, msg: DiagnosticArray) -> None:
+        for status in msg.status:
+            self.latest[status.name] = status
+            self.history.append(status)
+
+    def values(self, name: str) -> dict[str, str]:
+        """Key/values of the latest status called ``name`` ({} before any)."""
+        status = self.latest.get(name)
+        return {} if status is None else {kv.key: kv.value for kv in status.values}
+
+    def value(self, name: str, key: str, default: str = '') -> str:
+        return self.values(name).get(key, default)
+
+    def int_value(self, name: str, key: str) -> int:
+        return int(self.value(name, key, '-1'))
+
+
+class ParameterClient:
+    """Blocking calls of a node's parameter services (what ``ros2 param`` calls)."""
+
+    def __init__(self, ros_context, node: Node, target: str):
+        self.ros_context = ros_context
+        self.target = target
+        self.client = AsyncParameterClient(node, target)
+        assert self.client.wait_for_services(timeout_sec=HANG_GUARD_S), f'{target}: no services'
+
+    def _wait(self, future):
+        assert self.ros_context.wait_for(future.done, HANG_GUARD_S), f'{self.target}: no answer'
+        return future.result()
+
+    def names(self) -> list[str]:
+        return list(self._wait(self.client.list_parameters()).result.names)
+
+    def get(self, *names: str) -> dict[str, Any]:
+        values = self._wait(self.client.get_parameters(list(names))).values
+        assert len(values) == len(names), f'{self.target}: get_parameters({names}) failed'
+        return {n: _python(v) for n, v in zip(names, values, strict=True)}
+
+    def get_all(self) -> dict[str, Any]:
+        return self.get(*self.names())
+
+    def set(self, name: str, value: Any) -> SetParametersResult:
+        """Set one parameter (``ros2 param set``); the node's result (successful, reason)."""
+        param = value if isinstance(value, Parameter) else Parameter(name, value=value)
+        results = self._wait(self.client.set_parameters([param])).results
+        assert len(results) == 1
+        return results[0]
+
+    def set_atomically(self, **values: Any) -> SetParametersResult:
+        params = [Parameter(n, value=v) for n, v in values.items()]
+        return self._wait(self.client.set_parameters_atomically(params)).result
+
+
+def _python(value) -> Any:
+    result = parameter_value_to_python(value)
+    if isinstance(result, (list, tuple)) or type(result).__name__ == 'array':
+        return list(result)
+    return result
+
+
+def tone_amplitude(indices: np.ndarray, values: np.ndarray, frequency_hz: float,
+                   fs: float = FS_HZ) -> np.ndarray:
+    """Per-column amplitude of a ``frequency_hz`` sinusoid, least squares on the indices.
+
+    The fit has an offset and a slope too (DC, gravity and slow drift removed), and works
+    on samples with gaps since every value is placed on its sample index.
+    """
+    t = np.asarray(indices, float)
+    phase = 2.0 * np.pi * frequency_hz * t / fs
+    basis = np.column_stack([np.ones_like(t), (t - t.mean()) / max(np.ptp(t), 1.0),
+                             np.cos(phase), np.sin(phase)])
+    coef, *_ = np.linalg.lstsq(basis, np.asarray(values, float), rcond=None)
+    return np.hypot(coef[2], coef[3])
+
+
+def db(ratio: float | np.ndarray) -> float | np.ndarray:
+    return 20.0 * np.log10(ratio)
+
+
+def assert_rejected(result: SetParametersResult, *words: str) -> None:
+    """The set was refused with a non-empty reason containing ``words``."""
+    assert not result.successful, 'accepted, expected a rejection'
+    assert result.reason.strip(), 'rejected without a reason'
+    for word in words:
+        assert word.lower() in result.reason.lower(), result.reason
+
+
+def assert_close(actual: Any, expected: Any) -> None:
+    if isinstance(expected, float) and math.isnan(expected):
+        assert math.isnan(actual)
+    elif isinstance(expected, Sequence) and not isinstance(expected, str):
+        assert list(actual) == list(expected), (actual, expected)
+    else:
+        assert actual == expected, (actual, expected)
