@@ -523,7 +523,8 @@ def summary_markdown(results: dict[str, Any]) -> str:
         atts = ', '.join(f'{k} Hz {_fmt(v, 1)} dB' for k, v in diag['attenuation_db'].items())
         lines.append(f'FxLMS with the uncontrolled shaker tones off: {atts} '
                      f"(convergence {_fmt(diag['convergence_s'])} s).")
-    extra = {k: v for k, v in results.items() if k in ('realtime', 'lockstep_speedup')}
+    extra = {k: v for k, v in results.items() if k in ('realtime', 'lockstep_speedup',
+                                                      'executors')}
     if extra:
         lines += ['', '## ROS loop', '', '```', json.dumps(extra, indent=1, default=str), '```']
     return '\n'.join(lines) + '\n'

@@ -134,7 +134,7 @@ class PPHDriver(Node):
             self, "command_timeout_samples", 5, "watchdog: a command stream older than this "
             "many samples is dropped to zero force", 1, 1000)
         self._lockstep_timeout_s = p.declare_float(
-            self, "lockstep_timeout_s", 0.2, "lockstep: longest wait for the commands of one "
+            self, "lockstep_timeout_s", 2.0, "lockstep: longest wait for the commands of one "
             "sample before advancing without them (s)", 0.001, 10.0)
         self._hold_at_time_s = p.declare_float(
             self, "hold_at_time_s", -1.0, "lockstep breakpoint: stop before publishing the "
@@ -432,6 +432,8 @@ def _run(node: PPHDriver, executor) -> None:
 
 def main(args: list[str] | None = None) -> None:
     """Entry point of ``ros2 run hexapod_vibration pph_driver``."""
+    import faulthandler, signal  # DEBUG
+    faulthandler.register(signal.SIGUSR1, all_threads=True)  # DEBUG
     run_node("pph_driver", PPHDriver, _run, args=args)
 
 

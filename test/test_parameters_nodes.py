@@ -232,12 +232,19 @@ def test_driver_parameters(ros_context, node_processes):
         _, f = force.window(force.last_index - 200, force.last_index + 1)
         return (len(f) > 150 and np.allclose(f, f[:, :1])
                 and 4.5 < np.max(np.abs(f)) <= 5.0 + 1e-9)
-    assert ros_context.wait_for(sine_applied, HANG_GUARD_S), force.window(
-        force.last_index - 5, force.last_index + 1)
+    assert ros_context.wait_for(sine_applied, HANG_GUARD_S), (
+        force.window(force.last_index - 5, force.last_index + 1), driver.output())
     _check_accepted(client, 'test_sine_amplitude_n', 0.0)
+    ok = ros_context.wait_for(
+        lambda: not np.any(force.window(force.last_index - 200, force.last_index + 1)[1]),
+        20)
+    if not ok:
+        import os, signal, time
+        os.kill(driver.pid, signal.SIGUSR1); time.sleep(2)
     assert ros_context.wait_for(
         lambda: not np.any(force.window(force.last_index - 200, force.last_index + 1)[1]),
-        HANG_GUARD_S)
+        HANG_GUARD_S), (accel.last_index, force.last_index, accel.messages, force.messages,
+                        driver.running(), driver.output())
     _check_rejected(client, 'test_sine_amplitude_n', [-1.0, 41.0, math.nan])
     _check_rejected(client, 'test_sine_frequency_hz', [0.0, 500.0, math.inf])
 

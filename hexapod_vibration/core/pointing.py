@@ -99,6 +99,7 @@ class PointingController:
         self._jac_t = geometry.top_jacobian.T
         self.stiffness = strut_stiffness_n_per_m * geometry.top_jacobian.T @ geometry.top_jacobian
         self._mass = np.asarray(top_mass_matrix, float)
+        self._pose_from_gaps = np.linalg.inv(self.sensing_matrix)
         self.target = np.zeros(6)
         self.set_gains(gains or PointingGains())
 
@@ -113,6 +114,11 @@ class PointingController:
         self._k_p = np.diag(np.maximum(m * (w_n**2 + 2.0 * zeta * w_n * w_c) - k, 0.0))
         damping = np.minimum(m * (2.0 * zeta * w_n + w_c), m * 2.0 * np.pi * MAX_RATE_GAIN_HZ)
         self._damping = np.diag(damping)
+        # Per-sample work is mat-vec products only: statics J^-T folded into each gain.
+        jac_inv_t = np.linalg.inv(self._jac_t)
+        self._force_p = jac_inv_t @ self._k_p
+        self._force_i = jac_inv_t @ self._k_int
+        self._force_d = jac_inv_t @ self._damping
         previous = getattr(self, "_lowpass", None)
         self._lowpass = SosFilterBank.butter_lowpass(2, gains.output_lowpass_hz,
                                                      self.sample_rate_hz, 6)
@@ -138,21 +144,20 @@ class PointingController:
 
     def step(self, gaps_m: np.ndarray) -> np.ndarray:
         """One sample: eddy gaps (m) -> strut forces (N) for the same sample."""
-        pose = self.pose(gaps_m)
+        pose = self._pose_from_gaps @ np.asarray(gaps_m, float)
         rate = np.zeros(6) if self._prev_pose is None else (pose - self._prev_pose) / self.dt_s
         self._prev_pose = pose
         error = self.target - pose
-        self._integrate(error)
-        wrench = self._k_p @ error + self._k_int @ self._integral - self._damping @ rate
-        force = np.linalg.solve(self._jac_t, wrench)
+        integral_force = self._integrate(error)
+        force = self._force_p @ error + integral_force - self._force_d @ rate
         self._last_force = self._lowpass.step(force)
         return self._last_force
 
-    def _integrate(self, error: np.ndarray) -> None:
-        """Integrate the error; clamp so the integral's strut forces stay in the limit."""
+    def _integrate(self, error: np.ndarray) -> np.ndarray:
+        """Integrate the error; hold it where its strut forces would pass the limit (N)."""
         candidate = self._integral + error * self.dt_s
-        force = np.linalg.solve(self._jac_t, self._k_int @ candidate)
-        peak = float(np.max(np.abs(force)))
-        if peak > self.gains.force_limit_n:
-            candidate = self._integral   # anti-windup: hold the integral at the limit
+        force = self._force_i @ candidate
+        if np.abs(force).max() > self.gains.force_limit_n:
+            return self._force_i @ self._integral    # anti-windup: integral held
         self._integral = candidate
+        return force
