@@ -239,8 +239,16 @@ def test_driver_parameters(ros_context, node_processes):
         lambda: not np.any(force.window(force.last_index - 200, force.last_index + 1)[1]),
         20)
     if not ok:
-        import os, signal, time
-        os.kill(driver.pid, signal.SIGUSR1); time.sleep(2)
+        import subprocess, time
+        out = []
+        for _ in range(4):
+            stat = open(f'/proc/{driver.pid}/stat').read().split()
+            out.append(f'utime {stat[13]} stime {stat[14]} state {stat[2]} accel {accel.last_index}')
+            out.append(subprocess.run(['gdb', '-p', str(driver.pid), '-batch', '-ex', 'thread 1',
+                                       '-ex', 'bt 14'], capture_output=True, text=True,
+                                      timeout=120).stdout[-3000:])
+            time.sleep(1.0)
+        open('/tmp/hx/gdb.txt', 'w').write('\n'.join(out))
     assert ros_context.wait_for(
         lambda: not np.any(force.window(force.last_index - 200, force.last_index + 1)[1]),
         HANG_GUARD_S), (accel.last_index, force.last_index, accel.messages, force.messages,
