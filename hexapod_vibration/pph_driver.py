@@ -432,8 +432,6 @@ def _run(node: PPHDriver, executor) -> None:
 
 def main(args: list[str] | None = None) -> None:
     """Entry point of ``ros2 run hexapod_vibration pph_driver``."""
-    import faulthandler, signal  # DEBUG
-    faulthandler.register(signal.SIGUSR1, all_threads=True)  # DEBUG
     run_node("pph_driver", PPHDriver, _run, args=args)
 
 

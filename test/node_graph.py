@@ -9,6 +9,7 @@ measures or asserts time: every wait has a generous hang guard only.
 from __future__ import annotations
 
 import math
+import time
 from collections.abc import Sequence
 from typing import Any
 
@@ -48,6 +49,8 @@ class StrutTopic:
     def __init__(self, node: Node, topic: str):
         self.topic = topic
         self.by_index: dict[int, np.ndarray] = {}
+        self.last_index = -1
+        """Highest sample index received, -1 before any."""
         self.first_message: Float64MultiArray | None = None
         self.messages = 0
         self.unindexed = 0
@@ -63,17 +66,17 @@ class StrutTopic:
             self.unindexed += 1
             return
         self.by_index[index] = np.array(values)
-
-    @property
-    def last_index(self) -> int:
-        """Highest sample index received, -1 before any."""
-        return max(self.by_index, default=-1)
+        self.last_index = max(self.last_index, index)
 
     def window(self, start: int, stop: int) -> tuple[np.ndarray, np.ndarray]:
         """(indices, values (n, 6)) received for start <= index < stop."""
-        idx = np.array(sorted(i for i in self.by_index if start <= i < stop), dtype=int)
+        idx = [i for i in range(max(start, 0), stop) if i in self.by_index]
         values = np.array([self.by_index[i] for i in idx]).reshape(-1, 6)
-        return idx, values
+        return np.array(idx, dtype=int), values
+
+    def latest(self, samples: int) -> np.ndarray:
+        """Values (n, 6) of the last ``samples`` sample indices (those received)."""
+        return self.window(self.last_index - samples + 1, self.last_index + 1)[1]
 
 
 class ClockTopic:
@@ -115,6 +118,29 @@ class Diagnostics:
         return int(self.value(name, key, '-1'))
 
 
+def drain(ros_context, budget_s: float = 0.05) -> None:
+    """Run ready callbacks without waiting, for ``budget_s`` of wall time.
+
+    One callback per spin and a predicate evaluated between spins would fall far behind
+    a few 1 kHz streams on a loaded machine.
+    """
+    deadline = time.monotonic() + budget_s
+    while time.monotonic() < deadline:
+        ros_context.executor.spin_once(timeout_sec=0.0)
+
+
+def wait_until(ros_context, predicate, timeout_s: float = HANG_GUARD_S, step=None) -> bool:
+    """Spin (draining the queues) until ``predicate()``; False after the hang guard.
+
+    ``step`` (e.g. publishing something) runs before each drain.
+    """
+    def spin() -> None:
+        if step is not None:
+            step()
+        drain(ros_context)
+    return ros_context.wait_for(predicate, timeout_s, step=spin)
+
+
 class ParameterClient:
     """Blocking calls of a node's parameter services (what ``ros2 param`` calls)."""
 
@@ -125,7 +151,7 @@ class ParameterClient:
         assert self.client.wait_for_services(timeout_sec=HANG_GUARD_S), f'{target}: no services'
 
     def _wait(self, future):
-        assert self.ros_context.wait_for(future.done, HANG_GUARD_S), f'{self.target}: no answer'
+        assert wait_until(self.ros_context, future.done), f'{self.target}: no answer'
         return future.result()
 
     def names(self) -> list[str]:

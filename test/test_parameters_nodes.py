@@ -23,6 +23,7 @@ from node_graph import (
     assert_rejected,
     db,
     tone_amplitude,
+    wait_until,
 )
 from rclpy.parameter import Parameter
 
@@ -119,7 +120,7 @@ def test_notch_controller_parameters(ros_context, node_processes):
         return (diagnostics.value('notch_controller', 'state') == 'adapting'
                 and diagnostics.value('notch_controller', 'identified_tones_hz') == str(tones))
 
-    assert ros_context.wait_for(lambda: identified([40.0]), HANG_GUARD_S), logs()
+    assert wait_until(ros_context, lambda: identified([40.0]), HANG_GUARD_S), logs()
     bound = float(diagnostics.value('notch_controller', 'mu_bound'))
     assert 0.0 < bound < 0.9
 
@@ -145,7 +146,7 @@ def test_notch_controller_parameters(ros_context, node_processes):
     _check_rejected(client, 'tone_frequencies_hz', ['40', [40, 80], 40.0])  # wrong types
     # A new tone: accepted, identified (it was unknown), then adapted.
     _check_accepted(client, 'tone_frequencies_hz', [40.0, 80.0])
-    assert ros_context.wait_for(lambda: identified([40.0, 80.0]), HANG_GUARD_S), logs()
+    assert wait_until(ros_context, lambda: identified([40.0, 80.0]), HANG_GUARD_S), logs()
     # Removing a tone needs no identification (bumpless).
     statuses = len(diagnostics.history)
     mark = command.last_index
@@ -156,7 +157,7 @@ def test_notch_controller_parameters(ros_context, node_processes):
         later[:] = [s for s in diagnostics.history[statuses:] if s.name == 'notch_controller'
                     and int({kv.key: kv.value for kv in s.values}['last_sample']) > mark]
         return len(later) >= 2
-    assert ros_context.wait_for(two_later_statuses, HANG_GUARD_S), logs()
+    assert wait_until(ros_context, two_later_statuses, HANG_GUARD_S), logs()
     assert all(s.message == 'adapting' for s in later), [s.message for s in later]
 
     # enabled: off -> the command fades to exactly zero; on -> it comes back.
@@ -165,13 +166,13 @@ def test_notch_controller_parameters(ros_context, node_processes):
 
     _check_accepted(client, 'enabled', False)
     mark = command.last_index
-    off = ros_context.wait_for(
+    off = wait_until(ros_context,
         lambda: len(commands_after(mark)) > 200
         and not np.any(commands_after(mark)[-100:]), HANG_GUARD_S)
     assert off, commands_after(mark)[-5:]
     _check_accepted(client, 'enabled', True)
     mark = command.last_index
-    assert ros_context.wait_for(
+    assert wait_until(ros_context,
         lambda: np.any(np.abs(commands_after(mark)) > 0.01), HANG_GUARD_S)
     _check_rejected(client, 'enabled', ['yes', 1])
 
@@ -199,11 +200,11 @@ def test_driver_parameters(ros_context, node_processes):
         'clock_mode': 'realtime', 'lockstep_controllers': []}
 
     # The shaker tone is in the accelerometers, and gone once its amplitude is 0.
-    assert ros_context.wait_for(lambda: accel.last_index > 1500, HANG_GUARD_S), driver.output()
+    assert wait_until(ros_context, lambda: accel.last_index > 1500, HANG_GUARD_S), driver.output()
     on = tone_amplitude(*accel.window(accel.last_index - 1000, accel.last_index + 1), 40.0)
     _check_accepted(client, 'shaker_amplitudes_n', [0.0])
     mark = accel.last_index
-    assert ros_context.wait_for(lambda: accel.last_index > mark + 3000, HANG_GUARD_S)
+    assert wait_until(ros_context, lambda: accel.last_index > mark + 3000, HANG_GUARD_S)
     off = tone_amplitude(*accel.window(mark + 2000, mark + 3000), 40.0)
     assert np.all(on > 0.05) and db(np.linalg.norm(on) / np.linalg.norm(off)) > 20.0, (on, off)
 
@@ -232,24 +233,10 @@ def test_driver_parameters(ros_context, node_processes):
         _, f = force.window(force.last_index - 200, force.last_index + 1)
         return (len(f) > 150 and np.allclose(f, f[:, :1])
                 and 4.5 < np.max(np.abs(f)) <= 5.0 + 1e-9)
-    assert ros_context.wait_for(sine_applied, HANG_GUARD_S), (
+    assert wait_until(ros_context, sine_applied, HANG_GUARD_S), (
         force.window(force.last_index - 5, force.last_index + 1), driver.output())
     _check_accepted(client, 'test_sine_amplitude_n', 0.0)
-    ok = ros_context.wait_for(
-        lambda: not np.any(force.window(force.last_index - 200, force.last_index + 1)[1]),
-        20)
-    if not ok:
-        import subprocess, time
-        out = []
-        for _ in range(4):
-            stat = open(f'/proc/{driver.pid}/stat').read().split()
-            out.append(f'utime {stat[13]} stime {stat[14]} state {stat[2]} accel {accel.last_index}')
-            out.append(subprocess.run(['gdb', '-p', str(driver.pid), '-batch', '-ex', 'thread 1',
-                                       '-ex', 'bt 14'], capture_output=True, text=True,
-                                      timeout=120).stdout[-3000:])
-            time.sleep(1.0)
-        open('/tmp/hx/gdb.txt', 'w').write('\n'.join(out))
-    assert ros_context.wait_for(
+    assert wait_until(ros_context,
         lambda: not np.any(force.window(force.last_index - 200, force.last_index + 1)[1]),
         HANG_GUARD_S), (accel.last_index, force.last_index, accel.messages, force.messages,
                         driver.running(), driver.output())
@@ -270,7 +257,7 @@ def test_driver_parameters(ros_context, node_processes):
                               'lockstep_controllers': ['notch']})
     assert driver.running(), driver.output()
     last = accel.last_index
-    assert ros_context.wait_for(lambda: accel.last_index > last + 100, HANG_GUARD_S)
+    assert wait_until(ros_context, lambda: accel.last_index > last + 100, HANG_GUARD_S)
 
 
 def test_pointing_controller_parameters(ros_context, node_processes):
@@ -284,13 +271,13 @@ def test_pointing_controller_parameters(ros_context, node_processes):
     def recent_mean(samples: int = 300) -> np.ndarray:
         return command.window(command.last_index - samples, command.last_index + 1)[1].mean(0)
 
-    assert ros_context.wait_for(lambda: command.last_index > 2000, HANG_GUARD_S), (
+    assert wait_until(ros_context, lambda: command.last_index > 2000, HANG_GUARD_S), (
         driver.output() + pointing.output())
     level = recent_mean()
 
     # A tilt set-point changes the forces that hold the plate.
     _check_accepted(client, 'target_tilt_x_deg', 1.0)
-    assert ros_context.wait_for(
+    assert wait_until(ros_context,
         lambda: np.max(np.abs(recent_mean() - level)) > 1.0, HANG_GUARD_S), (
             level, recent_mean())
     _check_rejected(client, 'target_tilt_x_deg', [2.6, -3.0, math.nan, '1'])
@@ -317,7 +304,7 @@ def test_pointing_controller_parameters(ros_context, node_processes):
     # Disabled: exactly zero force.
     _check_accepted(client, 'enabled', False)
     mark = command.last_index
-    assert ros_context.wait_for(
+    assert wait_until(ros_context,
         lambda: command.last_index > mark + 200
         and not np.any(command.window(command.last_index - 100, command.last_index + 1)[1]),
         HANG_GUARD_S)

@@ -9,7 +9,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from node_graph import HANG_GUARD_S, Diagnostics, StrutTopic
+from node_graph import HANG_GUARD_S, Diagnostics, StrutTopic, wait_until
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
@@ -29,7 +29,8 @@ def _notch_part(force: StrutTopic, pointing: StrutTopic, n: int) -> np.ndarray:
 
 
 def test_killed_notch_controller_is_dropped_within_the_timeout(ros_context, node_processes):
-    driver = node_processes.start('pph_driver')
+    # Each of the last TIMEOUT_SAMPLES samples waits lockstep_timeout_s for the dead one.
+    driver = node_processes.start('pph_driver', '--ros-args', '-p', 'lockstep_timeout_s:=0.2')
     notch = node_processes.start(
         'notch_controller', '--ros-args', '-p', 'tone_frequencies_hz:=[40.0]',
         '-p', 'mu:=0.01', '-p', 'identify_delay_s:=0.2')
@@ -47,7 +48,7 @@ def test_killed_notch_controller_is_dropped_within_the_timeout(ros_context, node
     assert driver.running()
 
     # Kill the notch controller while it adapts (its command is far from zero).
-    adapting = ros_context.wait_for(
+    adapting = wait_until(ros_context,
         lambda: diagnostics.value('notch_controller', 'state') == 'adapting'
         and notch_cmd.last_index > diagnostics.int_value('notch_controller',
                                                          'enabled_since_sample') + 200,
@@ -55,7 +56,7 @@ def test_killed_notch_controller_is_dropped_within_the_timeout(ros_context, node
     assert adapting, logs()
     notch.process.kill()        # SIGKILL: no goodbye on the graph
     assert notch.wait(HANG_GUARD_S) is not None
-    ros_context.wait_for(lambda: False, 1.0)     # take in what it sent before it died
+    wait_until(ros_context, lambda: False, 1.0)     # take in what it sent before it died
     last = notch_cmd.last_index
     assert abs(notch_cmd.by_index[last]).max() > 0.1
 
@@ -64,7 +65,7 @@ def test_killed_notch_controller_is_dropped_within_the_timeout(ros_context, node
     def reported() -> bool:
         return (diagnostics.int_value(DRIVER, 'sample') > last
                 and diagnostics.int_value(DRIVER, 'notch_stale_events') >= 1)
-    ok = ros_context.wait_for(
+    ok = wait_until(ros_context,
         lambda: force.last_index > last + 1000 and reported(), HANG_GUARD_S)
     assert ok, (diagnostics.values(DRIVER), logs())
     assert driver.running(), driver.output()
@@ -129,10 +130,10 @@ def test_invalid_notch_commands_are_counted_and_never_applied(ros_context, node_
             publisher.publish(msg)
             sent += 1
 
-    started = ros_context.wait_for(lambda: force.last_index > 0, HANG_GUARD_S)
+    started = wait_until(ros_context, lambda: force.last_index > 0, HANG_GUARD_S)
     assert started, driver.output() + pointing.output()
     first = force.last_index
-    counted = ros_context.wait_for(
+    counted = wait_until(ros_context,
         lambda: diagnostics.int_value(DRIVER, 'notch_invalid') >= 50, HANG_GUARD_S,
         step=send_invalid)
     assert counted, (diagnostics.values(DRIVER), driver.output())
@@ -151,9 +152,10 @@ def test_invalid_notch_commands_are_counted_and_never_applied(ros_context, node_
     # The same check sees a valid command (no sample index: taken for the current sample).
     valid = np.arange(1.0, 7.0)
     start = force.last_index
-    seen = ros_context.wait_for(
-        lambda: any(n in pointing_cmd.by_index and np.array_equal(
-            _notch_part(force, pointing_cmd, n), valid) for n in force.by_index if n > start),
+    seen = wait_until(ros_context,
+        lambda: any(n in force.by_index and n in pointing_cmd.by_index and np.array_equal(
+            _notch_part(force, pointing_cmd, n), valid)
+            for n in range(start + 1, force.last_index + 1)),
         HANG_GUARD_S, step=lambda: publisher.publish(make_strut_array(valid, None)))
     assert seen, driver.output()
     assert driver.running() and pointing.running()
