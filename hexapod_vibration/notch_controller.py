@@ -14,8 +14,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from builtin_interfaces.msg import Time
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
@@ -25,6 +24,7 @@ from hexapod_vibration import parameters as p
 from hexapod_vibration.core import adaptation
 from hexapod_vibration.core.filters import DCBlocker
 from hexapod_vibration.core.notch import AdaptiveNotchCanceller, validate_frequencies
+from hexapod_vibration.diagnostics import diagnostic_array
 from hexapod_vibration.executors import run_node
 from hexapod_vibration.messages import InvalidStrutMessage, make_strut_array, parse_strut_array
 from hexapod_vibration.qos import DIAGNOSTICS_QOS, LOOP_PUBLISHER_QOS, LOOP_QOS
@@ -405,14 +405,9 @@ class NotchControllerNode(Node):
             values["plant_gain_m_s2_per_n"] = np.round(np.abs(diag).mean(axis=1), 6).tolist()
             values["plant_phase_deg"] = np.round(np.rad2deg(np.angle(diag.mean(axis=1))),
                                                  2).tolist()
-        level = DiagnosticStatus.WARN if self.counters["invalid"] else DiagnosticStatus.OK
-        status = DiagnosticStatus(level=level, name="notch_controller", message=state,
-                                  hardware_id="pph_sim",
-                                  values=[KeyValue(key=k, value=str(v)) for k, v in values.items()])
-        n = max(self.last_sample, 0)
-        msg = DiagnosticArray(status=[status])
-        msg.header.stamp = Time(sec=n // 1000, nanosec=(n % 1000) * 1_000_000)
-        self._pub_diag.publish(msg)
+        self._pub_diag.publish(diagnostic_array("notch_controller",
+                                                bool(self.counters["invalid"]), state, values,
+                                                self.last_sample))
 
 
 def main(args: list[str] | None = None) -> None:

@@ -11,8 +11,7 @@ against the platform's range (tilt within 2.5 deg, twist within 10 deg, stroke w
 from __future__ import annotations
 
 import numpy as np
-from builtin_interfaces.msg import Time
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from std_msgs.msg import Float64MultiArray
@@ -22,6 +21,7 @@ from hexapod_vibration.core.closed_loop import make_pointing_controller
 from hexapod_vibration.core.model_config import load_model_config
 from hexapod_vibration.core.pointing import PointingGains, validate_target_pose
 from hexapod_vibration.core.sensors import EddySensorArray
+from hexapod_vibration.diagnostics import diagnostic_array
 from hexapod_vibration.executors import run_node
 from hexapod_vibration.messages import InvalidStrutMessage, make_strut_array, parse_strut_array
 from hexapod_vibration.paths import config_path
@@ -134,14 +134,9 @@ class PointingControllerNode(Node):
         values = {"enabled": str(self.enabled).lower(), "last_sample": self.last_sample,
                   "invalid": self.invalid,
                   "target_pose_m_rad": np.round(self.law.target, 9).tolist()}
-        level = DiagnosticStatus.WARN if self.invalid else DiagnosticStatus.OK
-        status = DiagnosticStatus(level=level, name="pointing_controller", hardware_id="pph_sim",
-                                  message="enabled" if self.enabled else "disabled",
-                                  values=[KeyValue(key=k, value=str(v)) for k, v in values.items()])
-        n = max(self.last_sample, 0)
-        msg = DiagnosticArray(status=[status])
-        msg.header.stamp = Time(sec=n // 1000, nanosec=(n % 1000) * 1_000_000)
-        self._pub_diag.publish(msg)
+        message = "enabled" if self.enabled else "disabled"
+        self._pub_diag.publish(diagnostic_array("pointing_controller", bool(self.invalid),
+                                                message, values, self.last_sample))
 
 
 def main(args: list[str] | None = None) -> None:

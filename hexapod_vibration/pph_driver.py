@@ -17,8 +17,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import rclpy
-from builtin_interfaces.msg import Time
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rosgraph_msgs.msg import Clock
@@ -28,6 +27,7 @@ from hexapod_vibration import parameters as p
 from hexapod_vibration.core.model_config import load_model_config
 from hexapod_vibration.core.plant import PPHPlant, saturate_commands
 from hexapod_vibration.core.shaker import Shaker, tones_from_arrays
+from hexapod_vibration.diagnostics import diagnostic_array, sample_time
 from hexapod_vibration.executors import run_node
 from hexapod_vibration.messages import InvalidStrutMessage, make_strut_array, parse_strut_array
 from hexapod_vibration.paths import config_path
@@ -255,8 +255,7 @@ class PPHDriver(Node):
     def publish_sample(self) -> None:
         """Publish /clock and the sensors of the current sample."""
         n, sensors = self.sample, self._sample_pending
-        stamp = Time(sec=n // 1000, nanosec=(n % 1000) * 1_000_000)
-        self._pub_clock.publish(Clock(clock=stamp))
+        self._pub_clock.publish(Clock(clock=sample_time(n)))
         self._pub_accel.publish(make_strut_array(sensors.accel_m_s2, n))
         self._pub_eddy.publish(make_strut_array(sensors.eddy_m, n))
         now = time.perf_counter()
@@ -310,22 +309,10 @@ class PPHDriver(Node):
             values.update({f"{name}_invalid": s.invalid, f"{name}_stale_events": s.stale_events,
                            f"{name}_connected": s.connected})
         invalid = any(s.invalid for s in self.streams.values())
-        level = (DiagnosticStatus.WARN if stale or st.timeouts or st.missed or invalid
-                 else DiagnosticStatus.OK)
-        pairs = [KeyValue(key=k, value=_fmt(v)) for k, v in values.items()]
-        status = DiagnosticStatus(level=level, name="pph_driver: loop", hardware_id="pph_sim",
-                                  message=f"stale: {', '.join(stale)}" if stale else "ok",
-                                  values=pairs)
-        stamp = Time(sec=self.sample // 1000, nanosec=(self.sample % 1000) * 1_000_000)
-        msg = DiagnosticArray(status=[status])
-        msg.header.stamp = stamp
-        self._pub_diag.publish(msg)
-
-
-def _fmt(value: object) -> str:
-    if isinstance(value, float):
-        return f"{value:.6g}"
-    return str(value).lower() if isinstance(value, bool) else str(value)
+        warn = bool(stale or st.timeouts or st.missed or invalid)
+        message = f"stale: {', '.join(stale)}" if stale else "ok"
+        self._pub_diag.publish(diagnostic_array("pph_driver: loop", warn, message, values,
+                                                self.sample))
 
 
 def wait_while_held(node: PPHDriver, executor) -> None:

@@ -1,0 +1,33 @@
+"""``/diagnostics`` messages and sim-time stamps shared by the nodes."""
+
+from __future__ import annotations
+
+from builtin_interfaces.msg import Time
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+
+HARDWARE_ID = "pph_sim"
+
+
+def sample_time(sample: int, sample_rate_hz: float = 1000.0) -> Time:
+    """Sim time of loop sample ``sample`` (n / fs s), as ``builtin_interfaces/Time``."""
+    ns = int(round(max(sample, 0) * 1e9 / sample_rate_hz))
+    return Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
+
+
+def format_value(value: object) -> str:
+    """Diagnostics value text: floats with 6 significant digits, bools lower case."""
+    if isinstance(value, float):
+        return f"{value:.6g}"
+    return str(value).lower() if isinstance(value, bool) else str(value)
+
+
+def diagnostic_array(name: str, warn: bool, message: str, values: dict[str, object],
+                     sample: int) -> DiagnosticArray:
+    """One status (OK or WARN) with ``values`` as key/value pairs, stamped at ``sample``."""
+    status = DiagnosticStatus(level=DiagnosticStatus.WARN if warn else DiagnosticStatus.OK,
+                              name=name, message=message, hardware_id=HARDWARE_ID,
+                              values=[KeyValue(key=k, value=format_value(v))
+                                      for k, v in values.items()])
+    msg = DiagnosticArray(status=[status])
+    msg.header.stamp = sample_time(sample)
+    return msg
