@@ -34,6 +34,7 @@ from hexapod_vibration.paths import config_path
 from hexapod_vibration.qos import CLOCK_QOS, DIAGNOSTICS_QOS, LOOP_PUBLISHER_QOS, LOOP_QOS
 
 STREAMS = ("notch", "pointing")
+PUBLISH_HISTORY = 1024      # samples whose publication time is kept for the latency
 STATS_WINDOW = 60000
 """Latencies and periods kept for the percentiles on /diagnostics (the last minute at 1 kHz)."""
 CLOCK_MODES = ("lockstep", "realtime")
@@ -50,6 +51,7 @@ class CommandStream:
     sample: int = -1
     received_wall_s: float = 0.0
     invalid: int = 0
+    late: int = 0
     stale: bool = True
     stale_events: int = 0
     connected: bool = False
@@ -84,6 +86,7 @@ class PPHDriver(Node):
         self.plant = PPHPlant(self.model, shaker=self._make_shaker(seed), seed=seed)
         self.fs = self.model.simulation.sample_rate_hz
         self.sample = 0
+        self._publish_wall_s = np.zeros(PUBLISH_HISTORY)
         self.stats = LoopStats()
         self.streams = {s: CommandStream(f"/pph/{s}_command") for s in STREAMS}
         pub_qos = LOOP_PUBLISHER_QOS
@@ -207,9 +210,10 @@ class PPHDriver(Node):
         stream.force_n = np.array(values)
         stream.sample = index
         stream.received_wall_s = time.perf_counter()
-        if index == self.sample and name == "notch" and self.stats.last_publish_wall_s:
-            self.stats.latencies_ms.append(
-                (stream.received_wall_s - self.stats.last_publish_wall_s) * 1e3)
+        published = self._publish_wall_s[index % PUBLISH_HISTORY]
+        if name == "notch" and self.sample - index < PUBLISH_HISTORY and published > 0.0:
+            # accel(index) publication to notch_command(index) reception, late ones included
+            self.stats.latencies_ms.append((stream.received_wall_s - published) * 1e3)
 
     def _refresh_connections(self) -> None:
         """A stream is connected if the graph shows a publisher or it commanded recently.
@@ -259,6 +263,7 @@ class PPHDriver(Node):
         self._pub_accel.publish(make_strut_array(sensors.accel_m_s2, n))
         self._pub_eddy.publish(make_strut_array(sensors.eddy_m, n))
         now = time.perf_counter()
+        self._publish_wall_s[n % PUBLISH_HISTORY] = now
         if self.stats.last_publish_wall_s:
             self.stats.periods_ms.append((now - self.stats.last_publish_wall_s) * 1e3)
         self.stats.last_publish_wall_s = now
@@ -307,6 +312,7 @@ class PPHDriver(Node):
         }
         for name, s in self.streams.items():
             values.update({f"{name}_invalid": s.invalid, f"{name}_stale_events": s.stale_events,
+                           f"{name}_late": s.late,
                            f"{name}_connected": s.connected})
         invalid = any(s.invalid for s in self.streams.values())
         warn = bool(stale or st.timeouts or st.missed or invalid)
@@ -401,7 +407,10 @@ def run_realtime(node: PPHDriver, executor) -> None:
             if remaining <= 0.0:
                 break
             executor.spin_once(timeout_sec=remaining)
-        if any(s.connected and s.sample < node.sample for s in node.streams.values()):
+        late = [s for s in node.streams.values() if s.connected and s.sample < node.sample]
+        for stream in late:
+            stream.late += 1
+        if late:
             node.stats.late_commands += 1
         if node.sample % 200 == 0:
             node._refresh_connections()
