@@ -137,6 +137,15 @@ def test_invalid_notch_commands_are_counted_and_never_applied(ros_context, node_
         lambda: diagnostics.int_value(DRIVER, 'notch_invalid') >= 50, HANG_GUARD_S,
         step=send_invalid)
     assert counted, (diagnostics.values(DRIVER), driver.output())
+
+    def observed() -> list[int]:
+        return [n for n in range(first, force.last_index)
+                if n in force.by_index and n in pointing_cmd.by_index]
+
+    # Keep sending while enough samples with both topics are seen (subscriptions of this
+    # test process may match late on a loaded machine).
+    assert wait_until(ros_context, lambda: len(observed()) > 100, HANG_GUARD_S,
+                      step=send_invalid), driver.output()
     stop = force.last_index
     invalid = diagnostics.int_value(DRIVER, 'notch_invalid')
     assert invalid <= sent
