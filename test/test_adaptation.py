@@ -2,6 +2,7 @@
 
 import numpy as np
 import pytest
+from linear_plants import frequency_response, simulate
 from scipy import signal
 from scipy.linalg import block_diag
 
@@ -48,27 +49,6 @@ def delay_plant(gain_matrix, delay):
     cm = np.zeros((c, n))
     cm[:, -c:] = gain_matrix
     return a, b, cm
-
-
-def frequency_response(plant, freqs_hz):
-    a, b, c = plant
-    eye = np.eye(a.shape[0])
-    return np.stack([c @ np.linalg.solve(np.exp(2j * np.pi * f / FS) * eye - a, b)
-                     for f in np.atleast_1d(freqs_hz)])
-
-
-def simulate(plant, controller, dist, on_sample=None):
-    a, b, c = plant
-    x = np.zeros(a.shape[0])
-    errors = np.empty_like(dist)
-    for n in range(dist.shape[0]):
-        e = c @ x + dist[n]
-        errors[n] = e
-        u = controller.step(e)
-        x = a @ x + b @ u
-        if on_sample is not None:
-            on_sample(n)
-    return errors
 
 
 def shaker_disturbance(n_samples, tones, n_channels, amp=0.3, noise=0.0, seed=0):

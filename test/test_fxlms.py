@@ -7,7 +7,6 @@ benchmark's output, never in pass/fail tests.
 """
 
 import dataclasses
-import importlib.util
 import json
 import math
 
@@ -238,13 +237,3 @@ def test_bench_quick_writes_positive_finite_numbers(tmp_path, capsys):
         assert all(math.isfinite(v) for v in fit.values())
     machine = results['machine']
     assert machine['cpu_count'] >= 1 and machine['python'] and machine['numpy']
-
-
-@pytest.mark.skipif(importlib.util.find_spec('hexapod_vibration.bench_ros') is not None,
-                    reason='the ROS loop benchmark exists')
-def test_bench_without_skip_ros_fails_fast_when_ros_part_is_missing(tmp_path, capsys):
-    with pytest.raises(SystemExit) as exc:
-        bench.main(['--out', str(tmp_path), '--quick'])
-    assert exc.value.code == 2
-    assert '--skip-ros' in capsys.readouterr().err
-    assert not (tmp_path / 'results.json').exists()

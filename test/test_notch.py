@@ -4,6 +4,7 @@ import tracemalloc
 
 import numpy as np
 import pytest
+from linear_plants import frequency_response, simulate
 from scipy import signal
 from scipy.linalg import block_diag
 
@@ -31,29 +32,6 @@ def resonant_plant(f_res_hz, zeta=0.2, gain=0.1, coupling=0.0, seed=0):
         blocks.append(signal.cont2discrete(ss, 1 / FS, method='zoh')[:3])
     a, b, c = (block_diag(*m) for m in zip(*blocks, strict=True))
     return a, b @ k, c
-
-
-def frequency_response(plant, freqs_hz):
-    """G[t] = C (e^{jw} I - A)^{-1} B: phasor of e per unit phasor of u."""
-    a, b, c = plant
-    eye = np.eye(a.shape[0])
-    return np.stack([c @ np.linalg.solve(np.exp(2j * np.pi * f / FS) * eye - a, b)
-                     for f in np.atleast_1d(freqs_hz)])
-
-
-def simulate(plant, controller, dist, on_sample=None):
-    """Closed loop e_n = C x_n + d_n, u_n = controller(e_n), x_{n+1} = A x_n + B u_n."""
-    a, b, c = plant
-    x = np.zeros(a.shape[0])
-    errors = np.empty_like(dist)
-    for n in range(dist.shape[0]):
-        e = c @ x + dist[n]
-        errors[n] = e
-        u = controller.step(e)
-        x = a @ x + b @ u
-        if on_sample is not None:
-            on_sample(n)
-    return errors
 
 
 def tone_phasor(x, freq_hz, n0=0):

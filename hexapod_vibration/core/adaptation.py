@@ -307,7 +307,30 @@ def schroeder_phases(n_tones: int) -> np.ndarray:
     return -np.pi * k * (k - 1) / max(n_tones, 1)
 
 
-class ToneResponseIdentifier:
+class SampledRun:
+    """Bookkeeping of an identification run of ``_total`` samples at ``_fs`` (Hz)."""
+
+    _n: int
+    _total: int
+    _fs: float
+
+    @property
+    def done(self) -> bool:
+        """True once every sample of the run has been taken."""
+        return self._n >= self._total
+
+    @property
+    def progress(self) -> float:
+        """Fraction of the run completed, in [0, 1]."""
+        return min(1.0, self._n / self._total)
+
+    @property
+    def duration_s(self) -> float:
+        """Total duration of the run (s)."""
+        return self._total / self._fs
+
+
+class ToneResponseIdentifier(SampledRun):
     """Measure the plant response G (T, C, C) at the tones on a running plant.
 
     Same step interface as the canceller (error of sample n in, command of sample n out).
@@ -395,20 +418,6 @@ class ToneResponseIdentifier:
         t = self._freqs.size
         return coef[1:1 + t] - 1j * coef[1 + t:]
 
-    @property
-    def done(self) -> bool:
-        """True once every segment has been measured."""
-        return self._n >= self._total
-
-    @property
-    def progress(self) -> float:
-        """Fraction of the run completed, in [0, 1]."""
-        return min(1.0, self._n / self._total)
-
-    @property
-    def duration_s(self) -> float:
-        """Total duration of the run (s): (C + 2) (settle_s + measure_s)."""
-        return self._total / self._fs
 
     @property
     def excitation_phasors(self) -> np.ndarray:

@@ -33,6 +33,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from hexapod_vibration.core.adaptation import SampledRun
 from hexapod_vibration.core.closed_loop import STRUTS, CoreLoop, LoopRecord
 from hexapod_vibration.core.model_config import ModelConfig
 from hexapod_vibration.core.notch import TWO_PI, validate_frequencies, validate_mu
@@ -75,7 +76,7 @@ def fir_frequency_response(paths: np.ndarray, freqs_hz: Sequence[float] | np.nda
     return np.einsum('ijl,tl->tij', s, kernel)
 
 
-class SecondaryPathIdentifier:
+class SecondaryPathIdentifier(SampledRun):
     """FIR secondary-path identification on a running plant, one actuator at a time.
 
     Same step interface as the canceller (error of sample n in, command of sample n out).
@@ -163,20 +164,6 @@ class SecondaryPathIdentifier:
         coef, *_ = np.linalg.lstsq(regress, self._errors, rcond=None)
         return coef[:taps].T
 
-    @property
-    def done(self) -> bool:
-        """True once every actuator has been identified."""
-        return self._n >= self._total
-
-    @property
-    def progress(self) -> float:
-        """Fraction of the run completed, in [0, 1]."""
-        return min(1.0, self._n / self._total)
-
-    @property
-    def duration_s(self) -> float:
-        """Total duration of the run (s): C (settle_s + measure_s)."""
-        return self._total / self._fs
 
     def result(self) -> np.ndarray:
         """Identified secondary paths S (C, C, L): error i per command j, per tap (m/s^2/N).

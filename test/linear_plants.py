@@ -1,0 +1,28 @@
+"""Linear discrete-time test plants shared by the canceller and adaptation tests."""
+
+import numpy as np
+
+FS = 1000.0
+
+
+def frequency_response(plant, freqs_hz):
+    """G[t] = C (e^{jw} I - A)^{-1} B: phasor of e per unit phasor of u."""
+    a, b, c = plant
+    eye = np.eye(a.shape[0])
+    return np.stack([c @ np.linalg.solve(np.exp(2j * np.pi * f / FS) * eye - a, b)
+                     for f in np.atleast_1d(freqs_hz)])
+
+
+def simulate(plant, controller, dist, on_sample=None):
+    """Closed loop e_n = C x_n + d_n, u_n = controller(e_n), x_{n+1} = A x_n + B u_n."""
+    a, b, c = plant
+    x = np.zeros(a.shape[0])
+    errors = np.empty_like(dist)
+    for n in range(dist.shape[0]):
+        e = c @ x + dist[n]
+        errors[n] = e
+        u = controller.step(e)
+        x = a @ x + b @ u
+        if on_sample is not None:
+            on_sample(n)
+    return errors
