@@ -120,12 +120,10 @@ def gap_free_window(index: np.ndarray, start: int, stop: int) -> tuple[slice, st
 
 def tone_levels(x: np.ndarray, tones: list[float]) -> tuple[list[float], list[float], list[bool]]:
     """(level dB re 1 g, floor dB re 1 g, at-floor flag) per tone; level >= floor."""
-    with np.errstate(divide="ignore"):
-        raw = spectrum.tone_levels_db(x, FS, tones)
-    floor = [float(spectrum.noise_floor_db(x, FS, f, exclude_hz=tones)) for f in tones]
+    raw, floor = spectrum.tone_and_floor_db(x, FS, tones)
     at_floor = [bool(r < fl) for r, fl in zip(raw, floor, strict=True)]
     level = [float(max(r, fl)) for r, fl in zip(raw, floor, strict=True)]
-    return level, floor, at_floor
+    return level, [float(fl) for fl in floor], at_floor
 
 
 def settling_time_s(t_s: np.ndarray, level_db: np.ndarray, t_on_s: float,

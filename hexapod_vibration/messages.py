@@ -17,6 +17,7 @@ from __future__ import annotations
 import array
 import math
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
@@ -37,6 +38,7 @@ __all__ = [
     'InvalidStrutMessage',
     'make_strut_array',
     'parse_strut_array',
+    'receive_strut_array',
 ]
 
 _FLOAT64 = np.dtype(np.float64)
@@ -103,3 +105,17 @@ def parse_strut_array(msg: Float64MultiArray) -> tuple[np.ndarray, int | None]:
     if len(dims) < 2:
         return values, None
     return values, parse_sample_label(dims[1].label)
+
+
+def receive_strut_array(msg: Float64MultiArray, logger: Any, topic: str
+                        ) -> tuple[np.ndarray, int | None] | None:
+    """:func:`parse_strut_array` for a subscription callback: ``None`` for a bad message.
+
+    The reason is logged as a warning, throttled by rclpy to once a second per process
+    (the throttle is keyed by this call site); the caller counts every rejection.
+    """
+    try:
+        return parse_strut_array(msg)
+    except InvalidStrutMessage as exc:
+        logger.warn(f'{topic}: rejected message ({exc})', throttle_duration_sec=1.0)
+        return None

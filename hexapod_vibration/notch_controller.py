@@ -26,7 +26,7 @@ from hexapod_vibration.core.filters import DCBlocker
 from hexapod_vibration.core.notch import AdaptiveNotchCanceller, validate_frequencies
 from hexapod_vibration.diagnostics import diagnostic_array
 from hexapod_vibration.executors import run_node
-from hexapod_vibration.messages import InvalidStrutMessage, make_strut_array, parse_strut_array
+from hexapod_vibration.messages import make_strut_array, receive_strut_array
 from hexapod_vibration.qos import DIAGNOSTICS_QOS, LOOP_PUBLISHER_QOS, LOOP_QOS
 from hexapod_vibration.strut_layout import sample_label
 
@@ -34,7 +34,6 @@ STRUTS = 6
 SAMPLE_RATE_HZ = 1000.0
 MAX_TONES = 16
 WEIGHTS_EVERY_SAMPLES = 10
-MAX_GAP_SAMPLES = 5000
 
 
 def _tone_key(frequency_hz: float) -> float:
@@ -72,6 +71,7 @@ class NotchControllerNode(Node):
         self.canceller.set_enabled(False, ramp_samples=0)
         self._identify_delay = int(round(self.get_parameter("identify_delay_s").value * self.fs))
         self._auto_identify = bool(self.get_parameter("auto_identify").value)
+        self._command = np.zeros(STRUTS)      # the canceller writes each sample here
         self.dc_blocker = DCBlocker(STRUTS, self.fs, self.get_parameter("dc_cutoff_hz").value)
         self.identifier: adaptation.ToneResponseIdentifier | None = None
         self.plant_response: np.ndarray | None = None
@@ -332,13 +332,11 @@ class NotchControllerNode(Node):
 
     # ------------------------------------------------------------------ loop
     def _on_accel(self, msg: Float64MultiArray) -> None:
-        try:
-            accel, index = parse_strut_array(msg)
-        except InvalidStrutMessage as exc:
+        parsed = receive_strut_array(msg, self.get_logger(), "/pph/accel")
+        if parsed is None:
             self.counters["invalid"] += 1
-            self.get_logger().warn(f"/pph/accel: rejected message ({exc})",
-                                   throttle_duration_sec=1.0)
             return
+        accel, index = parsed
         index = self.last_sample + 1 if index is None else index
         if index <= self.last_sample:
             self.counters["duplicates"] += 1
@@ -359,8 +357,7 @@ class NotchControllerNode(Node):
             gap = index - self.last_sample - 1
             self.counters["gaps"] += 1
             self.counters["missed_samples"] += gap
-            for _ in range(min(gap, MAX_GAP_SAMPLES)):
-                self.canceller.step(np.zeros(STRUTS))
+            self.canceller.advance(gap)
             self.get_logger().warn(f"/pph/accel: {gap} samples missing before {index}")
             if self.identifier is not None:
                 self.get_logger().warn("samples missed during identification: restarting it")
@@ -371,7 +368,7 @@ class NotchControllerNode(Node):
             self.start_identification()
 
     def _step(self, error: np.ndarray) -> np.ndarray:
-        command = self.canceller.step(error)
+        command = self.canceller.step(error, out=self._command)
         if self.identifier is not None:
             command = command + self.identifier.step(error)
             if self.identifier.done:

@@ -23,7 +23,7 @@ from hexapod_vibration.core.pointing import PointingGains, validate_target_pose
 from hexapod_vibration.core.sensors import EddySensorArray
 from hexapod_vibration.diagnostics import diagnostic_array
 from hexapod_vibration.executors import run_node
-from hexapod_vibration.messages import InvalidStrutMessage, make_strut_array, parse_strut_array
+from hexapod_vibration.messages import make_strut_array, receive_strut_array
 from hexapod_vibration.paths import config_path
 from hexapod_vibration.qos import DIAGNOSTICS_QOS, LOOP_PUBLISHER_QOS, LOOP_QOS
 
@@ -113,18 +113,16 @@ class PointingControllerNode(Node):
         return p.accept()
 
     def _on_eddy(self, msg: Float64MultiArray) -> None:
-        try:
-            gaps, index = parse_strut_array(msg)
-        except InvalidStrutMessage as exc:
+        parsed = receive_strut_array(msg, self.get_logger(), "/pph/eddy")
+        if parsed is None:
             self.invalid += 1
-            self.get_logger().warn(f"/pph/eddy: rejected message ({exc})",
-                                   throttle_duration_sec=1.0)
             return
+        gaps, index = parsed
         index = self.last_sample + 1 if index is None else index
         if index <= self.last_sample:
             return
         self.last_sample = index
-        force = self.law.step(np.array(gaps)) if self.enabled else np.zeros(6)
+        force = self.law.step(gaps) if self.enabled else np.zeros(6)
         self._pub.publish(make_strut_array(force, index))
         if index % DIAGNOSTICS_EVERY_SAMPLES == 0:
             self.publish_diagnostics()

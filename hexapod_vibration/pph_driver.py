@@ -25,15 +25,17 @@ from std_msgs.msg import Float64MultiArray
 
 from hexapod_vibration import parameters as p
 from hexapod_vibration.core.model_config import load_model_config
-from hexapod_vibration.core.plant import PPHPlant, saturate_commands
+from hexapod_vibration.core.plant import PPHPlant, actuator_test_sine, saturate_commands
 from hexapod_vibration.core.shaker import Shaker, tones_from_arrays
 from hexapod_vibration.diagnostics import diagnostic_array, sample_time
 from hexapod_vibration.executors import run_node
-from hexapod_vibration.messages import InvalidStrutMessage, make_strut_array, parse_strut_array
+from hexapod_vibration.messages import make_strut_array, receive_strut_array
 from hexapod_vibration.paths import config_path
 from hexapod_vibration.qos import CLOCK_QOS, DIAGNOSTICS_QOS, LOOP_PUBLISHER_QOS, LOOP_QOS
 
 STREAMS = ("notch", "pointing")
+NO_FORCE_N = np.zeros(6)    # read-only: what a stale stream contributes
+NO_FORCE_N.flags.writeable = False
 PUBLISH_HISTORY = 1024      # samples whose publication time is kept for the latency
 STATS_WINDOW = 60000
 """Latencies and periods kept for the percentiles on /diagnostics (the last minute at 1 kHz)."""
@@ -196,13 +198,11 @@ class PPHDriver(Node):
     # ------------------------------------------------------------------ commands
     def _on_command(self, name: str, msg: Float64MultiArray) -> None:
         stream = self.streams[name]
-        try:
-            values, index = parse_strut_array(msg)
-        except InvalidStrutMessage as exc:
+        parsed = receive_strut_array(msg, self.get_logger(), stream.topic)
+        if parsed is None:
             stream.invalid += 1
-            self.get_logger().warn(f"{stream.topic}: rejected message ({exc})",
-                                   throttle_duration_sec=1.0)
             return
+        values, index = parsed
         index = self.sample if index is None else index
         if index > self.sample or index < stream.sample:
             stream.invalid += 1       # from the future or out of order: never applied
@@ -215,6 +215,10 @@ class PPHDriver(Node):
             # accel(index) publication to notch_command(index) reception, late ones included
             self.stats.latencies_ms.append((stream.received_wall_s - published) * 1e3)
 
+    def _fresh(self, stream: CommandStream) -> bool:
+        """The stream's last valid command is at most ``command_timeout_samples`` old."""
+        return stream.sample >= 0 and self.sample - stream.sample <= self._timeout_samples
+
     def _refresh_connections(self) -> None:
         """A stream is connected if the graph shows a publisher or it commanded recently.
 
@@ -222,8 +226,7 @@ class PPHDriver(Node):
         the handshake may not be listed yet, and it must be waited for all the same.
         """
         for stream in self.streams.values():
-            recent = stream.sample >= 0 and self.sample - stream.sample <= self._timeout_samples
-            stream.connected = recent or self.count_publishers(stream.topic) > 0
+            stream.connected = self._fresh(stream) or self.count_publishers(stream.topic) > 0
 
     def _waited_streams(self) -> list[CommandStream]:
         """Expected controllers that are connected and not dropped by the watchdog.
@@ -233,7 +236,7 @@ class PPHDriver(Node):
         any more, so the loop runs on without it; it is waited for again once it answers.
         """
         return [s for s in (self.streams[n] for n in self._expected)
-                if s.connected and self.sample - s.sample <= self._timeout_samples]
+                if s.connected and self._fresh(s)]
 
     def _commands_ready(self) -> bool:
         return all(s.sample == self.sample for s in self._waited_streams())
@@ -247,13 +250,13 @@ class PPHDriver(Node):
     def _active_force(self, name: str) -> np.ndarray:
         """The stream's force, or zero if its last valid command is too old (watchdog)."""
         stream = self.streams[name]
-        stale = stream.sample < 0 or self.sample - stream.sample > self._timeout_samples
+        stale = not self._fresh(stream)
         if stale and not stream.stale and stream.sample >= 0:
             stream.stale_events += 1
             self.get_logger().warn(f"{stream.topic}: no command for {self._timeout_samples} "
                                    f"samples, force set to zero")
         stream.stale = stale
-        return np.zeros(6) if stale else stream.force_n
+        return NO_FORCE_N if stale else stream.force_n
 
     # ------------------------------------------------------------------ loop
     def publish_sample(self) -> None:
@@ -270,7 +273,8 @@ class PPHDriver(Node):
 
     def apply_and_step(self) -> None:
         """Sum, saturate, publish the applied force and advance the plant one sample."""
-        notch = self._active_force("notch") + self._test_sine()
+        notch = self._active_force("notch") + actuator_test_sine(
+            self.sample, self._test_sine_frequency_hz, self._test_sine_amplitude_n, self.fs)
         applied = saturate_commands(notch, self._active_force("pointing"), self.model.strut)
         self._pub_force.publish(make_strut_array(applied, self.sample))
         self._sample_pending = self.plant.step(applied)
@@ -278,12 +282,6 @@ class PPHDriver(Node):
         self.stats.samples += 1
         if self.sample % int(self.fs) == 0:
             self.publish_diagnostics()
-
-    def _test_sine(self) -> np.ndarray:
-        amplitude, f = self._test_sine_amplitude_n, self._test_sine_frequency_hz
-        if amplitude <= 0.0:
-            return np.zeros(6)
-        return np.full(6, amplitude * np.sin(2.0 * np.pi * f * self.sample / self.fs))
 
     def held(self) -> bool:
         """True while the lockstep breakpoint ``hold_at_time_s`` stops the loop here."""
@@ -368,12 +366,9 @@ def run_lockstep(node: PPHDriver, executor) -> None:
     """
     wait_while_held(node, executor)
     wait_for_controllers(node, executor)
-    first = True
+    if rclpy.ok():
+        node.apply_and_step()      # sample 0 is out and answered already (handshake)
     while rclpy.ok():
-        if first:      # sample 0 is out already (handshake)
-            first = False
-            node.apply_and_step()
-            continue
         wait_while_held(node, executor)
         node.publish_sample()
         deadline = time.perf_counter() + node._lockstep_timeout_s

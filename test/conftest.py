@@ -39,6 +39,13 @@ def next_domain_id() -> int:
     return DOMAIN_MIN + (_domain_base - DOMAIN_MIN + next(_domain_counter)) % span
 
 
+# UDP only, for the test process and every node it starts: the tests SIGKILL nodes on
+# purpose, which leaves Fast DDS shared-memory port files locked in /dev/shm, and a later
+# participant can then pick a dead shared-memory channel and silently receive nothing
+# (seen: a controller that never got /pph/accel). Loopback UDP has no such state.
+os.environ.setdefault('FASTDDS_BUILTIN_TRANSPORTS', 'UDPv4')
+
+
 @pytest.fixture
 def ros_env() -> dict[str, str]:
     """Environment for ROS processes of one test: own domain, localhost discovery only."""

@@ -1,8 +1,24 @@
 """Linear discrete-time test plants shared by the canceller and adaptation tests."""
 
 import numpy as np
+from scipy import signal
+from scipy.linalg import block_diag
 
 FS = 1000.0
+
+
+def resonance_bank(f_res_hz, zeta, gain):
+    """(A, B, C) at FS of one resonance g w^2/(s^2 + 2 zeta w s + w^2) per channel.
+
+    ZOH discretisation of a strictly proper system: a command of sample n reaches the
+    output from sample n+1 on, as in docs/architecture.md.
+    """
+    blocks = []
+    for f in np.atleast_1d(f_res_hz):
+        w = 2 * np.pi * f
+        ss = signal.tf2ss([gain * w * w], [1.0, 2 * zeta * w, w * w])
+        blocks.append(signal.cont2discrete(ss, 1 / FS, method='zoh')[:3])
+    return tuple(block_diag(*m) for m in zip(*blocks, strict=True))
 
 
 def frequency_response(plant, freqs_hz):

@@ -2,9 +2,7 @@
 
 import numpy as np
 import pytest
-from linear_plants import frequency_response, simulate
-from scipy import signal
-from scipy.linalg import block_diag
+from linear_plants import frequency_response, resonance_bank, simulate
 
 from hexapod_vibration.core import adaptation as ad
 from hexapod_vibration.core.notch import AdaptiveNotchCanceller
@@ -25,12 +23,7 @@ def resonant_plant(f_res_hz, zeta=0.2, gain=0.1, coupling=0.0, seed=0):
     rng = np.random.default_rng(seed)
     off = rng.uniform(0.5, 1.0, (n, n)) * rng.choice([-1.0, 1.0], (n, n))
     k = np.eye(n) + coupling * off * (1 - np.eye(n))
-    blocks = []
-    for f in f_res_hz:
-        w = 2 * np.pi * f
-        ss = signal.tf2ss([gain * w * w], [1.0, 2 * zeta * w, w * w])
-        blocks.append(signal.cont2discrete(ss, 1 / FS, method='zoh')[:3])
-    a, b, c = (block_diag(*m) for m in zip(*blocks, strict=True))
+    a, b, c = resonance_bank(f_res_hz, zeta, gain)
     return a, b @ k, c
 
 

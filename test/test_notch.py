@@ -4,9 +4,7 @@ import tracemalloc
 
 import numpy as np
 import pytest
-from linear_plants import frequency_response, simulate
-from scipy import signal
-from scipy.linalg import block_diag
+from linear_plants import frequency_response, resonance_bank, simulate
 
 from hexapod_vibration.core import spectrum as sp
 from hexapod_vibration.core.notch import AdaptiveNotchCanceller
@@ -25,12 +23,7 @@ def resonant_plant(f_res_hz, zeta=0.2, gain=0.1, coupling=0.0, seed=0):
     n = f_res_hz.size
     rng = np.random.default_rng(seed)
     k = np.eye(n) + coupling * rng.uniform(-1, 1, (n, n)) * (1 - np.eye(n))
-    blocks = []
-    for f in f_res_hz:
-        w = 2 * np.pi * f
-        ss = signal.tf2ss([gain * w * w], [1.0, 2 * zeta * w, w * w])
-        blocks.append(signal.cont2discrete(ss, 1 / FS, method='zoh')[:3])
-    a, b, c = (block_diag(*m) for m in zip(*blocks, strict=True))
+    a, b, c = resonance_bank(f_res_hz, zeta, gain)
     return a, b @ k, c
 
 
@@ -263,3 +256,21 @@ def test_constructor_validation():
         AdaptiveNotchCanceller(6, [40.0], FS, 0.01, np.eye(6))
     with pytest.raises(ValueError):
         AdaptiveNotchCanceller(0, [40.0], FS, 0.01)
+
+
+def test_advance_equals_steps_with_zero_error():
+    """Skipping missing samples keeps the phase grid, ramp and fading tones exact."""
+    def make():
+        c = AdaptiveNotchCanceller(6, [40.0, 80.0], FS, 0.01)
+        c.set_weights(np.arange(12).reshape(2, 6) * (1 + 0.5j))
+        c.set_enabled(False, ramp_samples=30)
+        c.set_tone_frequencies([40.0], ramp_samples=40)
+        return c
+
+    stepped, skipped = make(), make()
+    for _ in range(25):
+        stepped.step(np.zeros(6))
+    skipped.advance(25)
+    np.testing.assert_allclose(skipped.phases_rad, stepped.phases_rad, atol=1e-9)
+    assert skipped.output_gain == pytest.approx(stepped.output_gain)
+    np.testing.assert_allclose(skipped.step(np.zeros(6)), stepped.step(np.zeros(6)), atol=1e-9)

@@ -313,6 +313,23 @@ class SampledRun:
     _n: int
     _total: int
     _fs: float
+    _c: int
+    _seg_len: int
+    _u: np.ndarray
+
+    def _position(self, error: np.ndarray) -> tuple[np.ndarray, int, int] | None:
+        """Check the error (C,), clear the command; (error, segment, sample in it) or None.
+
+        None once the run is over: the command stays zero.
+        """
+        e = np.asarray(error, dtype=float)
+        if e.shape != (self._c,):
+            raise ValueError(f'error must have shape ({self._c},), got {e.shape}')
+        self._u[:] = 0.0
+        if self._n >= self._total:
+            return None
+        seg, k = divmod(self._n, self._seg_len)
+        return e, seg, k
 
     @property
     def done(self) -> bool:
@@ -389,13 +406,10 @@ class ToneResponseIdentifier(SampledRun):
 
     def step(self, error: np.ndarray) -> np.ndarray:
         """Record the error of sample n (m/s^2, (C,)) and return the command (N, (C,))."""
-        e = np.asarray(error, dtype=float)
-        if e.shape != (self._c,):
-            raise ValueError(f'error must have shape ({self._c},), got {e.shape}')
-        self._u[:] = 0.0
-        if self._n >= self._total:
+        position = self._position(error)
+        if position is None:
             return self._u.copy()
-        seg, k = divmod(self._n, self._seg_len)
+        e, seg, k = position
         if k >= self._settle:
             row = k - self._settle
             t = self._freqs.size

@@ -15,7 +15,12 @@ from hexapod_vibration.core import adaptation
 from hexapod_vibration.core.filters import DCBlocker
 from hexapod_vibration.core.model_config import ModelConfig
 from hexapod_vibration.core.notch import AdaptiveNotchCanceller
-from hexapod_vibration.core.plant import PPHPlant, rigid_body_mass_matrix, saturate_commands
+from hexapod_vibration.core.plant import (
+    PPHPlant,
+    actuator_test_sine,
+    rigid_body_mass_matrix,
+    saturate_commands,
+)
 from hexapod_vibration.core.pointing import PointingController
 from hexapod_vibration.core.scenario import Scenario
 from hexapod_vibration.core.shaker import Shaker
@@ -130,9 +135,7 @@ class CoreLoop:
         sine = sc.test_sine
         for n in range(n_samples):
             notch = self._notch_step(n, self.dc_blocker.step(sample.accel_m_s2), rec)
-            if sine.amplitude_n > 0.0:
-                phase = 2.0 * np.pi * sine.frequency_hz * n / self.fs
-                notch = notch + sine.amplitude_n * np.sin(phase)
+            notch = notch + actuator_test_sine(n, sine.frequency_hz, sine.amplitude_n, self.fs)
             pointing = self.pointing.step(sample.eddy_m)
             applied = saturate_commands(notch, pointing, self.config.strut)
             rec.accel_m_s2[n], rec.eddy_m[n] = sample.accel_m_s2, sample.eddy_m

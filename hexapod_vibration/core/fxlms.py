@@ -135,13 +135,10 @@ class SecondaryPathIdentifier(SampledRun):
 
     def step(self, error: np.ndarray) -> np.ndarray:
         """Record the error of sample n (m/s^2, (C,)) and return the command (N, (C,))."""
-        e = np.asarray(error, dtype=float)
-        if e.shape != (self._c,):
-            raise ValueError(f'error must have shape ({self._c},), got {e.shape}')
-        self._u[:] = 0.0
-        if self._n >= self._total:
+        position = self._position(error)
+        if position is None:
             return self._u.copy()
-        seg, k = divmod(self._n, self._seg_len)
+        e, seg, k = position
         if k >= self._settle:
             self._errors[k - self._settle] = e
             if k == self._seg_len - 1:

@@ -144,6 +144,17 @@ class _FadingTones:
         self.step_size = np.concatenate([self.step_size, np.full(w.shape[0], 1.0 / ramp)])
         self._alloc()
 
+    def advance(self, samples: int) -> None:
+        """Skip ``samples`` samples: the same state as that many :meth:`accumulate` calls."""
+        if self.phi.size == 0:
+            return
+        self.gain -= samples * self.step_size
+        np.maximum(self.gain, 0.0, out=self.gain)
+        self.phi += samples * self.dphi
+        np.remainder(self.phi, TWO_PI, out=self.phi)
+        if not np.any(self.gain):
+            self.clear()
+
     def accumulate(self, out: np.ndarray) -> None:
         """Add this sample's faded output (N) to ``out`` (C,) and advance one sample."""
         if self.phi.size == 0:
@@ -266,6 +277,24 @@ class AdaptiveNotchCanceller:
             return self._u.copy()
         out[...] = self._u
         return out
+
+    def advance(self, samples: int) -> None:
+        """Skip ``samples`` samples whose error is unknown (missing messages).
+
+        Phases, the enable ramp and fading tones move on exactly as ``samples`` calls of
+        :meth:`step` with a zero error would move them, at O(1) cost; weights are unchanged.
+        """
+        samples = int(samples)
+        if samples < 0:
+            raise ValueError(f'samples must be >= 0, got {samples}')
+        target = 1.0 if self._enabled else 0.0
+        if self._gain_step <= 0.0 or samples * self._gain_step >= abs(target - self._gain):
+            self._gain = target if samples else self._gain
+        else:
+            self._gain += np.copysign(samples * self._gain_step, target - self._gain)
+        self._fading.advance(samples)
+        self._phi += samples * self._dphi
+        np.remainder(self._phi, TWO_PI, out=self._phi)
 
     def _adapt(self, e: np.ndarray) -> None:
         """W += mu * P @ (e * e^{-j phi}), masked by the per-tone adapting flags.

@@ -190,6 +190,21 @@ def tone_rms(x: np.ndarray, fs: float, freqs_hz: Sequence[float] | np.ndarray,
     return np.sqrt(np.maximum(lobe_p - floor_p, TINY_RMS ** 2))
 
 
+def tone_and_floor_db(x: np.ndarray, fs: float, freqs_hz: Sequence[float] | np.ndarray,
+                      segment_s: float = DEFAULT_SEGMENT_S, window: str = DEFAULT_WINDOW,
+                      band_hz: float = DEFAULT_BAND_HZ) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`tone_levels_db` and :func:`noise_floor_db` of every tone from one spectrum.
+
+    The floor of each tone excludes the main lobes of all ``freqs_hz``, as
+    ``noise_floor_db(x, fs, f, exclude_hz=freqs_hz)`` does.
+    """
+    lobe_p, floor_p = _Lines(x, fs, segment_s, window).tone_and_floor_power(freqs_hz, (),
+                                                                            band_hz)
+    tone = np.sqrt(np.maximum(lobe_p - floor_p, TINY_RMS ** 2))
+    floor = np.sqrt(np.maximum(floor_p, TINY_RMS ** 2))
+    return np.asarray(to_db_re_g(tone)), np.asarray(to_db_re_g(floor))
+
+
 def tone_levels_db(x: np.ndarray, fs: float, freqs_hz: Sequence[float] | np.ndarray,
                    segment_s: float = DEFAULT_SEGMENT_S, window: str = DEFAULT_WINDOW,
                    band_hz: float = DEFAULT_BAND_HZ) -> np.ndarray:
