@@ -30,6 +30,7 @@ setup(
             'pph_driver = hexapod_vibration.pph_driver:main',
             'notch_controller = hexapod_vibration.notch_controller:main',
             'pointing_controller = hexapod_vibration.pointing_controller:main',
+            'pph_graph = hexapod_vibration.pph_graph:main',
             'pph_recorder = hexapod_vibration.recorder:main',
             'experiment = hexapod_vibration.experiment:main',
             'analyze = hexapod_vibration.analyze:main',

@@ -49,20 +49,25 @@ def _write_params(out: Path, mode: str, executor: str) -> Path:
     return path
 
 
-def _start_graph(out: Path, mode: str, executor: str) -> list[Child]:
+def _start_graph(out: Path, mode: str, executor: str, composed: bool = False
+                 ) -> list[Child]:
+    """The driver and both controllers: three processes, or one (``pph_graph``)."""
     common = ["--params-file", str(_write_params(out, mode, executor))]
-    children = [start_child(f"bench_{name}_{mode}_{executor}", f"hexapod_vibration.{name}",
-                            common, out)
+    tag = f"{mode}_{executor}"
+    if composed:
+        return [start_child(f"bench_pph_graph_{tag}", "hexapod_vibration.pph_graph", common,
+                            out)]
+    children = [start_child(f"bench_{name}_{tag}", f"hexapod_vibration.{name}", common, out)
                 for name in ("notch_controller", "pointing_controller")]
-    children.append(start_child(f"bench_pph_driver_{mode}_{executor}",
-                                "hexapod_vibration.pph_driver", common, out))
+    children.append(start_child(f"bench_pph_driver_{tag}", "hexapod_vibration.pph_driver",
+                                common, out))
     return children
 
 
 def _run(out: Path, mode: str, executor: str, wall_s: float) -> dict[str, Any]:
     """One configuration; returns the driver's last diagnostics (floats) or a stall note."""
     children = _start_graph(out, mode, executor)
-    sup = Supervisor()
+    sup = Supervisor(watch_clock=False)
     try:
         start = time.monotonic()
         while sup.sim_time_s < 0.0:           # handshake / discovery

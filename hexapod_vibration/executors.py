@@ -1,27 +1,58 @@
-"""Executor choice for the 1 kHz nodes (a parameter of each node, for the benchmarks).
+"""Executor choice for the 1 kHz nodes, and the loop spinner that serves their hot path.
 
-``single_threaded`` is rclpy's SingleThreadedExecutor (the default: predictable, one
-thread); ``events`` is rclpy's experimental EventsExecutor (Jazzy), which skips the wait-set
-rebuild of every spin and is cheaper per callback.
+Each node has a read-only ``executor`` parameter:
+
+- ``waitset`` (the default): the node's 1 kHz loop subscriptions are served from one
+  persistent rcl wait set and taken directly (``take_message``), every queued message at
+  each wake-up; everything else (parameter services, ``~/identify``, graph events) is
+  served by a SingleThreadedExecutor at least every ``SERVICE_PERIOD_S`` and whenever the
+  loop is idle. rclpy's executors rebuild a wait set from every entity of the node and go
+  through a task per callback on every spin; on the project's 2-core machine that costs
+  about 170 us per message against about 20 us here (``make bench``).
+- ``single_threaded``: rclpy's SingleThreadedExecutor for everything.
+- ``events``: rclpy's experimental EventsExecutor (Jazzy). It stalls and loses messages
+  at 1 kHz on this machine, even without project code (``make bench``): kept for
+  comparison only.
+
+All three run in the node's one thread: a parameter change is never applied in the middle
+of a sample's computation.
 """
 
 from __future__ import annotations
 
 import sys
-from collections.abc import Callable
+import time
+from collections.abc import Callable, Sequence
 
 import rclpy
 from rclpy._rclpy_pybind11 import RCLError
-from rclpy.exceptions import ParameterException
+from rclpy.exceptions import InvalidHandle, ParameterException
 from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedExecutor
+from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
+from rclpy.subscription import Subscription
 
-EXECUTORS = ("single_threaded", "events")
+from hexapod_vibration.parameters import declare_string
+
+EXECUTORS = ("waitset", "single_threaded", "events")
+DEFAULT_EXECUTOR = "waitset"
+SERVICE_PERIOD_S = 0.01
+"""Longest time (s, wall) between two services of the non-loop callbacks by ``waitset``."""
+IDLE_SPIN_S = 0.01
+"""Longest single wait (s) of a node's main loop, so shutdown is noticed promptly."""
+
+
+def declare_executor_parameter(node: Node) -> str:
+    """Declare the node's read-only ``executor`` parameter; returns its value."""
+    return declare_string(node, "executor", DEFAULT_EXECUTOR, "how the node is served: "
+                          "waitset (loop topics from a persistent wait set, the rest by a "
+                          "SingleThreadedExecutor), single_threaded or events (rclpy's "
+                          "executors for everything)", EXECUTORS, read_only=True)
 
 
 def make_executor(name: str) -> Executor:
-    """Create the executor called ``name`` (one of :data:`EXECUTORS`)."""
-    if name == "single_threaded":
+    """Create the rclpy executor behind ``name`` (one of :data:`EXECUTORS`)."""
+    if name in ("waitset", "single_threaded"):
         return SingleThreadedExecutor()
     if name == "events":
         from rclpy.experimental import EventsExecutor
@@ -30,24 +61,103 @@ def make_executor(name: str) -> Executor:
     raise ValueError(f"executor must be one of {EXECUTORS}, got {name!r}")
 
 
-def run_node(name: str, factory: Callable[[], Node],
-             loop: Callable[[Node, Executor], None] | None = None,
-             args: list[str] | None = None) -> None:
-    """Init rclpy, build the node, spin it (or run ``loop``), shut down cleanly.
+class LoopSpinner:
+    """``spin_once`` for a node with 1 kHz loop subscriptions (see the module docstring).
 
+    With ``fast=False`` it is the executor's own ``spin_once``. With ``fast=True`` the loop
+    subscriptions are waited on in a persistent wait set and their callbacks are called
+    directly, in arrival order per subscription; the executor serves the rest.
+    """
+
+    def __init__(self, executor: Executor, subscriptions: Sequence[Subscription],
+                 fast: bool, service_period_s: float = SERVICE_PERIOD_S) -> None:
+        """Bind to ``executor`` (which holds the node) and its loop ``subscriptions``."""
+        self.executor = executor
+        self.subscriptions = list(subscriptions)
+        self.fast = fast and bool(self.subscriptions)
+        self.service_period_s = service_period_s
+        self._served_s = 0.0
+        self._wait_set = None
+        if self.fast:
+            self._wait_set = _rclpy.WaitSet(len(self.subscriptions), 0, 0, 0, 0, 0,
+                                            executor.context.handle)
+
+    def spin_once(self, timeout_sec: float) -> None:
+        """Dispatch ready callbacks, waiting up to ``timeout_sec`` (s) for a loop message."""
+        if not self.fast:
+            self.executor.spin_once(timeout_sec=timeout_sec)
+            return
+        now = time.perf_counter()
+        if now - self._served_s >= self.service_period_s:
+            # The executor may take a loop message too (its callback runs): return so the
+            # caller sees it rather than waiting for the next one.
+            self._served_s = now
+            self.executor.spin_once(timeout_sec=0.0)
+            self._take_all()
+            return
+        if self._take_all() or timeout_sec <= 0.0:
+            return
+        if self._wait(timeout_sec):
+            self._take_all()
+
+    def _wait(self, timeout_sec: float) -> bool:
+        """Block until a loop subscription has data or ``timeout_sec`` passes."""
+        wait_set = self._wait_set
+        wait_set.clear_entities()
+        for sub in self.subscriptions:
+            wait_set.add_subscription(sub.handle)
+        wait_set.wait(int(timeout_sec * 1e9))
+        return bool(wait_set.get_ready_entities("subscription"))
+
+    def _take_all(self) -> int:
+        """Take every queued loop message and call its callback; the number taken."""
+        taken = 0
+        for sub in self.subscriptions:
+            while True:
+                try:
+                    with sub.handle:
+                        item = sub.handle.take_message(sub.msg_type, sub.raw)
+                except InvalidHandle:
+                    break
+                if item is None:
+                    break
+                sub.callback(item[0])
+                taken += 1
+        return taken
+
+
+def spin_loop(node: Node, spinner: LoopSpinner) -> None:
+    """Serve ``node`` until shutdown (the main loop of a controller node)."""
+    while rclpy.ok():
+        spinner.spin_once(IDLE_SPIN_S)
+
+
+def run_node(name: str, factory: Callable[[], Node],
+             loop: Callable[[Node, LoopSpinner], None] = spin_loop,
+             args: list[str] | None = None,
+             companions: Sequence[Callable[[], Node]] = ()) -> None:
+    """Init rclpy, build the node, run ``loop`` (default: serve it), shut down cleanly.
+
+    The node's 1 kHz subscriptions are those it lists in ``loop_subscriptions`` (empty if
+    it has no such attribute); its ``executor`` parameter chooses how they are served.
+    ``companions`` are more nodes composed into the same process and thread (built after
+    the main node, served by the same executor; their loop subscriptions are taken before
+    the main node's, so a message they publish in a callback reaches it in the same spin).
     Ctrl-C / SIGTERM end the process quietly with the bag-friendly clean shutdown; a bad
     parameter (ValueError) or a missing file ends it with exit code 2 and the reason.
     """
     rclpy.init(args=args)
-    node = None
+    nodes: list[Node] = []
     try:
-        node = factory()
-        executor = make_executor(node.get_parameter("executor").value)
-        executor.add_node(node)
-        if loop is None:
-            executor.spin()
-        else:
-            loop(node, executor)
+        nodes.append(factory())
+        nodes.extend(make() for make in companions)
+        executor_name = nodes[0].get_parameter("executor").value
+        executor = make_executor(executor_name)
+        for node in nodes:
+            executor.add_node(node)
+        subscriptions = [sub for node in nodes[1:] + nodes[:1]
+                         for sub in getattr(node, "loop_subscriptions", ())]
+        loop(nodes[0], LoopSpinner(executor, subscriptions, fast=executor_name == "waitset"))
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except RCLError:
@@ -57,6 +167,6 @@ def run_node(name: str, factory: Callable[[], Node],
         print(f"{name}: {exc}", file=sys.stderr, flush=True)
         raise SystemExit(2) from None
     finally:
-        if node is not None:
+        for node in reversed(nodes):
             node.destroy_node()
         rclpy.try_shutdown()

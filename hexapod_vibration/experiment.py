@@ -135,8 +135,13 @@ def stop_children(children: list[Child]) -> None:
 class Supervisor:
     """In-process rclpy node: watches /clock and /diagnostics, sets parameters."""
 
-    def __init__(self) -> None:
-        """Create the node on the caller's domain."""
+    def __init__(self, watch_clock: bool = True) -> None:
+        """Create the node on the caller's domain.
+
+        ``watch_clock=False``: no ``/clock`` subscription (a benchmark that must not add a
+        1 kHz subscriber to the loop it measures); ``sim_time_s`` then follows the
+        driver's ``sample`` on /diagnostics (once per simulated second).
+        """
         import rclpy
         from diagnostic_msgs.msg import DiagnosticArray
         from rclpy.parameter_client import AsyncParameterClient
@@ -150,7 +155,9 @@ class Supervisor:
         self.sim_time_s = -1.0
         self.driver: dict[str, str] = {}
         self.notch: dict[str, str] = {}
-        self.node.create_subscription(Clock, "/clock", self._on_clock, CLOCK_QOS)
+        self._watch_clock = watch_clock
+        if watch_clock:
+            self.node.create_subscription(Clock, "/clock", self._on_clock, CLOCK_QOS)
         self.node.create_subscription(DiagnosticArray, "/diagnostics", self._on_diag,
                                       DIAGNOSTICS_QOS)
         self.clients = {name: AsyncParameterClient(self.node, name)
@@ -164,6 +171,8 @@ class Supervisor:
             values = {kv.key: kv.value for kv in status.values}
             if status.name == "pph_driver: loop":
                 self.driver = values
+                if not self._watch_clock:
+                    self.sim_time_s = max(self.sim_time_s, int(values.get("sample", 0)) / 1e3)
             elif status.name == "notch_controller":
                 self.notch = values
 

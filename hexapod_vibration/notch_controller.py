@@ -25,8 +25,8 @@ from hexapod_vibration.core import adaptation
 from hexapod_vibration.core.filters import DCBlocker
 from hexapod_vibration.core.notch import AdaptiveNotchCanceller, validate_frequencies
 from hexapod_vibration.diagnostics import diagnostic_array
-from hexapod_vibration.executors import run_node
-from hexapod_vibration.messages import make_strut_array, receive_strut_array
+from hexapod_vibration.executors import declare_executor_parameter, run_node
+from hexapod_vibration.messages import StrutArrayPublisher, receive_strut_array
 from hexapod_vibration.qos import DIAGNOSTICS_QOS, LOOP_PUBLISHER_QOS, LOOP_QOS
 from hexapod_vibration.strut_layout import sample_label
 
@@ -83,10 +83,12 @@ class NotchControllerNode(Node):
         self.enabled_since_sample = -1
         self.counters = {"invalid": 0, "gaps": 0, "missed_samples": 0, "duplicates": 0}
         pub_qos = LOOP_PUBLISHER_QOS
-        self._pub_cmd = self.create_publisher(Float64MultiArray, "/pph/notch_command", pub_qos)
+        self._pub_cmd = StrutArrayPublisher(self.create_publisher(
+            Float64MultiArray, "/pph/notch_command", pub_qos))
         self._pub_w = self.create_publisher(Float64MultiArray, "/pph/notch_weights", pub_qos)
         self._pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", DIAGNOSTICS_QOS)
-        self.create_subscription(Float64MultiArray, "/pph/accel", self._on_accel, LOOP_QOS)
+        self.loop_subscriptions = [self.create_subscription(
+            Float64MultiArray, "/pph/accel", self._on_accel, LOOP_QOS)]
         self.create_service(Trigger, "~/identify", self._on_identify)
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self._want_enabled = bool(self.get_parameter("enabled").value)
@@ -128,8 +130,7 @@ class NotchControllerNode(Node):
                         "bound (samples): 1 for the ZOH + anti-aliasing group delay", 0.0, 20.0,
                         read_only=True)
         p.declare_float(self, "ramp_s", 0.05, "enable/disable fade time (s)", 0.0, 5.0)
-        p.declare_string(self, "executor", "single_threaded", "rclpy executor",
-                         ("single_threaded", "events"), read_only=True)
+        declare_executor_parameter(self)
 
     def _on_set_parameters(self, params: list[Parameter]):
         changes = {q.name: q.value for q in params}
@@ -343,7 +344,7 @@ class NotchControllerNode(Node):
             return
         self._catch_up(index)
         command = self._step(self.dc_blocker.step(accel))
-        self._pub_cmd.publish(make_strut_array(command, index))
+        self._pub_cmd.publish(command, index)
         if index % WEIGHTS_EVERY_SAMPLES == 0:
             self._publish_weights(index)
         if index % int(self.fs) == 0:

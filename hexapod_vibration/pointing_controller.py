@@ -22,8 +22,8 @@ from hexapod_vibration.core.model_config import load_model_config
 from hexapod_vibration.core.pointing import PointingGains, validate_target_pose
 from hexapod_vibration.core.sensors import EddySensorArray
 from hexapod_vibration.diagnostics import diagnostic_array
-from hexapod_vibration.executors import run_node
-from hexapod_vibration.messages import make_strut_array, receive_strut_array
+from hexapod_vibration.executors import declare_executor_parameter, run_node
+from hexapod_vibration.messages import StrutArrayPublisher, receive_strut_array
 from hexapod_vibration.paths import config_path
 from hexapod_vibration.qos import DIAGNOSTICS_QOS, LOOP_PUBLISHER_QOS, LOOP_QOS
 
@@ -51,10 +51,11 @@ class PointingControllerNode(Node):
         self.enabled = bool(self.get_parameter("enabled").value)
         self.invalid = 0
         self.last_sample = -1
-        self._pub = self.create_publisher(Float64MultiArray, "/pph/pointing_command",
-                                          LOOP_PUBLISHER_QOS)
+        self._pub = StrutArrayPublisher(self.create_publisher(
+            Float64MultiArray, "/pph/pointing_command", LOOP_PUBLISHER_QOS))
         self._pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", DIAGNOSTICS_QOS)
-        self.create_subscription(Float64MultiArray, "/pph/eddy", self._on_eddy, LOOP_QOS)
+        self.loop_subscriptions = [self.create_subscription(
+            Float64MultiArray, "/pph/eddy", self._on_eddy, LOOP_QOS)]
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self.get_logger().info(f"pointing controller up: target {np.round(self.law.target, 6)}"
                                f", bandwidth {self.law.gains.bandwidth_hz} Hz")
@@ -78,8 +79,7 @@ class PointingControllerNode(Node):
                        "reset)")
         p.declare_string(self, "model_file", "", "physical model YAML (empty: packaged "
                          "config/pph_model.yaml)", read_only=True)
-        p.declare_string(self, "executor", "single_threaded", "rclpy executor",
-                         ("single_threaded", "events"), read_only=True)
+        declare_executor_parameter(self)
 
     def _value(self, changes: dict, name: str):
         return changes[name] if name in changes else self.get_parameter(name).value
@@ -123,7 +123,7 @@ class PointingControllerNode(Node):
             return
         self.last_sample = index
         force = self.law.step(gaps) if self.enabled else np.zeros(6)
-        self._pub.publish(make_strut_array(force, index))
+        self._pub.publish(force, index)
         if index % DIAGNOSTICS_EVERY_SAMPLES == 0:
             self.publish_diagnostics()
 

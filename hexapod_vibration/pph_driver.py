@@ -28,8 +28,8 @@ from hexapod_vibration.core.model_config import load_model_config
 from hexapod_vibration.core.plant import PPHPlant, actuator_test_sine, saturate_commands
 from hexapod_vibration.core.shaker import Shaker, tones_from_arrays
 from hexapod_vibration.diagnostics import diagnostic_array, sample_time
-from hexapod_vibration.executors import run_node
-from hexapod_vibration.messages import make_strut_array, receive_strut_array
+from hexapod_vibration.executors import LoopSpinner, declare_executor_parameter, run_node
+from hexapod_vibration.messages import StrutArrayPublisher, receive_strut_array
 from hexapod_vibration.paths import config_path
 from hexapod_vibration.qos import CLOCK_QOS, DIAGNOSTICS_QOS, LOOP_PUBLISHER_QOS, LOOP_QOS
 
@@ -92,15 +92,18 @@ class PPHDriver(Node):
         self.stats = LoopStats()
         self.streams = {s: CommandStream(f"/pph/{s}_command") for s in STREAMS}
         pub_qos = LOOP_PUBLISHER_QOS
-        self._pub_accel = self.create_publisher(Float64MultiArray, "/pph/accel", pub_qos)
-        self._pub_eddy = self.create_publisher(Float64MultiArray, "/pph/eddy", pub_qos)
-        self._pub_force = self.create_publisher(Float64MultiArray, "/pph/actuator_force",
-                                                LOOP_PUBLISHER_QOS)
+        self._pub_accel = StrutArrayPublisher(self.create_publisher(
+            Float64MultiArray, "/pph/accel", pub_qos))
+        self._pub_eddy = StrutArrayPublisher(self.create_publisher(
+            Float64MultiArray, "/pph/eddy", pub_qos))
+        self._pub_force = StrutArrayPublisher(self.create_publisher(
+            Float64MultiArray, "/pph/actuator_force", pub_qos))
         self._pub_clock = self.create_publisher(Clock, "/clock", CLOCK_QOS)
         self._pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", DIAGNOSTICS_QOS)
-        for name, stream in self.streams.items():
+        self.loop_subscriptions = [
             self.create_subscription(Float64MultiArray, stream.topic,
                                      lambda msg, n=name: self._on_command(n, msg), LOOP_QOS)
+            for name, stream in self.streams.items()]
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self._sample_pending = self.plant.step(np.zeros(6))
         self.get_logger().info(
@@ -144,8 +147,7 @@ class PPHDriver(Node):
         self._hold_at_time_s = p.declare_float(
             self, "hold_at_time_s", -1.0, "lockstep breakpoint: stop before publishing the "
             "sample at this sim time (s) until it is changed; negative = never", -1.0, 1e6)
-        p.declare_string(self, "executor", "single_threaded", "rclpy executor",
-                         ("single_threaded", "events"), read_only=True)
+        declare_executor_parameter(self)
         self._expected = p.declare_string_array(
             self, "lockstep_controllers", list(STREAMS), "controllers the lockstep driver "
             "waits for before sample 0 and then every sample while they are connected "
@@ -263,8 +265,8 @@ class PPHDriver(Node):
         """Publish /clock and the sensors of the current sample."""
         n, sensors = self.sample, self._sample_pending
         self._pub_clock.publish(Clock(clock=sample_time(n)))
-        self._pub_accel.publish(make_strut_array(sensors.accel_m_s2, n))
-        self._pub_eddy.publish(make_strut_array(sensors.eddy_m, n))
+        self._pub_accel.publish(sensors.accel_m_s2, n)
+        self._pub_eddy.publish(sensors.eddy_m, n)
         now = time.perf_counter()
         self._publish_wall_s[n % PUBLISH_HISTORY] = now
         if self.stats.last_publish_wall_s:
@@ -276,7 +278,7 @@ class PPHDriver(Node):
         notch = self._active_force("notch") + actuator_test_sine(
             self.sample, self._test_sine_frequency_hz, self._test_sine_amplitude_n, self.fs)
         applied = saturate_commands(notch, self._active_force("pointing"), self.model.strut)
-        self._pub_force.publish(make_strut_array(applied, self.sample))
+        self._pub_force.publish(applied, self.sample)
         self._sample_pending = self.plant.step(applied)
         self.sample += 1
         self.stats.samples += 1
@@ -319,7 +321,7 @@ class PPHDriver(Node):
                                                 self.sample))
 
 
-def wait_while_held(node: PPHDriver, executor) -> None:
+def wait_while_held(node: PPHDriver, spinner: LoopSpinner) -> None:
     """Lockstep breakpoint: serve callbacks (parameters) until ``hold_at_time_s`` moves on.
 
     On entering the hold the driver reports ``held: true`` with its sample on
@@ -333,10 +335,10 @@ def wait_while_held(node: PPHDriver, executor) -> None:
         if time.perf_counter() - announced > 0.5:      # late subscribers hear it too
             node.publish_diagnostics(held=True)
             announced = time.perf_counter()
-        executor.spin_once(timeout_sec=0.01)
+        spinner.spin_once(timeout_sec=0.01)
 
 
-def wait_for_controllers(node: PPHDriver, executor) -> None:
+def wait_for_controllers(node: PPHDriver, spinner: LoopSpinner) -> None:
     """Offer sample 0 again and again until every expected controller answered it.
 
     Discovery does not tell when a subscription can receive: re-publishing the first
@@ -347,7 +349,7 @@ def wait_for_controllers(node: PPHDriver, executor) -> None:
         node.publish_sample()
         deadline = time.perf_counter() + 0.05
         while time.perf_counter() < deadline:
-            executor.spin_once(timeout_sec=max(deadline - time.perf_counter(), 0.0))
+            spinner.spin_once(timeout_sec=max(deadline - time.perf_counter(), 0.0))
         missing = [n for n in node._expected if node.streams[n].sample != 0]
         if not missing:
             break
@@ -358,18 +360,18 @@ def wait_for_controllers(node: PPHDriver, executor) -> None:
     node._refresh_connections()
 
 
-def run_lockstep(node: PPHDriver, executor) -> None:
+def run_lockstep(node: PPHDriver, spinner: LoopSpinner) -> None:
     """Advance as soon as every connected controller answered the current sample.
 
     Only the controllers of ``lockstep_controllers`` are waited for, each up to
     ``lockstep_timeout_s`` per sample, and not once the watchdog dropped its stream.
     """
-    wait_while_held(node, executor)
-    wait_for_controllers(node, executor)
+    wait_while_held(node, spinner)
+    wait_for_controllers(node, spinner)
     if rclpy.ok():
         node.apply_and_step()      # sample 0 is out and answered already (handshake)
     while rclpy.ok():
-        wait_while_held(node, executor)
+        wait_while_held(node, spinner)
         node.publish_sample()
         deadline = time.perf_counter() + node._lockstep_timeout_s
         spun = False
@@ -379,17 +381,17 @@ def run_lockstep(node: PPHDriver, executor) -> None:
                 node.stats.timeouts += 1
                 node._refresh_connections()
                 break
-            executor.spin_once(timeout_sec=remaining)
+            spinner.spin_once(timeout_sec=remaining)
             spun = True
         if not spun:    # nothing to wait for: still serve parameters and other streams
-            executor.spin_once(timeout_sec=0.0)
+            spinner.spin_once(timeout_sec=0.0)
         if node.sample % 200 == 0:
             node._refresh_connections()
         node._count_missed()
         node.apply_and_step()
 
 
-def run_realtime(node: PPHDriver, executor) -> None:
+def run_realtime(node: PPHDriver, spinner: LoopSpinner) -> None:
     """Pace the loop at the sample rate on the wall clock, as hardware would."""
     period = 1.0 / node.fs
     start = time.perf_counter()
@@ -397,11 +399,9 @@ def run_realtime(node: PPHDriver, executor) -> None:
     while rclpy.ok():
         node.publish_sample()
         deadline = start + (node.sample + 1) * period
-        while True:
-            remaining = deadline - time.perf_counter()
-            if remaining <= 0.0:
-                break
-            executor.spin_once(timeout_sec=remaining)
+        spinner.spin_once(timeout_sec=0.0)   # after an overrun: what is here is not late
+        while (remaining := deadline - time.perf_counter()) > 0.0:
+            spinner.spin_once(timeout_sec=remaining)
         late = [s for s in node.streams.values() if s.connected and s.sample < node.sample]
         for stream in late:
             stream.late += 1
@@ -412,10 +412,11 @@ def run_realtime(node: PPHDriver, executor) -> None:
         node.apply_and_step()
 
 
-def _run(node: PPHDriver, executor) -> None:
+def run_driver(node: PPHDriver, spinner: LoopSpinner) -> None:
+    """Run the loop of the driver's ``clock_mode`` until shutdown, then report once more."""
     node.stats.start_wall_s = time.perf_counter()
     try:
-        (run_lockstep if node.mode == "lockstep" else run_realtime)(node, executor)
+        (run_lockstep if node.mode == "lockstep" else run_realtime)(node, spinner)
     finally:
         if rclpy.ok():
             node.publish_diagnostics()
@@ -423,7 +424,7 @@ def _run(node: PPHDriver, executor) -> None:
 
 def main(args: list[str] | None = None) -> None:
     """Entry point of ``ros2 run hexapod_vibration pph_driver``."""
-    run_node("pph_driver", PPHDriver, _run, args=args)
+    run_node("pph_driver", PPHDriver, run_driver, args=args)
 
 
 if __name__ == "__main__":
