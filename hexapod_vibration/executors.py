@@ -103,27 +103,39 @@ class LoopSpinner:
     def _wait(self, timeout_sec: float) -> bool:
         """Block until a loop subscription has data or ``timeout_sec`` passes."""
         wait_set = self._wait_set
-        wait_set.clear_entities()
-        for sub in self.subscriptions:
-            wait_set.add_subscription(sub.handle)
-        wait_set.wait(int(timeout_sec * 1e9))
+        try:
+            wait_set.clear_entities()
+            for sub in self.subscriptions:
+                wait_set.add_subscription(sub.handle)
+            wait_set.wait(int(timeout_sec * 1e9))
+        except (RuntimeError, RCLError, InvalidHandle):
+            self._raise_if_shut_down()
+            raise
+        self._raise_if_shut_down()
         return bool(wait_set.get_ready_entities("subscription"))
 
     def _take_all(self) -> int:
         """Take every queued loop message and call its callback; the number taken."""
         taken = 0
         for sub in self.subscriptions:
-            while True:
-                try:
-                    with sub.handle:
-                        item = sub.handle.take_message(sub.msg_type, sub.raw)
-                except InvalidHandle:
-                    break
-                if item is None:
-                    break
+            while (item := self._take(sub)) is not None:
                 sub.callback(item[0])
                 taken += 1
         return taken
+
+    def _take(self, sub: Subscription) -> tuple | None:
+        """One message of ``sub`` (with its info), or None if none is queued."""
+        try:
+            with sub.handle:
+                return sub.handle.take_message(sub.msg_type, sub.raw)
+        except (RuntimeError, RCLError, InvalidHandle):
+            # rclpy's executors treat a failing take after shutdown (Ctrl-C) as the end.
+            self._raise_if_shut_down()
+            raise
+
+    def _raise_if_shut_down(self) -> None:
+        if not self.executor.context.ok():
+            raise ExternalShutdownException()
 
 
 def spin_loop(node: Node, spinner: LoopSpinner) -> None:

@@ -1,10 +1,12 @@
 """``experiment``: run one of the paper's experiments through the ROS graph and analyse it.
 
-``experiment --scenario NAME --out DIR [--duration S] [--control-on S] [--lockstep|--realtime]``
+``experiment --scenario NAME --out DIR [--duration S] [--control-on S] [--lockstep|--realtime]
+[--composed] [--storage mcap|sqlite3]``
 
 1. Writes ``DIR/params.yaml`` (a ROS 2 params file for the three nodes, from the scenario).
 2. Starts the recorder (bag into ``DIR/bag``), the controllers and the driver as separate
-   processes, on the caller's ROS_DOMAIN_ID, and waits until the graph is connected.
+   processes (``--composed``: the driver and controllers as one ``pph_graph`` process), on
+   the caller's ROS_DOMAIN_ID, and waits until the graph is connected.
 3. Lockstep: the driver holds (parameter ``hold_at_time_s``) before sample 0, at
    ``--control-on`` and at the end. At the control-on breakpoint the runner switches the
    notch controller on through its parameter service, so the switch lands on the same
@@ -229,6 +231,8 @@ class RunOptions:
     mode: str = "lockstep"
     storage: str = "mcap"
     wall_timeout_s: float = 0.0
+    composed: bool = False
+    """Driver and controllers in one process (``pph_graph``) instead of three."""
 
 
 class ExperimentRun:
@@ -260,13 +264,17 @@ class ExperimentRun:
         common = ["--params-file", str(self.params_file)]
         self.children.append(start_child("pph_recorder", "hexapod_vibration.recorder", [
             "-p", f"bag_path:={self.bag}", "-p", f"storage:={self.o.storage}"], logs))
-        if self.has_notch:
-            self.children.append(start_child("notch_controller",
-                                             "hexapod_vibration.notch_controller", common, logs))
-        self.children.append(start_child("pointing_controller",
-                                         "hexapod_vibration.pointing_controller", common, logs))
-        self.children.append(start_child("pph_driver", "hexapod_vibration.pph_driver", common,
-                                         logs))
+        if self.o.composed:
+            self.children.append(start_child("pph_graph", "hexapod_vibration.pph_graph",
+                                             common, logs))
+        else:
+            if self.has_notch:
+                self.children.append(start_child(
+                    "notch_controller", "hexapod_vibration.notch_controller", common, logs))
+            self.children.append(start_child(
+                "pointing_controller", "hexapod_vibration.pointing_controller", common, logs))
+            self.children.append(start_child("pph_driver", "hexapod_vibration.pph_driver",
+                                             common, logs))
         self.sup = Supervisor()
 
     def _check(self) -> None:
@@ -363,6 +371,9 @@ def build_parser() -> argparse.ArgumentParser:
                       help="deterministic, as fast as the graph allows (default)")
     mode.add_argument("--realtime", dest="mode", action="store_const", const="realtime",
                       help="driver paced at 1 kHz wall clock")
+    parser.add_argument("--composed", action="store_true",
+                        help="driver and controllers as one process (pph_graph): same nodes "
+                             "and topics, intra-process delivery, faster loop")
     parser.add_argument("--storage", choices=("mcap", "sqlite3"), default="mcap",
                         help="rosbag2 storage of DIR/bag (default mcap, as Jazzy)")
     parser.add_argument("--demo", action="store_true",
@@ -414,7 +425,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"experiment {sc.name}: {sc.description} ({args.mode}, {sc.duration_s:g} s, "
               f"control on at {sc.control_on_s:g} s) -> {out}", flush=True)
         try:
-            report = run_scenario(RunOptions(sc, out, args.mode, args.storage))
+            report = run_scenario(RunOptions(sc, out, args.mode, args.storage,
+                                             composed=args.composed))
         except KeyboardInterrupt:
             print(f"\nexperiment: interrupted; processes stopped, bag in {out / 'bag'}",
                   file=sys.stderr)

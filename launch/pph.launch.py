@@ -4,12 +4,15 @@
     ros2 launch hexapod_vibration pph.launch.py clock_mode:=realtime
     ros2 launch hexapod_vibration pph.launch.py params_file:=/path/to/my_pph.yaml
     ros2 launch hexapod_vibration pph.launch.py record:=true bag_path:=/tmp/pph_bag
+    ros2 launch hexapod_vibration pph.launch.py composed:=true
 
 Starts ``pph_driver``, ``notch_controller`` and ``pointing_controller`` (node names = the
 executable names) with the parameters of ``config/pph.yaml`` from the package's share
 directory (or ``params_file``); ``clock_mode`` overrides the driver's clock mode. With
 ``record:=true`` it also starts ``pph_recorder``, which writes the contract topics into
 the bag directory ``bag_path`` (empty: ``rosbag2_<date>-<time>`` in the current directory).
+With ``composed:=true`` the three nodes run in one process (``pph_graph``: same node names,
+parameters and topics, intra-process delivery; see the README's Performance section).
 """
 
 import os
@@ -17,7 +20,7 @@ import os
 from ament_index_python.packages import get_package_share_directory
 from launch import LaunchDescription
 from launch.actions import DeclareLaunchArgument
-from launch.conditions import IfCondition
+from launch.conditions import IfCondition, UnlessCondition
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 from launch_ros.parameter_descriptions import ParameterValue
@@ -33,6 +36,7 @@ def generate_launch_description() -> LaunchDescription:
     clock_mode = LaunchConfiguration('clock_mode')
     record = LaunchConfiguration('record')
     bag_path = LaunchConfiguration('bag_path')
+    composed = LaunchConfiguration('composed')
     arguments = [
         DeclareLaunchArgument(
             'params_file', default_value=default_params,
@@ -45,18 +49,25 @@ def generate_launch_description() -> LaunchDescription:
             'record', default_value='false', choices=['true', 'false'],
             description='also start pph_recorder (rosbag2 bag of the contract topics)'),
         DeclareLaunchArgument(
+            'composed', default_value='false', choices=['true', 'false'],
+            description='run the driver and both controllers in one process (pph_graph)'),
+        DeclareLaunchArgument(
             'bag_path', default_value='',
             description='bag directory of the recorder (must not exist); empty: '
                         'rosbag2_<date>-<time> in the current directory'),
     ]
+    driver_parameters = [params_file, {'clock_mode': ParameterValue(clock_mode, value_type=str)}]
+    separate = UnlessCondition(composed)
     nodes = [
         Node(package=PACKAGE, executable='pph_driver', name='pph_driver', output='screen',
-             parameters=[params_file,
-                         {'clock_mode': ParameterValue(clock_mode, value_type=str)}]),
+             parameters=driver_parameters, condition=separate),
         Node(package=PACKAGE, executable='notch_controller', name='notch_controller',
-             output='screen', parameters=[params_file]),
+             output='screen', parameters=[params_file], condition=separate),
         Node(package=PACKAGE, executable='pointing_controller', name='pointing_controller',
-             output='screen', parameters=[params_file]),
+             output='screen', parameters=[params_file], condition=separate),
+        # No name=: a name remap would rename all three nodes of the process.
+        Node(package=PACKAGE, executable='pph_graph', output='screen',
+             parameters=driver_parameters, condition=IfCondition(composed)),
         Node(package=PACKAGE, executable='pph_recorder', name='pph_recorder', output='screen',
              parameters=[{'bag_path': ParameterValue(bag_path, value_type=str)}],
              condition=IfCondition(record)),

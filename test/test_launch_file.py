@@ -47,18 +47,23 @@ def test_launch_file_compiles_and_starts_the_three_nodes(tmp_path):
 
     nodes = [_keywords(c, constants) for c in _calls(tree, 'Node')]
     executables = {n['executable']: n for n in nodes}
-    assert set(executables) == {*NODES, 'pph_recorder'}
+    assert set(executables) == {*NODES, 'pph_graph', 'pph_recorder'}
     for name, node in executables.items():
         assert node['package'] == 'hexapod_vibration'
-        assert node['name'] == name
+        if name != 'pph_graph':
+            assert node['name'] == name
+    # pph_graph holds three nodes: a name remap would rename them all.
+    assert 'name' not in executables['pph_graph']
     assert 'condition' in executables['pph_recorder']          # only with record:=true
-    for name in NODES:
-        assert 'condition' not in executables[name]
+    for name in (*NODES, 'pph_graph'):                        # separate xor composed
         assert 'parameters' in executables[name]
+        assert 'condition' in executables[name]
+    assert source.count('UnlessCondition(composed)') == 1
+    assert 'IfCondition(composed)' in source
 
     arguments = {_keywords(c, constants).get('name') or c.args[0].value
                  for c in _calls(tree, 'DeclareLaunchArgument')}
-    assert arguments == {'params_file', 'clock_mode', 'record', 'bag_path'}
+    assert arguments == {'params_file', 'clock_mode', 'record', 'bag_path', 'composed'}
     assert "choices=['lockstep', 'realtime']" in source
     # The params file comes from the package's share directory.
     assert 'get_package_share_directory' in source
