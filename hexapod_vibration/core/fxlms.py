@@ -1,27 +1,30 @@
 """Multichannel filtered-x LMS (Elliott's multiple-error LMS): the model-based baseline.
 
 The paper compares its Adaptive Notch Canceller with the classic model-based alternative,
-the multiple-error LMS of Elliott, Stothers and Nelson (1987). This module implements it
-with the same prior knowledge and the same step interface as
-:class:`~hexapod_vibration.core.notch.AdaptiveNotchCanceller`, so that both run in the same
-loop and their cost per sample can be compared:
+the multiple-error LMS of Elliott, Stothers and Nelson (1987). This module implements its
+tonal, multiple-reference form with the same prior knowledge and the same step interface
+as :class:`~hexapod_vibration.core.notch.AdaptiveNotchCanceller`, so that both run in the
+same loop and their cost per sample can be compared:
 
-- Reference ``x_n = sum_t A_t cos(phi_t,n)`` (dimensionless): the sum of the disturbance
-  tones' sinusoids, known frequencies as for the notch.
+- References ``x_k[n] = a_k cos(phi_k,n)``: one sinusoid per disturbance tone k (known
+  frequencies, as for the notch), with its own control filters and filtered references. A
+  single summed reference would let any other tone in the error (e.g. an uncontrolled
+  harmonic) mix into every filter through the products of the LMS gradient.
 - Secondary paths ``S[i, j, l]`` (m/s^2 per N): FIR impulse responses (``L`` taps, 32-128)
   from command ``j`` to error ``i``, identified on the running plant before control
   (:class:`SecondaryPathIdentifier`), with the pairing of docs/architecture.md:
   ``e_i[n] = sum_j sum_l S[i, j, l] u_j[n - l] + d_i[n]`` (so ``S[:, :, 0]`` is ~0).
-- Control filters ``W[k, j]`` (N per unit reference): one FIR of ``N`` taps per actuator,
-  ``u_j[n] = sum_k W[k, j] x[n - k]``.
-- Filtered reference ``r_ij[n] = sum_l S[i, j, l] x[n - l]`` and the normalised update
-  ``W[k, j] -= mu / (eps + ||R||^2) * sum_i e_i[n] r_ij[n - k]``, with
-  ``||R||^2 = sum_{i,j,k} r_ij[n - k]^2`` the filtered-reference power in the filters'
-  window (normalised LMS: ``mu`` is dimensionless, stable for small ``mu``).
+- Control filters ``W[m, k, j]`` (N per unit reference): one FIR of ``N`` taps per tone
+  and actuator, ``u_j[n] = sum_k sum_m W[m, k, j] x_k[n - m]``.
+- Filtered references ``r_kij[n] = sum_l S[i, j, l] x_k[n - l]`` and the normalised update
+  ``W[m, k, j] -= mu * sum_i e_i[n] r_kij[n - m]``, where the reference amplitude ``a_k``
+  makes the filtered-reference power of each tone in the filters' window one (normalised
+  LMS per tone: ``mu`` is dimensionless, stable for small ``mu``).
 
-Cost per sample: ``I*J*L`` multiply-adds for the filtered reference (the model's cost, which
-grows with the plant order through ``L``), ``2*I*J*N`` for the update and its normalisation
-and ``J*N`` for the output, against O(T*C) for the notch whatever the plant.
+Cost per sample: ``K*I*J*L`` multiply-adds for the filtered references (the model's cost,
+which grows with the plant order through ``L``), ``K*I*J*N`` for the gradient and
+``2*K*J*N`` for the update and the output (:func:`multiply_adds_per_sample`), against
+O(K*C) for the notch whatever the plant.
 
 :class:`FxlmsCoreLoop` runs a scenario of :mod:`hexapod_vibration.core.closed_loop` with this
 controller in place of the notch.
@@ -37,6 +40,7 @@ from hexapod_vibration.core.adaptation import SampledRun
 from hexapod_vibration.core.closed_loop import STRUTS, CoreLoop, LoopRecord
 from hexapod_vibration.core.model_config import ModelConfig
 from hexapod_vibration.core.notch import TWO_PI, validate_frequencies, validate_mu
+from hexapod_vibration.core.phasor import PhasorBank
 from hexapod_vibration.core.scenario import Scenario
 
 DEFAULT_PATH_TAPS = 64
@@ -44,6 +48,8 @@ DEFAULT_CONTROL_TAPS = 32
 PATH_TAPS_RANGE = (32, 128)
 DEFAULT_FXLMS_MU = 0.05
 NORMALISATION_EPS = 1e-12
+# rows between two block copies of the sliding histories (samples)
+HISTORY_BLOCK = 256
 
 
 def _check_positive_int(name: str, value: int) -> int:
@@ -173,17 +179,64 @@ class SecondaryPathIdentifier(SampledRun):
         return self._paths.copy()
 
 
+class _SlidingHistories:
+    """Newest-first windows over the recent rows of several signals, no copy per sample.
+
+    Row ``n`` of every signal is written at position ``p`` of its buffer of
+    ``depth + block`` rows and ``p`` moves down by one per sample, so ``buf[p:p + depth]``
+    is always ``[newest, ..., oldest]``. When ``p`` would leave the buffers, the newest
+    ``depth - 1`` rows of each are moved to its end (one block copy every ``block + 1``
+    samples) and ``p`` restarts at ``block``. The buffers start as zeros (a zero past).
+
+    Args:
+        shapes: per signal, (window depth in rows, shape of one row).
+        block: rows between two block copies.
+    """
+
+    def __init__(self, shapes: Sequence[tuple[int, tuple[int, ...]]],
+                 block: int = HISTORY_BLOCK) -> None:
+        """Allocate the zeroed buffers; the first :meth:`push` returns ``block``."""
+        self.block = block
+        self.depths = [depth for depth, _ in shapes]
+        self.buffers = [np.zeros((depth + block, *row)) for depth, row in shapes]
+        self.pos = block + 1
+
+    def push(self) -> int:
+        """Move every buffer to the next row position and return it (caller writes it)."""
+        p = self.pos - 1
+        if p < 0:
+            for depth, buf in zip(self.depths, self.buffers, strict=True):
+                buf[self.block + 1:] = buf[:depth - 1]
+            p = self.block
+        self.pos = p
+        return p
+
+
 class FilteredXLMSController:
-    """Multichannel filtered-x LMS (multiple-error LMS) with a sum-of-tones reference.
+    """Multichannel multiple-reference filtered-x LMS, one reference per tone.
+
+    The tonal form of Elliott's multiple-error LMS: every tone k has its own sinusoidal
+    reference ``x_k[n] = a_k cos(phi_k,n)``, its own control filters and its own filtered
+    references. Per sample (I errors, J actuators, K tones, L model taps, N control taps):
+
+    - filtered references ``r_kij[n] = sum_l S[i, j, l] x_k[n - l]`` (K*I*J*L multiply-adds),
+    - normalised update ``W[m, k, j] -= mu * sum_i e_i[n] r_kij[n - m]`` (K*I*J*N),
+    - output ``u_j[n] = sum_k sum_m W[m, k, j] x_k[n - m]`` (K*J*N).
+
+    Normalisation: the reference amplitude ``a_k = (eps + N/2 ||S(w_k)||_F^2)^(-1/2)`` makes
+    the filtered-reference power of tone k in the filters' N-tap window one, so the plain
+    LMS step above is the normalised LMS step ``mu / ||R_k||^2`` of each tone (the tones are
+    orthogonal, so every tone adapts at the rate ``mu`` sets, whatever the plant gain at
+    its frequency). For a sinusoidal reference of known amplitude this power is known from
+    the model, so it costs nothing per sample. ``mu`` is dimensionless.
 
     Args:
         secondary_paths: (I, J, L) FIR models of the secondary paths (m/s^2 per N per tap),
-            error i per command j, L in [32, 128].
+            error i per command j, L in PATH_TAPS_RANGE.
         tone_frequencies_hz: reference tones (Hz), in (0, fs/2), no duplicates.
         sample_rate_hz: sample rate fs (Hz).
-        mu: normalised step size (dimensionless, >= 0); see the module docstring.
-        n_taps: control-filter length N (taps) per actuator.
-        reference_amplitudes: amplitude A_t of each tone in the reference (default 1).
+        mu: normalised step size (dimensionless, >= 0).
+        n_taps: control-filter length N (taps) per tone and actuator.
         leakage: weight leakage per sample (0 = classic FxLMS), in [0, 1).
     """
 
@@ -194,16 +247,10 @@ class FilteredXLMSController:
         sample_rate_hz: float,
         mu: float = DEFAULT_FXLMS_MU,
         n_taps: int = DEFAULT_CONTROL_TAPS,
-        reference_amplitudes: Sequence[float] | np.ndarray | None = None,
         leakage: float = 0.0,
     ) -> None:
-        """Validate the arguments (ValueError) and allocate the ring buffers."""
-        s = np.array(secondary_paths, dtype=float)
-        if s.ndim != 3 or not np.all(np.isfinite(s)):
-            raise ValueError(f'secondary_paths must be a finite (I, J, L) array, got {s.shape}')
-        lo, hi = PATH_TAPS_RANGE
-        if not lo <= s.shape[2] <= hi:
-            raise ValueError(f'secondary-path length L must be in [{lo}, {hi}], got {s.shape[2]}')
+        """Validate the arguments (ValueError) and allocate the histories."""
+        s = _validate_paths(secondary_paths)
         self._fs = float(sample_rate_hz)
         if not np.isfinite(self._fs) or self._fs <= 0.0:
             raise ValueError(f'sample_rate_hz must be finite and > 0, got {sample_rate_hz!r}')
@@ -213,37 +260,48 @@ class FilteredXLMSController:
         self._freqs = freqs
         self._mu = validate_mu(mu)
         self._n_taps = _check_positive_int('n_taps', n_taps)
-        amps = np.ones(freqs.size) if reference_amplitudes is None else np.asarray(
-            reference_amplitudes, dtype=float).reshape(-1)
-        if amps.shape != freqs.shape or not np.all(np.isfinite(amps)):
-            raise ValueError(f'reference_amplitudes must be finite with shape {freqs.shape}')
         if not 0.0 <= leakage < 1.0:
             raise ValueError(f'leakage must be in [0, 1), got {leakage!r}')
+        self._keep = 1.0 - float(leakage)
         self._ni, self._nj, self._nl = s.shape
         self._paths = s
-        self._paths_2d = np.ascontiguousarray(s.reshape(self._ni * self._nj, self._nl))
-        self._amps = amps
-        self._keep = 1.0 - float(leakage)
         self._dphi = TWO_PI * freqs / self._fs
-        self._phi = np.zeros(freqs.size)
-        self._cos = np.zeros(freqs.size)
-        # Double-length ring buffers: the newest sample is written at pos and pos + M, so
-        # buf[pos:pos + M] is always [newest, ..., oldest] without copying.
-        self._xlen = max(self._nl, self._n_taps)
-        self._xbuf = np.zeros(2 * self._xlen)
-        self._xpos = 0
-        self._rbuf = np.zeros((2 * self._n_taps, self._ni, self._nj))
-        self._rbuf_2d = self._rbuf.reshape(2 * self._n_taps, self._ni * self._nj)
-        self._rpos = 0
-        self._r = np.zeros(self._ni * self._nj)
-        self._w = np.zeros((self._n_taps, self._nj))
-        self._grad = np.zeros((self._n_taps, self._nj))
-        self._u = np.zeros(self._nj)
+        self._osc = PhasorBank(self._dphi, amplitudes=self._normalising_amplitudes())
         self._enabled = True
         self._frozen = False
+        self._allocate()
+
+    def _normalising_amplitudes(self) -> np.ndarray:
+        """a_k (K,): unit filtered-reference power per tone in the N-tap window."""
+        g = fir_frequency_response(self._paths, self._freqs, self._fs)      # (K, I, J)
+        power = 0.5 * self._n_taps * np.sum(np.abs(g) ** 2, axis=(1, 2))
+        return 1.0 / np.sqrt(NORMALISATION_EPS + power)
+
+    def _allocate(self) -> None:
+        """Histories, weights and the views the hot path uses at each buffer position."""
+        k, i, j, ell, n = self._freqs.size, self._ni, self._nj, self._nl, self._n_taps
+        # paths as (L, J*I): filtered references come out as (K, J, I), so the gradient
+        # sum_i e_i r_kij[n - m] is one matrix-vector product over every (m, k, j)
+        self._paths_t = np.ascontiguousarray(self._paths.transpose(2, 1, 0).reshape(ell, j * i))
+        self._hist = _SlidingHistories([(max(ell, n), (k,)), (n, (k, j, i))])
+        xb, rb = self._hist.buffers
+        positions = range(self._hist.block + 1)
+        self._x_slot = [xb[p] for p in positions]
+        self._x_model = [xb[p:p + ell].T for p in positions]                 # (K, L)
+        self._x_filter = [xb[p:p + n].reshape(n * k) for p in positions]     # (N*K,)
+        self._r_slot = [rb[p].reshape(k, j * i) for p in positions]          # (K, J*I)
+        self._r_window = [rb[p:p + n].reshape(n * k * j, i) for p in positions]
+        self._w = np.zeros((n, k, j))
+        self._w_flat = self._w.reshape(-1)
+        self._w_2d = self._w.reshape(n * k, j)
+        self._grad = np.zeros(n * k * j)
+        self._e_mu = np.zeros(i)
+        self._mu_vec = np.full(i, self._mu)          # (a vector multiplies faster than a float)
+        self._u = np.zeros(j)
+        self._z_re = self._osc.z.real
         # adaptation waits until the filtered-reference window holds real data (L + N - 1
-        # samples), otherwise the normalisation by a partly empty window gives huge steps
-        self._warmup = self._nl + self._n_taps - 1
+        # samples): before, the filtered references come from a partly empty history
+        self._warmup = ell + n - 1
 
     # ------------------------------------------------------------------ hot path
     def step(self, error: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
@@ -255,53 +313,37 @@ class FilteredXLMSController:
 
         Returns:
             u_n, (J,) command forces (N) for sample n (``out`` if given, else a new array).
-            Zero while disabled (the reference and filtered reference keep running).
+            Zero while disabled (the references and filtered references keep running).
             Adaptation starts once L + N - 1 samples have filled the filtered-reference
             window.
         """
         e = np.asarray(error, dtype=float)
         if e.shape != (self._ni,):
             raise ValueError(f'error must have shape ({self._ni},), got {e.shape}')
-        # reference x_n and its history
-        np.cos(self._phi, out=self._cos)
-        x = float(np.dot(self._amps, self._cos))
-        m = self._xlen
-        self._xpos = (self._xpos - 1) % m
-        self._xbuf[self._xpos] = x
-        self._xbuf[self._xpos + m] = x
-        xhist = self._xbuf[self._xpos:self._xpos + m]
-        # filtered reference r_ij[n] = S_ij * x, pushed into its history
-        np.dot(self._paths_2d, xhist[:self._nl], out=self._r)
-        n = self._n_taps
-        self._rpos = (self._rpos - 1) % n
-        self._rbuf_2d[self._rpos] = self._r
-        self._rbuf_2d[self._rpos + n] = self._r
+        p = self._hist.push()
+        np.copyto(self._x_slot[p], self._z_re)                              # x_k[n]
+        np.dot(self._x_model[p], self._paths_t, out=self._r_slot[p])        # r_kji[n]
         if self._warmup > 0:
             self._warmup -= 1
         elif self._enabled and not self._frozen and self._mu > 0.0:
-            self._adapt(e)
+            self._adapt(e, p)
         if self._enabled:
-            np.dot(xhist[:n], self._w, out=self._u)
+            np.dot(self._x_filter[p], self._w_2d, out=self._u)
         else:
             self._u[:] = 0.0
-        self._phi += self._dphi
-        np.remainder(self._phi, TWO_PI, out=self._phi)
+        self._osc.rotate()
         if out is None:
             return self._u.copy()
         out[...] = self._u
         return out
 
-    def _adapt(self, e: np.ndarray) -> None:
-        """W[k, j] -= mu / (eps + ||R||^2) sum_i e_i r_ij[n - k]."""
-        n = self._n_taps
-        hist = self._rbuf[self._rpos:self._rpos + n]               # (N, I, J), newest first
-        flat = self._rbuf_2d[self._rpos:self._rpos + n]
-        power = float(np.vdot(flat, flat))
-        np.matmul(e, hist, out=self._grad)                        # (N, J)
-        self._grad *= self._mu / (NORMALISATION_EPS + power)
+    def _adapt(self, e: np.ndarray, p: int) -> None:
+        """W[m, k, j] -= mu sum_i e_i r_kij[n - m] (normalised by the references' amplitude)."""
+        np.multiply(e, self._mu_vec, out=self._e_mu)
+        np.dot(self._r_window[p], self._e_mu, out=self._grad)
         if self._keep != 1.0:
-            self._w *= self._keep
-        self._w -= self._grad
+            self._w_flat *= self._keep
+        np.subtract(self._w_flat, self._grad, out=self._w_flat)
 
     # ------------------------------------------------------------------ configuration
     def set_enabled(self, flag: bool) -> None:
@@ -315,6 +357,7 @@ class FilteredXLMSController:
     def set_mu(self, mu: float) -> None:
         """Set the normalised step size (>= 0, finite); ValueError keeps the old one."""
         self._mu = validate_mu(mu)
+        self._mu_vec[:] = self._mu
 
     def reset_weights(self) -> None:
         """Set every control-filter weight to zero."""
@@ -323,8 +366,17 @@ class FilteredXLMSController:
     # ------------------------------------------------------------------ read-only views
     @property
     def weights(self) -> np.ndarray:
-        """Control filters W (N, J): tap k of actuator j (N per unit reference), a copy."""
+        """Control filters W (N, K, J): tap m of tone k's filter for actuator j, a copy.
+
+        Units: N per unit of the internal reference ``x_k`` (amplitude
+        :attr:`reference_amplitudes`).
+        """
         return self._w.copy()
+
+    @property
+    def reference_amplitudes(self) -> np.ndarray:
+        """Internal reference amplitudes a_k (K,) (normalisation, see the class), a copy."""
+        return self._osc.amplitudes
 
     @property
     def secondary_paths(self) -> np.ndarray:
@@ -346,26 +398,45 @@ class FilteredXLMSController:
         """Whether the controller adapts and drives its output."""
         return self._enabled
 
-    def equivalent_tone_weights(self) -> np.ndarray:
-        """Complex (T, J) command phasors (N) the filters produce at each tone.
+    @property
+    def n_taps(self) -> int:
+        """Control-filter length N (taps)."""
+        return self._n_taps
 
-        ``u_j = Re{sum_t A_t W_j(w_t) e^{j phi_t}}``, ``W_j(w) = sum_k W[k, j] e^{-j w k}``:
-        the notch's weight convention, for comparing the two controllers' solutions.
+    def equivalent_tone_weights(self) -> np.ndarray:
+        """Complex (K, J) command phasors (N) the filters produce at each tone.
+
+        ``u_j = Re{sum_k U[k, j] e^{j phi_k}}`` with ``U[k, j] = a_k sum_m W[m, k, j]
+        e^{-j w_k m}``: the notch's weight convention, for comparing the two controllers.
         """
-        k = np.arange(self._n_taps)
-        kernel = np.exp(-1j * self._dphi[:, None] * k[None, :])
-        return self._amps[:, None] * (kernel @ self._w)
+        m = np.arange(self._n_taps)
+        kernel = np.exp(-1j * self._dphi[:, None] * m[None, :])                 # (K, N)
+        return self._osc.amplitudes[:, None] * np.einsum('km,mkj->kj', kernel, self._w)
+
+
+def _validate_paths(secondary_paths: np.ndarray) -> np.ndarray:
+    """Return the (I, J, L) secondary paths as a float array or raise ValueError."""
+    s = np.array(secondary_paths, dtype=float)
+    if s.ndim != 3 or not np.all(np.isfinite(s)):
+        raise ValueError(f'secondary_paths must be a finite (I, J, L) array, got {s.shape}')
+    lo, hi = PATH_TAPS_RANGE
+    if not lo <= s.shape[2] <= hi:
+        raise ValueError(f'secondary-path length L must be in [{lo}, {hi}], got {s.shape[2]}')
+    return s
 
 
 def multiply_adds_per_sample(n_err: int, n_act: int, path_taps: int, control_taps: int,
-                             n_tones: int) -> int:
-    """Multiply-adds per sample of :class:`FilteredXLMSController` (analytic count).
+                             n_tones: int, leakage: bool = False) -> int:
+    """Real multiply-adds per sample of :class:`FilteredXLMSController` (analytic count).
 
-    Filtered reference I*J*L, normalisation I*J*N, gradient I*J*N, update J*N, output J*N,
-    reference T.
+    References 4 per tone (one complex phasor rotation), filtered references K*I*J*L,
+    step-size scaling of the error I, gradient K*I*J*N, update K*J*N (twice with leakage),
+    output K*J*N. The normalisation is a constant of the model: nothing per sample.
     """
-    ij = n_err * n_act
-    return ij * path_taps + 2 * ij * control_taps + 2 * n_act * control_taps + n_tones
+    kij = n_tones * n_err * n_act
+    kjn = n_tones * n_act * control_taps
+    return (4 * n_tones + kij * path_taps + n_err + kij * control_taps
+            + (3 if leakage else 2) * kjn)
 
 
 # ---------------------------------------------------------------------- core closed loop
@@ -442,4 +513,5 @@ class FxlmsCoreLoop(CoreLoop):
         record.plant_response = fir_frequency_response(self.secondary_paths, self.tones_hz,
                                                        self.fs)
         record.notes.append(f'FxLMS: {STRUTS}x{STRUTS} secondary paths, L={self.path_taps} '
-                            f'taps, N={self.control_taps} control taps, mu={self.mu:g}')
+                            f'taps, one reference per tone ({len(self.tones_hz)}), '
+                            f'N={self.control_taps} control taps, mu={self.mu:g}')

@@ -15,15 +15,24 @@ with ``e_n`` the (DC-blocked) accelerations (m/s^2) of sample ``n``. A diagonal 
 O(T*C) path (the paper's decentralised SISO loops); a full ``P`` costs O(T*C*C).
 Timing (docs/architecture.md): the command returned for sample ``n`` is held over
 ``[n/fs, (n+1)/fs)`` and first seen in the error of sample ``n+1``.
+
+Implementation: ``e^{j phi_t}`` comes from a :class:`~hexapod_vibration.core.phasor.PhasorBank`
+(one complex multiply per tone and sample, exactly re-synchronised to the phase grid), and
+the weights are stored conjugated and transposed, ``V[i, t] = conj(W[t, i]) = a + j b``, so
+that the output ``sum_t a cos phi + b sin phi`` is one real matrix-vector product of the
+float views of ``V`` and ``e^{j phi}``, and the update ``V += conj(mu P) e e^{+j phi}``
+needs no conjugation per sample.
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 
 import numpy as np
 
-TWO_PI = 2.0 * np.pi
+from hexapod_vibration.core.phasor import TWO_PI, PhasorBank
+
 SAME_FREQUENCY_TOL_HZ = 1e-9
 DEFAULT_RAMP_SAMPLES = 50
 
@@ -125,6 +134,7 @@ class _FadingTones:
         self.dphi = np.zeros(0)
         self.gain = np.zeros(0)
         self.step_size = np.zeros(0)
+        self.active = False
         self._alloc()
 
     def _alloc(self) -> None:
@@ -142,6 +152,7 @@ class _FadingTones:
         self.dphi = np.concatenate([self.dphi, dphi])
         self.gain = np.concatenate([self.gain, np.ones(w.shape[0])])
         self.step_size = np.concatenate([self.step_size, np.full(w.shape[0], 1.0 / ramp)])
+        self.active = True
         self._alloc()
 
     def advance(self, samples: int) -> None:
@@ -207,6 +218,7 @@ class AdaptiveNotchCanceller:
         self._enabled = True
         self._frozen = False
         self._gain = 1.0
+        self._target = 1.0
         self._gain_step = 0.0
         self._fading = _FadingTones(self._c)
         self._u = np.zeros(self._c)
@@ -220,31 +232,44 @@ class AdaptiveNotchCanceller:
         t = freqs.size
         self._freqs = freqs.copy()
         self._dphi = TWO_PI * freqs / self._fs
-        self._phi = phi.astype(float).copy()
-        self._w = w.astype(complex).copy()
+        self._osc = PhasorBank(self._dphi, phi)
+        self._z_r = self._osc.z.view(float)                 # (2T,) cos, sin, cos, ...
+        self._z_row_r = self._z_r.reshape(1, 2 * t)
+        self._z_stack = self._osc.z[:, None, None]          # (T, 1, 1)
+        self._v = np.ascontiguousarray(np.conj(w).T, dtype=complex)   # V = W^H, (C, T)
+        self._v_r = self._v.view(float)                     # (C, 2T) a, b, a, b, ...
+        self._y = np.zeros((self._c, t), dtype=complex)     # update of V
+        self._y_r = self._y.view(float)
+        self._y_flat = self._y_r.reshape(-1)
+        self._y_stack = self._y.T[:, None, :]               # (T, 1, C) view of y
+        self._m = np.zeros((self._c, t), dtype=complex)     # conj(mu P) e (full P)
+        self._m_flat = self._m.view(float).reshape(-1)
+        self._m_stack = self._m.T[:, None, :]
         self._adapting = adapting.astype(bool).copy()
         self._set_p(p_full)
-        self._rot = np.zeros(t, dtype=complex)             # e^{j phi}
-        self._rot_re, self._rot_im = self._rot.real, self._rot.imag
-        self._g_vec = np.zeros(t, dtype=complex)           # mu_t e^{-j phi}
-        self._g_col = self._g_vec[:, None]
-        self._e_row = np.zeros((1, self._c), dtype=complex)
-        self._e_row_re = self._e_row.real[0]
-        self._grad = np.zeros((t, self._c), dtype=complex)
-        self._grad3 = self._grad[:, :, None]
-        self._upd = np.zeros((t, self._c), dtype=complex)
-        self._upd3 = self._upd[:, :, None]
-        self._uc = np.zeros(self._c, dtype=complex)
-        self._uc_re = self._uc.real
-        self._update_rate()
 
     def _set_p(self, p_full: np.ndarray) -> None:
         self._p_full = p_full.copy()
         self._p_diag = _diagonal_or_none(self._p_full)
+        self._update_rate()
 
     def _update_rate(self) -> None:
-        """Per-tone rate mu * adapting (T,), complex so the hot path never casts."""
-        self._mu_t = (self._mu * self._adapting).astype(complex)
+        """Rate-scaled, conjugated coefficients in the layouts :meth:`_adapt` uses.
+
+        Diagonal P: ``Q[i, t] = mu_t conj(P_t[i, i])`` (C, T) complex. Full P: the real
+        (C*T*2, C) stack of ``Re, Im`` of ``mu_t conj(P_t[i, j])`` over rows (i, t), so
+        that its product with the real error is the complex (C, T) array
+        ``sum_j mu_t conj(P_t[i, j]) e_j`` in memory. ``mu_t = mu`` for adapting tones, else 0.
+        """
+        rate = self._mu * self._adapting
+        q = np.conj(rate[:, None, None] * self._p_full).transpose(1, 0, 2)    # (C, T, C)
+        if self._p_diag is not None:
+            self._q = np.ascontiguousarray(np.diagonal(q, axis1=0, axis2=2).T)
+            self._q_stack = None
+        else:
+            self._q = None
+            self._q_stack = np.ascontiguousarray(
+                np.stack([q.real, q.imag], axis=2).reshape(-1, self._c))
 
     # ------------------------------------------------------------------ hot path
     def step(self, error: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
@@ -260,19 +285,18 @@ class AdaptiveNotchCanceller:
         e = np.asarray(error, dtype=float)
         if e.shape != (self._c,):
             raise ValueError(f'error must have shape ({self._c},), got {e.shape}')
-        if not np.isfinite(e.sum()):        # a NaN would poison the weights for good
+        if not math.isfinite(sum(e.tolist())):         # a NaN would poison the weights
             raise ValueError(f'error must be finite, got {e.tolist()}')
-        np.cos(self._phi, out=self._rot_re)
-        np.sin(self._phi, out=self._rot_im)
         if self._enabled and not self._frozen and self._mu > 0.0:
             self._adapt(e)
-        self._advance_gain()
-        np.matmul(self._rot, self._w, out=self._uc)
-        np.copyto(self._u, self._uc_re)
-        self._fading.accumulate(self._u)
-        self._u *= self._gain
-        self._phi += self._dphi
-        np.remainder(self._phi, TWO_PI, out=self._phi)
+        if self._gain != self._target:
+            self._advance_gain()
+        np.dot(self._v_r, self._z_r, out=self._u)          # sum_t a cos phi + b sin phi
+        if self._fading.active:
+            self._fading.accumulate(self._u)
+        if self._gain != 1.0:
+            self._u *= self._gain
+        self._osc.rotate()
         if out is None:
             return self._u.copy()
         out[...] = self._u
@@ -287,33 +311,33 @@ class AdaptiveNotchCanceller:
         samples = int(samples)
         if samples < 0:
             raise ValueError(f'samples must be >= 0, got {samples}')
-        target = 1.0 if self._enabled else 0.0
+        target = self._target
         if self._gain_step <= 0.0 or samples * self._gain_step >= abs(target - self._gain):
             self._gain = target if samples else self._gain
         else:
             self._gain += np.copysign(samples * self._gain_step, target - self._gain)
         self._fading.advance(samples)
-        self._phi += samples * self._dphi
-        np.remainder(self._phi, TWO_PI, out=self._phi)
+        self._osc.advance(samples)
 
     def _adapt(self, e: np.ndarray) -> None:
-        """W += mu * P @ (e * e^{-j phi}), masked by the per-tone adapting flags.
+        """V += conj(mu P) e e^{j phi} (i.e. W += mu P e e^{-j phi}), masked per tone.
 
-        Only matmul and same-dtype, same-shape ufuncs with ``out=``: no array is allocated
-        (broadcasting or mixed-dtype ufuncs would allocate numpy iterator buffers).
+        Three calls, all with ``out=``, same dtypes and no broadcasting ufunc (those
+        allocate iterator buffers): diagonal P forms the outer product ``e e^{j phi}`` as
+        a real (C, 1) x (1, 2T) matrix product into the float view of ``y`` and scales it
+        by ``Q``; full P takes ``conj(mu P) e`` as one real matrix-vector product and
+        multiplies it by ``e^{j phi_t}`` as T stacked 1 x 1 products.
         """
-        np.conjugate(self._rot, out=self._g_vec)
-        np.multiply(self._g_vec, self._mu_t, out=self._g_vec)
-        np.copyto(self._e_row_re, e)
-        np.matmul(self._g_col, self._e_row, out=self._grad)
-        if self._p_diag is not None:
-            np.multiply(self._p_diag, self._grad, out=self._upd)
+        if self._q is not None:
+            np.dot(e[:, None], self._z_row_r, out=self._y_r)
+            np.multiply(self._y, self._q, out=self._y)
         else:
-            np.matmul(self._p_full, self._grad3, out=self._upd3)
-        np.add(self._w, self._upd, out=self._w)
+            np.dot(self._q_stack, e, out=self._m_flat)
+            np.matmul(self._z_stack, self._m_stack, out=self._y_stack)
+        np.add(self._v, self._y, out=self._v)
 
     def _advance_gain(self) -> None:
-        target = 1.0 if self._enabled else 0.0
+        target = self._target
         if self._gain == target:
             return
         if self._gain_step <= 0.0:
@@ -336,9 +360,8 @@ class AdaptiveNotchCanceller:
         continuous. Raises ValueError (object unchanged) on a bad shape or value.
         """
         p_full = validate_coefficients(coefficients, self._freqs.size, self._c)
-        self._set_p(p_full)
         self._adapting[:] = True
-        self._update_rate()
+        self._set_p(p_full)
 
     def set_tone_frequencies(
         self,
@@ -367,31 +390,33 @@ class AdaptiveNotchCanceller:
         p_full = np.zeros((t_new, self._c, self._c), dtype=complex)
         adapting = np.zeros(t_new, dtype=bool)
         kept_old = np.zeros(self._freqs.size, dtype=bool)
+        w_old, phi_old = self.weights, self.phases_rad
         for k, f in enumerate(freqs):
             match = np.flatnonzero(np.abs(self._freqs - f) <= SAME_FREQUENCY_TOL_HZ)
             if match.size:
                 old = match[0]
                 kept_old[old] = True
-                w[k], phi[k] = self._w[old], self._phi[old]
+                w[k], phi[k] = w_old[old], phi_old[old]
                 p_full[k], adapting[k] = self._p_full[old], self._adapting[old]
         if given is not None:
             p_full, adapting[:] = given, True
         gone = ~kept_old
-        self._fading.add(self._w[gone], self._phi[gone], self._dphi[gone], ramp)
+        self._fading.add(w_old[gone], phi_old[gone], self._dphi[gone], ramp)
         self._install(freqs, w, phi, p_full, adapting)
 
     def reset_weights(self, ramp_samples: int = DEFAULT_RAMP_SAMPLES) -> None:
         """Set every weight to 0; the present output fades out over ``ramp_samples``."""
         ramp = _validate_ramp(ramp_samples)
-        self._fading.add(self._w.copy(), self._phi.copy(), self._dphi.copy(), ramp)
-        self._w[:] = 0.0
+        self._fading.add(self.weights, self.phases_rad, self._dphi.copy(), ramp)
+        self._v[:] = 0.0
 
     def set_weights(self, weights: np.ndarray) -> None:
         """Overwrite the complex (T, C) weights (N); the output follows immediately."""
         w = np.array(weights, dtype=complex)
-        if w.shape != self._w.shape or not np.all(np.isfinite(w)):
-            raise ValueError(f'weights must be finite with shape {self._w.shape}, got {w.shape}')
-        self._w[...] = w
+        shape = (self._freqs.size, self._c)
+        if w.shape != shape or not np.all(np.isfinite(w)):
+            raise ValueError(f'weights must be finite with shape {shape}, got {w.shape}')
+        self._v[...] = np.conj(w).T
 
     def set_enabled(self, flag: bool, ramp_samples: int = DEFAULT_RAMP_SAMPLES) -> None:
         """Enable/disable the output with a linear gain ramp 0 <-> 1 over ``ramp_samples``.
@@ -401,6 +426,7 @@ class AdaptiveNotchCanceller:
         """
         ramp = _validate_ramp(ramp_samples)
         self._enabled = bool(flag)
+        self._target = 1.0 if self._enabled else 0.0
         self._gain_step = 1.0 / ramp if ramp > 0 else 0.0
 
     def set_frozen(self, flag: bool) -> None:
@@ -411,7 +437,7 @@ class AdaptiveNotchCanceller:
     @property
     def weights(self) -> np.ndarray:
         """Complex (T, C) weights W = a - j b (N), a copy."""
-        return self._w.copy()
+        return np.conj(self._v).T.copy()
 
     @property
     def tone_frequencies_hz(self) -> np.ndarray:
@@ -421,7 +447,7 @@ class AdaptiveNotchCanceller:
     @property
     def phases_rad(self) -> np.ndarray:
         """Phase accumulators phi_t (rad, in [0, 2 pi)) of the next sample, a copy."""
-        return self._phi.copy()
+        return self._osc.phases_rad
 
     @property
     def coefficients(self) -> np.ndarray:
