@@ -77,8 +77,9 @@ class StrutArrayPublisher:
     """Publish ``/pph/*`` messages at 1 kHz from one reused message (no per-sample allocation).
 
     rclpy converts the message to its C form inside ``publish``, so the Python message can
-    be overwritten for the next sample as soon as ``publish`` returns. About 3 us per
-    message less than :func:`make_strut_array` + publish.
+    be overwritten for the next sample as soon as ``publish`` returns. Measured on the
+    project's 2-core machine (no subscriber): 8.1 us per publish against 15.0 us for
+    :func:`make_strut_array` + publish.
     """
 
     def __init__(self, publisher: Any) -> None:
