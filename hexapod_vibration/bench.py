@@ -122,6 +122,13 @@ def machine_info() -> dict[str, Any]:
     }
 
 
+def machine_summary(info: dict[str, Any]) -> str:
+    """One line naming the machine of :func:`machine_info` (``results.json``'s ``machine``)."""
+    return (f"{info['cpu_model']} ({info['processor']}), {info['cpu_count']} cores "
+            f"({info['cpu_usable']} usable), {info['uname']}, Python {info['python']}, "
+            f"numpy {info['numpy']}, scipy {info['scipy']}, load {info['load_average_1_5_15']}")
+
+
 # ----------------------------------------------------------------------------- timing
 Step = Callable[[np.ndarray, np.ndarray], np.ndarray]
 
@@ -256,8 +263,8 @@ def measure_costs(timing: TimingSettings, quick: bool) -> dict[str, Any]:
     """Every timing of the benchmark (notch, FxLMS, scaling), in us per sample."""
     raw = time_steps_us(cost_configurations(quick), timing)
     med = {name: v['median'] for name, v in raw.items()}
-    notch = {str(t): med[f'notch_dec_6x{t}'] for t in NOTCH_TONES}
-    central = {str(t): med[f'notch_cen_6x{t}'] for t in NOTCH_TONES}
+    notch = {f'6x{t}': med[f'notch_dec_6x{t}'] for t in NOTCH_TONES}
+    central = {f'6x{t}': med[f'notch_cen_6x{t}'] for t in NOTCH_TONES}
     fx_by_l = {str(n): med[f'fxlms_L{n}'] for n in FXLMS_PATH_TAPS}
     fx = fx_by_l[str(DEFAULT_PATH_TAPS)]
     tones = list(NOTCH_TONES) if quick else list(range(1, 17))
@@ -275,8 +282,8 @@ def measure_costs(timing: TimingSettings, quick: bool) -> dict[str, Any]:
                          'control_taps': DEFAULT_CONTROL_TAPS,
                          'reference_tones': len(FXLMS_TONES_HZ),
                          'references': 'one per tone', 'mu': DEFAULT_FXLMS_MU},
-        'cost_ratio_fxlms_over_notch_6x8': fx / notch[str(RATIO_NOTCH_TONES)],
-        'cost_ratio_fxlms_over_notch_6x2': fx / notch['2'],
+        'cost_ratio_fxlms_over_notch_6x8': fx / notch[f'6x{RATIO_NOTCH_TONES}'],
+        'cost_ratio_fxlms_over_notch_6x2': fx / notch['6x2'],
         'cost_ratio_fxlms_over_notch_6x8_of_minima': (
             raw[f'fxlms_L{DEFAULT_PATH_TAPS}']['min'] / raw['notch_dec_6x8']['min']),
         'timings_us_per_sample': raw,
@@ -446,7 +453,7 @@ def equal_attenuation(notch: dict[str, Any], fxlms: dict[str, Any], tones: Seque
 
 def issue_targets(results: dict[str, Any]) -> dict[str, Any]:
     """The open issue's targets against this run's numbers (booleans and values)."""
-    notch_us = results['notch_us_per_sample'][str(RATIO_NOTCH_TONES)]
+    notch_us = results['notch_us_per_sample'][f'6x{RATIO_NOTCH_TONES}']
     ratio = results['cost_ratio_fxlms_over_notch_6x8']
     return {
         'notch_6x8_us': notch_us, 'notch_6x8_target_us': NOTCH_TARGET_US,
@@ -463,7 +470,9 @@ def issue_targets(results: dict[str, Any]) -> dict[str, Any]:
 def run_core_benchmarks(quick: bool) -> dict[str, Any]:
     """Everything but the ROS loop: machine, costs, scaling, Table 1 on the core loop."""
     timing = QUICK_TIMING if quick else FULL_TIMING
-    results: dict[str, Any] = {'quick': quick, 'machine': machine_info(),
+    details = machine_info()
+    results: dict[str, Any] = {'quick': quick, 'machine': machine_summary(details),
+                               'machine_details': details,
                                'timing': dataclasses.asdict(timing)}
     results.update(measure_costs(timing, quick))
     results.update(measure_table1(quick))
@@ -482,7 +491,7 @@ def _summary_costs(results: dict[str, Any]) -> list[str]:
     lines = ['## Controller cost per sample (us, median of '
              f"{results['timing']['repeat']} round-robin runs x {results['timing']['number']}"
              ' steps)', '',
-             '| tones | notch 6 ch decentralized | notch 6 ch centralized |',
+             '| struts x tones | notch decentralized | notch centralized |',
              '|---:|---:|---:|']
     for t, v in results['notch_us_per_sample'].items():
         lines.append(f"| {t} | {_fmt(v)} | "
@@ -586,7 +595,7 @@ def _summary_table1(results: dict[str, Any]) -> list[str]:
 
 def summary_markdown(results: dict[str, Any]) -> str:
     """A short Markdown report of every number and the machine."""
-    m = results['machine']
+    m = results['machine_details']
     lines = ['# hexapod_bench' + (' (quick)' if results.get('quick') else ''), '',
              f"Machine: {m['cpu_model']} ({m['processor']}), {m['cpu_count']} cores "
              f"({m['cpu_usable']} usable), load {m['load_average_1_5_15']}, {m['uname']}, "
