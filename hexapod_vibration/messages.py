@@ -16,10 +16,12 @@ from __future__ import annotations
 
 import array
 import math
+import struct
 from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
+from rclpy.serialization import deserialize_message
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
 from hexapod_vibration.strut_layout import (
@@ -37,6 +39,8 @@ __all__ = [
     'STRUT_LABEL',
     'InvalidStrutMessage',
     'StrutArrayPublisher',
+    'UnsupportedCdr',
+    'decode_strut_cdr',
     'make_strut_array',
     'parse_strut_array',
     'receive_strut_array',
@@ -135,14 +139,78 @@ def parse_strut_array(msg: Float64MultiArray) -> tuple[np.ndarray, int | None]:
     return values, parse_sample_label(dims[1].label)
 
 
-def receive_strut_array(msg: Float64MultiArray, logger: Any, topic: str
+_CDR_LE = b'\x00\x01'          # encapsulation: plain CDR (XCDR1), little endian
+_CDR_HEADER = 4                # encapsulation bytes; alignment counts from after them
+_U32 = struct.Struct('<I')
+
+
+class UnsupportedCdr(ValueError):
+    """A serialized message this decoder does not read (not little-endian XCDR1, truncated)."""
+
+
+def decode_strut_cdr(raw: bytes) -> tuple[np.ndarray, int | None]:
+    """:func:`parse_strut_array` straight from the serialized (CDR) message bytes.
+
+    Reads only what the loop needs (``data`` and the ``layout.dim[1]`` label) without
+    building the Python message: about 3 us against about 19 us for rclpy's conversion to
+    a Python message on the project's machine. Same rules and results as
+    :func:`parse_strut_array` (tested against rclpy's serializer).
+
+    Raises:
+        InvalidStrutMessage: As :func:`parse_strut_array`.
+        UnsupportedCdr: Another encoding (e.g. big-endian) or malformed bytes: decode with
+            rclpy instead (:func:`receive_strut_array` does).
+    """
+    if raw[:2] != _CDR_LE:
+        raise UnsupportedCdr(f'encapsulation {raw[:2].hex()} is not little-endian CDR')
+    try:
+        pos, label = _skip_layout(raw)
+        (count,) = _U32.unpack_from(raw, pos)
+        pos += 4
+        pos += -(pos - _CDR_HEADER) % 8                    # float64 alignment
+        if count != STRUT_COUNT:
+            raise InvalidStrutMessage(f'expected {STRUT_COUNT} strut values, got {count}')
+        values = np.frombuffer(raw, dtype='<f8', count=count, offset=pos)
+    except (struct.error, ValueError, UnicodeDecodeError) as exc:
+        if isinstance(exc, InvalidStrutMessage):
+            raise
+        raise UnsupportedCdr(f'malformed Float64MultiArray CDR: {exc}') from None
+    if not all(map(math.isfinite, values.tolist())):
+        raise InvalidStrutMessage(f'non-finite strut value in {values.tolist()}')
+    return values, None if label is None else parse_sample_label(label)
+
+
+def _skip_layout(raw: bytes) -> tuple[int, str | None]:
+    """Walk ``layout`` (dims, data_offset); the offset of ``data`` and dim[1]'s label."""
+    (dims,) = _U32.unpack_from(raw, _CDR_HEADER)
+    pos, label = _CDR_HEADER + 4, None
+    for d in range(dims):
+        (length,) = _U32.unpack_from(raw, pos)              # string length incl. NUL
+        if length < 1 or pos + 4 + length > len(raw):
+            raise UnsupportedCdr(f'bad string length {length} in layout.dim[{d}]')
+        if d == 1:
+            label = raw[pos + 4:pos + 3 + length].decode()
+        pos += 4 + length
+        pos += -(pos - _CDR_HEADER) % 4 + 8                 # align, then size and stride
+    return pos + 4, label                                   # data_offset (uint32)
+
+
+def receive_strut_array(msg: Float64MultiArray | bytes, logger: Any, topic: str
                         ) -> tuple[np.ndarray, int | None] | None:
     """:func:`parse_strut_array` for a subscription callback: ``None`` for a bad message.
 
-    The reason is logged as a warning, throttled by rclpy to once a second per process
-    (the throttle is keyed by this call site); the caller counts every rejection.
+    ``msg`` is the message, or its serialized bytes (what the ``waitset`` loop spinner
+    takes): those are read by :func:`decode_strut_cdr`, or by rclpy for an encoding it does
+    not read. The reason of a rejection is logged as a warning, throttled by rclpy to once
+    a second per process (the throttle is keyed by this call site); the caller counts
+    every rejection.
     """
     try:
+        if isinstance(msg, bytes):
+            try:
+                return decode_strut_cdr(msg)
+            except UnsupportedCdr:
+                msg = deserialize_message(msg, Float64MultiArray)
         return parse_strut_array(msg)
     except InvalidStrutMessage as exc:
         logger.warn(f'{topic}: rejected message ({exc})', throttle_duration_sec=1.0)

@@ -332,7 +332,7 @@ class NotchControllerNode(Node):
         return response
 
     # ------------------------------------------------------------------ loop
-    def _on_accel(self, msg: Float64MultiArray) -> None:
+    def _on_accel(self, msg: Float64MultiArray | bytes) -> None:
         parsed = receive_strut_array(msg, self.get_logger(), "/pph/accel")
         if parsed is None:
             self.counters["invalid"] += 1

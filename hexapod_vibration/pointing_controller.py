@@ -112,7 +112,7 @@ class PointingControllerNode(Node):
             self.law.reset()
         return p.accept()
 
-    def _on_eddy(self, msg: Float64MultiArray) -> None:
+    def _on_eddy(self, msg: Float64MultiArray | bytes) -> None:
         parsed = receive_strut_array(msg, self.get_logger(), "/pph/eddy")
         if parsed is None:
             self.invalid += 1

@@ -198,7 +198,7 @@ class PPHDriver(Node):
         return p.accept()
 
     # ------------------------------------------------------------------ commands
-    def _on_command(self, name: str, msg: Float64MultiArray) -> None:
+    def _on_command(self, name: str, msg: Float64MultiArray | bytes) -> None:
         stream = self.streams[name]
         parsed = receive_strut_array(msg, self.get_logger(), stream.topic)
         if parsed is None:

@@ -15,7 +15,7 @@ from rclpy.serialization import deserialize_message
 from std_msgs.msg import Float64MultiArray, String
 
 from hexapod_vibration.executors import LoopSpinner
-from hexapod_vibration.messages import StrutArrayPublisher, make_strut_array, parse_strut_array
+from hexapod_vibration.messages import StrutArrayPublisher, make_strut_array, receive_strut_array
 from hexapod_vibration.qos import LOOP_PUBLISHER_QOS, LOOP_QOS
 
 HANG_GUARD_S = 30.0
@@ -31,6 +31,7 @@ class Graph:
         self.listener.declare_parameter('gain', 1.0)
         self.loop_msgs: list[tuple[np.ndarray, int]] = []
         self.other_msgs: list[str] = []
+        self.kinds: set[type] = set()
         self.loop_sub = self.listener.create_subscription(
             Float64MultiArray, '/spin/loop', self._on_loop, LOOP_QOS)
         self.listener.create_subscription(String, '/spin/other',
@@ -39,8 +40,10 @@ class Graph:
             Float64MultiArray, '/spin/loop', LOOP_PUBLISHER_QOS))
         self.other_pub = self.talker.create_publisher(String, '/spin/other', 10)
 
-    def _on_loop(self, msg: Float64MultiArray) -> None:
-        values, index = parse_strut_array(msg)
+    def _on_loop(self, msg: Float64MultiArray | bytes) -> None:
+        # The fast path hands over the serialized message, the executor a Python one.
+        self.kinds.add(type(msg))
+        values, index = receive_strut_array(msg, self.listener.get_logger(), '/spin/loop')
         self.loop_msgs.append((values.copy(), index))
 
     def spinner(self, fast: bool = True, service_period_s: float = 0.01) -> LoopSpinner:
@@ -62,6 +65,7 @@ class Graph:
         assert self.spin_until(spinner, lambda: self.loop_msgs,
                                step=lambda: self.loop_pub.publish(np.zeros(6), 0))
         self.loop_msgs.clear()
+        self.kinds.clear()
 
 
 @pytest.mark.parametrize('fast', [True, False])
@@ -76,6 +80,8 @@ def test_loop_messages_arrive_in_order_with_their_index(ros_context, fast):
     assert [index for _, index in graph.loop_msgs] == list(sent)
     for (values, index) in graph.loop_msgs:
         np.testing.assert_array_equal(values, sent[index])
+    # The fast path takes serialized messages (its executor service may take one too).
+    assert (bytes in graph.kinds) if fast else graph.kinds == {Float64MultiArray}
 
 
 def test_fast_spinner_serves_other_callbacks_and_parameter_services(ros_context):
