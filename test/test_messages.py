@@ -12,6 +12,7 @@ from hexapod_vibration.messages import (
     InvalidStrutMessage,
     UnsupportedCdr,
     decode_strut_cdr,
+    encode_strut_cdr,
     make_strut_array,
     parse_strut_array,
     receive_strut_array,
@@ -222,3 +223,22 @@ def test_receive_logs_and_returns_none_for_bad_bytes():
     raw = serialize_message(_message([1, 2, math.nan, 4, 5, 6], [('strut', 6, 6)]))
     assert receive_strut_array(raw, logger, '/pph/eddy') is None
     assert logger.warnings and '/pph/eddy' in logger.warnings[0]
+
+
+@pytest.mark.parametrize('index', [0, 1, 9, 10, 99, 100, 12345, 10**15])
+def test_encode_cdr_is_what_rclpy_serializes(index):
+    """Deserialized by rclpy, the bytes are make_strut_array's message; they decode back."""
+    values = VALUES * (index + 1)
+    raw = encode_strut_cdr(values, index)
+    assert deserialize_message(raw, Float64MultiArray) == make_strut_array(values, index)
+    assert len(raw) == len(serialize_message(make_strut_array(values, index)))
+    decoded, decoded_index = decode_strut_cdr(raw)
+    np.testing.assert_array_equal(decoded, values)
+    assert decoded_index == index
+
+
+@pytest.mark.parametrize('values, index', [(np.zeros(5), 1), (np.zeros(7), 1),
+                                           (np.zeros(6), -1)])
+def test_encode_cdr_rejects_bad_input(values, index):
+    with pytest.raises(ValueError):
+        encode_strut_cdr(values, index)
