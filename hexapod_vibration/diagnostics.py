@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import struct
+
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 
@@ -12,6 +14,19 @@ def sample_time(sample: int, sample_rate_hz: float = 1000.0) -> Time:
     """Sim time of loop sample ``sample`` (n / fs s), as ``builtin_interfaces/Time``."""
     ns = int(round(max(sample, 0) * 1e9 / sample_rate_hz))
     return Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
+
+
+_CLOCK_CDR = struct.Struct("<4siI")     # encapsulation (LE CDR), sec (int32), nanosec
+
+
+def clock_cdr(sample: int, sample_rate_hz: float = 1000.0) -> bytes:
+    """``rosgraph_msgs/Clock`` at :func:`sample_time` as serialized (CDR) bytes.
+
+    What rclpy serializes from ``Clock(clock=sample_time(sample))`` (tested), built without
+    the Python message: the driver publishes it every sample.
+    """
+    ns = int(round(max(sample, 0) * 1e9 / sample_rate_hz))
+    return _CLOCK_CDR.pack(b"\x00\x01\x00\x00", ns // 1_000_000_000, ns % 1_000_000_000)
 
 
 def format_value(value: object) -> str:

@@ -27,7 +27,7 @@ from hexapod_vibration import parameters as p
 from hexapod_vibration.core.model_config import load_model_config
 from hexapod_vibration.core.plant import PPHPlant, actuator_test_sine, saturate_commands
 from hexapod_vibration.core.shaker import Shaker, tones_from_arrays
-from hexapod_vibration.diagnostics import diagnostic_array, sample_time
+from hexapod_vibration.diagnostics import clock_cdr, diagnostic_array
 from hexapod_vibration.executors import LoopSpinner, declare_executor_parameter, run_node
 from hexapod_vibration.messages import StrutArrayPublisher, receive_strut_array
 from hexapod_vibration.paths import config_path
@@ -264,7 +264,7 @@ class PPHDriver(Node):
     def publish_sample(self) -> None:
         """Publish /clock and the sensors of the current sample."""
         n, sensors = self.sample, self._sample_pending
-        self._pub_clock.publish(Clock(clock=sample_time(n)))
+        self._pub_clock.publish(clock_cdr(n, self.fs))
         self._pub_accel.publish(sensors.accel_m_s2, n)
         self._pub_eddy.publish(sensors.eddy_m, n)
         now = time.perf_counter()
@@ -275,8 +275,10 @@ class PPHDriver(Node):
 
     def apply_and_step(self) -> None:
         """Sum, saturate, publish the applied force and advance the plant one sample."""
-        notch = self._active_force("notch") + actuator_test_sine(
-            self.sample, self._test_sine_frequency_hz, self._test_sine_amplitude_n, self.fs)
+        notch = self._active_force("notch")
+        if self._test_sine_amplitude_n > 0.0:
+            notch = notch + actuator_test_sine(self.sample, self._test_sine_frequency_hz,
+                                               self._test_sine_amplitude_n, self.fs)
         applied = saturate_commands(notch, self._active_force("pointing"), self.model.strut)
         self._pub_force.publish(applied, self.sample)
         self._sample_pending = self.plant.step(applied)
