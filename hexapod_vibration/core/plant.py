@@ -199,6 +199,8 @@ class PPHPlant:
         self._lifted = self._build_lifted_matrix(ad, bd)
         self._lifted_in = np.zeros(N_STATE + N_INPUT + self.substeps)
         self._lifted_in[N_STATE + IN_GRAVITY] = 1.0
+        self._bind_lifted_buffers()
+        self._ratio, self._gain = np.empty(6), np.empty(6)
         self.fallback_samples = 0
         self.reset_to_equilibrium()
 
@@ -238,6 +240,7 @@ class PPHPlant:
         self._xu[:N_STATE] = 0.0
         self._xu[:N_DOF] = q
         self._nl = self._nl_out @ self._xu[:N_STATE]
+        self._start_in_regime = False
         g = self.config.simulation.gravity_m_s2
         self.accelerometers.settle(g * self.config.geometry.unit_vectors[:, 2])
 
@@ -266,12 +269,36 @@ class PPHPlant:
             x = x_next
         return np.vstack([x, *rows_acc, *rows_nl, acc[6:12]])
 
+    def _bind_lifted_buffers(self) -> None:
+        """Output buffer of the lifted product and named views of its rows.
+
+        ``_out_strokes`` and ``_out_joints`` (substeps x 6, m) are the strokes and joint
+        deflections at the start of internal steps 1..substeps, the last one being the
+        start of the next sample.
+        """
+        n, ns = N_STATE, self.substeps
+        out = np.zeros(self._lifted.shape[0])
+        nl_rows = out[n + 6 * ns:n + 24 * ns].reshape(ns, 18)
+        self._lifted_out = out
+        self._out_state = out[:n]
+        self._out_specific_force = out[n:n + 6 * ns].reshape(ns, 6)
+        self._out_strokes, self._out_joints = nl_rows[:, 0:6], nl_rows[:, 12:18]
+        self._out_next_nl = nl_rows[-1]
+        self._out_top_acc = out[n + 24 * ns:]
+        self._shaker_in = self._lifted_in[n + N_INPUT:]
+        self._specific_force = self._acc
+        self._contact_side = np.zeros(6)
+        self._regime_scratch = np.empty((ns, 6))
+        self._start_in_regime = False
+
     def _held_actuator_force(self, command_n: np.ndarray) -> np.ndarray:
         """Voice-coil force (N): command times the force constant at this sample's stroke."""
-        st = self._strut
-        ratio = self._nl[0:6] / st.stroke_limit_m
-        return command_n * (1.0 + ratio * (st.force_constant_linear_per_stroke
-                                           - st.force_constant_quadratic_per_stroke * ratio))
+        st, ratio, gain = self._strut, self._ratio, self._gain
+        np.divide(self._nl[0:6], st.stroke_limit_m, out=ratio)
+        np.multiply(st.force_constant_quadratic_per_stroke, ratio, out=gain)
+        np.subtract(st.force_constant_linear_per_stroke, gain, out=gain)
+        np.multiply(ratio, gain, out=gain)
+        return command_n * np.add(1.0, gain, out=gain)
 
     def _stop_and_play(self, nl: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Hard-stop force and free-play correction (N) from nonlinear outputs."""
@@ -283,17 +310,39 @@ class PPHPlant:
         play = st.joint_stiffness_n_per_m * np.clip(joint, -self._half_play, self._half_play)
         return stop, play
 
-    def _regime_holds(self, nl_rows: np.ndarray, start_nl: np.ndarray) -> bool:
-        """True if no stop is touched and no joint leaves its contact side in the sample."""
-        st, ns = self._strut, self.substeps
-        rows = nl_rows.reshape(ns, 18)[:-1]
-        if max(rows[:, 0:6].max(), -rows[:, 0:6].min()) > st.stroke_limit_m:
+    def _enter_regime(self) -> bool:
+        """Start-of-sample test of the lifted step, and its held free-play correction.
+
+        True if no hard-stop force acts and (with free-play) every joint is deflected
+        beyond half the clearance: it is then held against one side (``_contact_side``,
+        +-1) and its correction is the constant ``joint_stiffness * half_play * side`` (N).
+        """
+        stop, play = self._stop_and_play(self._nl)
+        if stop.any():
+            return False
+        if self._half_play != 0.0:
+            joint = self._nl[12:18]
+            side = np.sign(joint)
+            if not (joint * side).min() > self._half_play:
+                return False
+            self._contact_side[:] = side
+        self._lifted_in[N_STATE + 6:N_STATE + 12] = play
+        self._start_in_regime = True
+        return True
+
+    def _rows_in_regime(self, rows: int) -> bool:
+        """True if the first ``rows`` internal steps of the lifted output stay in the regime.
+
+        In the regime no stroke exceeds ``stroke_limit_m`` (no stop is touched) and no joint
+        deflection comes within half the free-play of its contact side.
+        """
+        scratch = self._regime_scratch[:rows]
+        if np.abs(self._out_strokes[:rows], out=scratch).max() > self._strut.stroke_limit_m:
             return False
         if self._half_play == 0.0:
             return True
-        side = np.sign(start_nl[12:18])
-        return bool((rows[:, 12:18] * side).min() > self._half_play
-                    and (start_nl[12:18] * side).min() > self._half_play)
+        np.multiply(self._out_joints[:rows], self._contact_side, out=scratch)
+        return bool(scratch.min() > self._half_play)
 
     def step(self, force_command_n: np.ndarray) -> PlantSample:
         """Advance one sample (1 ms) holding ``force_command_n`` (N, already saturated).
@@ -302,7 +351,7 @@ class PPHPlant:
         sample and held for it; free-play and hard stops act at every internal step.
         """
         t0 = self.sample_index * self.dt_sample_s
-        shaker = self.shaker.force_n(t0 + self.dt_internal_s * np.arange(self.substeps))
+        shaker = self.shaker.force_into(t0, self.dt_internal_s, self._shaker_in)
         actuator = self._held_actuator_force(np.asarray(force_command_n, float))
         if not self._lifted_step(actuator, shaker):
             self._substep_loop(actuator, shaker)
@@ -311,7 +360,7 @@ class PPHPlant:
         q = self._xu[:N_DOF]
         relative = q[:6] - q[6:12]
         return PlantSample(
-            accel_m_s2=self.accelerometers.sample(self._acc),
+            accel_m_s2=self.accelerometers.sample(self._specific_force),
             eddy_m=self.eddy.gaps(relative),
             applied_force_n=actuator,
             top_accel_true=self._top_acc.copy(),
@@ -320,28 +369,35 @@ class PPHPlant:
         )
 
     def _lifted_step(self, actuator: np.ndarray, shaker: np.ndarray) -> bool:
-        """Whole sample in one product, valid when the contact regime does not change."""
-        n, ns = N_STATE, self.substeps
-        stop, play = self._stop_and_play(self._nl)
-        if stop.any():
+        """Whole sample in one product, valid when the contact regime does not change.
+
+        ``shaker`` is the force (N) per internal step; :meth:`step` has the shaker write
+        it straight into the product's input (``_shaker_in``). When all internal steps,
+        including the start of the next sample, stay in the regime, the next sample
+        skips the start test (its outcome is then known: no stop force, same sides).
+        """
+        if not (self._start_in_regime or self._enter_regime()):
             return False
         v = self._lifted_in
-        v[:n] = self._xu[:n]
-        v[n + 0:n + 6] = actuator
-        v[n + 6:n + 12] = play
-        v[n + N_INPUT:] = shaker
-        out = self._lifted @ v
-        nl_rows = out[n + 6 * ns:n + 24 * ns]
-        if not self._regime_holds(nl_rows, self._nl):
-            return False
-        self._xu[:n] = out[:n]
-        self._acc[:] = out[n:n + 6 * ns].reshape(ns, 6)
-        self._nl = nl_rows[-18:].copy()
-        self._top_acc = out[-6:]
+        if shaker is not self._shaker_in:
+            self._shaker_in[:] = shaker
+        v[:N_STATE] = self._xu[:N_STATE]
+        v[N_STATE:N_STATE + 6] = actuator
+        np.dot(self._lifted, v, out=self._lifted_out)
+        if not self._rows_in_regime(self.substeps):
+            self._start_in_regime = False
+            if not self._rows_in_regime(self.substeps - 1):
+                return False
+        self._xu[:N_STATE] = self._out_state
+        self._specific_force = self._out_specific_force
+        self._nl = self._out_next_nl.copy()
+        self._top_acc = self._out_top_acc
         return True
 
     def _substep_loop(self, actuator: np.ndarray, shaker: np.ndarray) -> None:
         """Internal steps one by one (free-play crossing or hard-stop contact)."""
+        self._start_in_regime = False
+        self._specific_force = self._acc
         xu, u = self._xu, self._xu[N_STATE:]
         for k in range(self.substeps):
             stop, play = self._stop_and_play(self._nl)

@@ -19,6 +19,7 @@ of the vibration band. The integral carries the payload's weight.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -86,7 +87,11 @@ def validate_target_pose(pose: np.ndarray, geometry: CubicHexapodGeometry,
 
 
 class PointingController:
-    """Cartesian PI + damping pointing law on the eddy-sensor pose (see module docstring)."""
+    """Cartesian PI + damping pointing law on the eddy-sensor pose (see module docstring).
+
+    Per sample the linear part is one product of the law matrix (see :meth:`_law_matrix`)
+    with the stacked inputs [gaps, gap change since the last sample, target, integral].
+    """
 
     def __init__(self, geometry: CubicHexapodGeometry, sensing_matrix: np.ndarray,
                  strut_stiffness_n_per_m: float, top_mass_matrix: np.ndarray,
@@ -101,6 +106,12 @@ class PointingController:
         self._mass = np.asarray(top_mass_matrix, float)
         self._pose_from_gaps = np.linalg.inv(self.sensing_matrix)
         self.target = np.zeros(6)
+        # Per-sample buffers: the law's stacked inputs and its four outputs, as views of 6.
+        self._inputs = np.zeros(4 * 6)
+        self._gaps, self._gap_step, self._target_in, self._integral = np.split(self._inputs, 4)
+        self._terms = np.zeros(4 * 6)
+        (self._candidate, self._candidate_force, self._force,
+         self._held_force) = np.split(self._terms, 4)
         self.set_gains(gains or PointingGains())
 
     def set_gains(self, gains: PointingGains) -> None:
@@ -114,11 +125,12 @@ class PointingController:
         self._k_p = np.diag(np.maximum(m * (w_n**2 + 2.0 * zeta * w_n * w_c) - k, 0.0))
         damping = np.minimum(m * (2.0 * zeta * w_n + w_c), m * 2.0 * np.pi * MAX_RATE_GAIN_HZ)
         self._damping = np.diag(damping)
-        # Per-sample work is mat-vec products only: statics J^-T folded into each gain.
+        # Statics J^-T folded into each gain: Cartesian gains -> strut forces.
         jac_inv_t = np.linalg.inv(self._jac_t)
         self._force_p = jac_inv_t @ self._k_p
         self._force_i = jac_inv_t @ self._k_int
         self._force_d = jac_inv_t @ self._damping
+        self._law = self._law_matrix()
         previous = getattr(self, "_lowpass", None)
         self._lowpass = SosFilterBank.butter_lowpass(2, gains.output_lowpass_hz,
                                                      self.sample_rate_hz, 6)
@@ -127,10 +139,29 @@ class PointingController:
         else:
             self._lowpass.reset(self._last_force)
 
+    def _law_matrix(self) -> np.ndarray:
+        """The law as one (24, 24) matrix on the stacked inputs, 6 values each.
+
+        Inputs: gaps (m), gap change since the last sample (m), target (m, rad), integral
+        (m s, rad s). With pose = S^-1 gaps, e = target - pose, rate = S^-1 (gap change) / dt
+        and the candidate integral c = integral + e dt, the outputs are: c (m s, rad s); its
+        strut forces F_i c (N); the strut forces F_p e - F_d rate + F_i c (N); and the same
+        with the integral held, F_p e - F_d rate + F_i integral (N), for the anti-windup.
+        """
+        pose, dt = self._pose_from_gaps, self.dt_s
+        f_p, f_i = self._force_p, self._force_i
+        eye, zero = np.eye(6), np.zeros((6, 6))
+        rate_force = -self._force_d @ pose / dt
+        return np.block([
+            [-dt * pose, zero, dt * eye, eye],
+            [-dt * f_i @ pose, zero, dt * f_i, f_i],
+            [-(f_p + dt * f_i) @ pose, rate_force, f_p + dt * f_i, f_i],
+            [-f_p @ pose, rate_force, f_p, f_i]])
+
     def reset(self) -> None:
         """Zero the integral, the rate estimate and the output filter."""
-        self._integral = np.zeros(6)
-        self._prev_pose: np.ndarray | None = None
+        self._integral[...] = 0.0
+        self._primed = False        # the next sample gives a zero rate
         self._last_force = np.zeros(6)
         self._lowpass.reset(0.0)
 
@@ -143,21 +174,25 @@ class PointingController:
         return pose_from_gaps(self.sensing_matrix, gaps_m)
 
     def step(self, gaps_m: np.ndarray) -> np.ndarray:
-        """One sample: eddy gaps (m) -> strut forces (N) for the same sample."""
-        pose = self._pose_from_gaps @ np.asarray(gaps_m, float)
-        rate = np.zeros(6) if self._prev_pose is None else (pose - self._prev_pose) / self.dt_s
-        self._prev_pose = pose
-        error = self.target - pose
-        integral_force = self._integrate(error)
-        force = self._force_p @ error + integral_force - self._force_d @ rate
+        """One sample: eddy gaps (m) -> strut forces (N) for the same sample (a new array)."""
+        if self._primed:
+            np.subtract(gaps_m, self._gaps, self._gap_step)
+        else:
+            self._gap_step[...] = 0.0           # first sample: zero rate
+            self._primed = True
+        self._gaps[...] = gaps_m
+        self._target_in[...] = self.target
+        np.matmul(self._law, self._inputs, self._terms)     # see _law_matrix
+        if _exceeds(self._candidate_force, self.gains.force_limit_n):
+            force = self._held_force            # anti-windup: integral held
+        else:
+            self._integral[...] = self._candidate
+            force = self._force
         self._last_force = self._lowpass.step(force)
         return self._last_force
 
-    def _integrate(self, error: np.ndarray) -> np.ndarray:
-        """Integrate the error; hold it where its strut forces would pass the limit (N)."""
-        candidate = self._integral + error * self.dt_s
-        force = self._force_i @ candidate
-        if np.abs(force).max() > self.gains.force_limit_n:
-            return self._force_i @ self._integral    # anti-windup: integral held
-        self._integral = candidate
-        return force
+
+def _exceeds(values: np.ndarray, limit: float) -> bool:
+    """``np.abs(values).max() > limit`` (False if any value is NaN), cheaper for a few values."""
+    magnitudes = list(map(abs, values.tolist()))
+    return max(magnitudes) > limit and not math.isnan(sum(magnitudes))

@@ -44,6 +44,11 @@ class AccelerometerBank:
                                * np.sqrt(sample_rate_hz / 2.0))
         self._rng = np.random.default_rng(seed)
         self.clipped_samples = 0
+        # Scratch for sample(): filter output and state update, each as its two products.
+        self._out_terms = (np.empty((1, channels)), np.empty((1, channels)))
+        self._state_terms = (np.empty(self._x.shape), np.empty(self._x.shape))
+        self._clipped = np.empty(channels)
+        self._was_clipped = np.empty(channels, bool)
 
     def _lift_filter(self, a: np.ndarray, b: np.ndarray, c: np.ndarray, d: np.ndarray) -> None:
         """Matrices mapping (state, inputs of one sample) to (next state, last output)."""
@@ -71,14 +76,28 @@ class AccelerometerBank:
 
         Returns the value at the sampling instant (last internal step), in m/s^2.
         """
-        filtered = (self._out_state @ self._x + self._out_inputs @ specific_force_m_s2)[0]
-        self._x = self._state_update @ self._x + self._input_update @ specific_force_m_s2
+        filtered = self._filter(specific_force_m_s2)
         value = filtered + self._rng.normal(0.0, self.noise_rms_m_s2, filtered.shape[0])
-        high = self.range_m_s2 - self.lsb_m_s2
-        clipped = np.minimum(np.maximum(value, -self.range_m_s2), high)
-        if (clipped != value).any():
+        clipped = np.maximum(value, -self.range_m_s2, out=self._clipped)
+        np.minimum(clipped, self.range_m_s2 - self.lsb_m_s2, out=clipped)
+        if np.count_nonzero(np.not_equal(clipped, value, out=self._was_clipped)):
             self.clipped_samples += 1
-        return np.round(clipped / self.lsb_m_s2) * self.lsb_m_s2
+        return np.rint(np.divide(clipped, self.lsb_m_s2, out=clipped), out=clipped) * self.lsb_m_s2
+
+    def _filter(self, specific_force_m_s2: np.ndarray) -> np.ndarray:
+        """Advance the anti-aliasing filter by one sample; its output (m/s^2) at the end.
+
+        The same products and sums as ``C x + D u`` and ``A x + B u`` written out, into
+        preallocated buffers; the returned row is a buffer, valid until the next call.
+        """
+        out_now, out_in = self._out_terms
+        x_now, x_in = self._state_terms
+        np.dot(self._out_state, self._x, out=out_now)
+        np.dot(self._out_inputs, specific_force_m_s2, out=out_in)
+        np.dot(self._state_update, self._x, out=x_now)
+        np.dot(self._input_update, specific_force_m_s2, out=x_in)
+        np.add(x_now, x_in, out=self._x)
+        return np.add(out_now, out_in, out=out_now)[0]
 
     def antialias_response(self, frequencies_hz: np.ndarray) -> np.ndarray:
         """Complex frequency response of the anti-aliasing filter."""
@@ -115,7 +134,7 @@ class EddySensorArray:
     def gaps(self, relative_pose: np.ndarray) -> np.ndarray:
         """Gap changes (m) for a top-minus-bottom pose ``[x, y, z, rx, ry, rz]``, with noise."""
         noise = self._rng.normal(0.0, self.config.noise_rms_m, 6)
-        return self.sensing_matrix @ relative_pose + noise
+        return np.add(self.sensing_matrix.dot(relative_pose), noise, out=noise)
 
     def pose(self, gaps_m: np.ndarray) -> np.ndarray:
         """Relative pose from gap changes: (6,) or (N, 6)."""

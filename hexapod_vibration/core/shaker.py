@@ -58,6 +58,10 @@ class Shaker:
         self._p = np.array([t.phase_rad for t in tones], float)
         self._df = np.array([t.drift_hz for t in tones], float)
         self._tp = np.array([t.drift_period_s for t in tones], float)
+        self._w = 2.0 * np.pi * self._f          # rad/s, the first factor of the phase
+        self._drifts = bool(np.any(self._df != 0.0))
+        self._grid_key: tuple[float, int] | None = None   # see _tone_sum
+        self._grid: tuple[np.ndarray, ...] = ()
 
     def force_n(self, time_s: np.ndarray) -> np.ndarray:
         """Shaker force (N) at the given times (s); one noise draw per time point."""
@@ -68,6 +72,46 @@ class Shaker:
         if self.noise_rms_n > 0.0:
             force = force + self._rng.normal(0.0, self.noise_rms_n, t.shape[0])
         return np.clip(force, -self.force_limit_n, self.force_limit_n)
+
+    def force_into(self, start_s: float, step_s: float, out: np.ndarray) -> np.ndarray:
+        """Write the force (N) at the times ``start_s + step_s * k`` (s) into ``out[k]``.
+
+        The same values and noise draws as ``force_n(start_s + step_s * np.arange(n))``
+        for ``n = len(out)``, computed in preallocated buffers; ``out`` must be a
+        contiguous float array. Returns ``out``.
+        """
+        if self._drifts:
+            out[:] = self.force_n(start_s + step_s * np.arange(out.shape[0]))
+            return out
+        if self._a.size:
+            self._tone_sum(start_s, step_s, out)
+        else:
+            out.fill(0.0)
+        if self.noise_rms_n > 0.0:
+            np.add(out, self._rng.normal(0.0, self.noise_rms_n, out.shape[0]), out=out)
+        np.maximum(out, -self.force_limit_n, out=out)
+        return np.minimum(out, self.force_limit_n, out=out)
+
+    def _tone_sum(self, start_s: float, step_s: float, out: np.ndarray) -> None:
+        """Sum of the drift-free tones (N) at ``start_s + step_s * k`` (s), into ``out``.
+
+        Operation for operation what :meth:`force_n` computes when no tone drifts (its
+        drift term is then exactly zero), so the result is bit-identical; the time
+        offsets, angular frequencies and phases are laid out per (time, tone) once.
+        """
+        key = (step_s, out.shape[0])
+        if self._grid_key != key:
+            offsets_s = step_s * np.arange(out.shape[0])
+            self._grid = (np.repeat(offsets_s[:, None], self._a.size, axis=1),
+                          np.tile(self._w, (out.shape[0], 1)),
+                          np.tile(self._p, (out.shape[0], 1)),
+                          np.empty((out.shape[0], self._a.size)))
+            self._grid_key = key
+        offsets_s, w, phase_rad, scratch = self._grid
+        np.add(offsets_s, start_s, out=scratch)
+        np.multiply(w, scratch, out=scratch)
+        np.add(scratch, phase_rad, out=scratch)
+        np.dot(np.sin(scratch, out=scratch), self._a, out=out)
 
 
 def tones_from_arrays(frequencies_hz: Sequence[float], amplitudes_n: Sequence[float],
