@@ -7,16 +7,16 @@ Each node has a read-only ``executor`` parameter:
   conversion to a Python message, which costs about 19 us per message here), every queued
   message at each wake-up; their callbacks get the CDR bytes (``messages.receive_strut_array``
   reads both); everything else (parameter services, ``~/identify``, graph events) is
-  served by a SingleThreadedExecutor at least every ``SERVICE_PERIOD_S`` and whenever the
-  loop is idle. rclpy's executors rebuild a wait set from every entity of the node and go
-  through a task per callback on every spin. Measured on the project's 2-core machine: a
+  served by a SingleThreadedExecutor at least every ``SERVICE_PERIOD_S``, running or
+  idle. rclpy's executors rebuild a wait set from every entity of the node and go through
+  a task per callback on every spin. Measured on the project's 2-core machine: a
   ping-pong between two processes takes 388 us per round trip with the executor and
   222 us with a wait set; the notch controller's CPU per 1 kHz sample fell from 656 to
   288 us (the README's Performance section has the loop as a whole).
 - ``single_threaded``: rclpy's SingleThreadedExecutor for everything.
-- ``events``: rclpy's experimental EventsExecutor (Jazzy). It stalls and loses messages
-  at 1 kHz on this machine, even without project code (``make bench``): kept for
-  comparison only.
+- ``events``: rclpy's experimental EventsExecutor (Jazzy), for comparison only: on this
+  machine it misses more samples than ``waitset`` in realtime and does not stop on SIGINT
+  (``make bench``; it stalled while a 1 kHz ``/clock`` subscriber was in its process).
 
 All three run in the node's one thread: a parameter change is never applied in the middle
 of a sample's computation.
@@ -40,8 +40,12 @@ from hexapod_vibration.parameters import declare_string
 
 EXECUTORS = ("waitset", "single_threaded", "events")
 DEFAULT_EXECUTOR = "waitset"
-SERVICE_PERIOD_S = 0.01
-"""Longest time (s, wall) between two services of the non-loop callbacks by ``waitset``."""
+SERVICE_PERIOD_S = 0.05
+"""Longest time (s, wall) between two services of the non-loop callbacks by ``waitset``.
+
+One service (an executor ``spin_once`` over every entity of the process's nodes) costs
+0.2-0.4 ms here; every 50 ms that is under 1 % of the loop, and ``ros2 param set`` is
+answered within 50 ms."""
 IDLE_SPIN_S = 0.01
 """Longest single wait (s) of a node's main loop, so shutdown is noticed promptly."""
 

@@ -95,6 +95,9 @@ class StrutArrayPublisher:
     def __init__(self, publisher: Any) -> None:
         """Wrap an rclpy publisher of ``std_msgs/Float64MultiArray``."""
         self.publisher = publisher
+        # rclpy's Publisher.publish(bytes) is this call behind a type check and a
+        # destruction guard (~3 us); the node outlives its loop, so call it directly.
+        self._publish_raw = publisher.handle.publish_raw
 
     def publish(self, values: np.ndarray | Sequence[float], sample_index: int) -> None:
         """Publish six values (SI units of the topic) for loop sample ``sample_index`` >= 0.
@@ -102,7 +105,7 @@ class StrutArrayPublisher:
         Raises:
             ValueError: ``values`` does not hold exactly six numbers or the index is < 0.
         """
-        self.publisher.publish(encode_strut_cdr(values, sample_index))
+        self._publish_raw(encode_strut_cdr(values, sample_index))
 
 
 _CDR_LE = b'\x00\x01'          # encapsulation: plain CDR (XCDR1), little endian
@@ -114,6 +117,19 @@ _CDR_PREFIX = (_CDR_LE + b'\x00\x00' + _U32.pack(2) + _U32.pack(len(STRUT_LABEL)
 """Encapsulation, two dims, dim[0] = ("strut", 6, 6): the same for every loop message."""
 _CDR_SAMPLE_TAIL = struct.pack('<IIII', 1, 1, 0, STRUT_COUNT)
 """dim[1] size and stride, data_offset, length of data."""
+_LABEL_FORMAT = SAMPLE_LABEL_PREFIX.encode() + b'%d\x00'
+
+
+def _after_label(label_bytes: int) -> bytes:
+    """Padding, dim[1] size/stride, data_offset, data length and padding to the doubles."""
+    pos = len(_CDR_PREFIX) + 4 + label_bytes
+    pad = -(pos - _CDR_HEADER) % 4
+    pos += pad + len(_CDR_SAMPLE_TAIL)
+    return bytes(pad) + _CDR_SAMPLE_TAIL + bytes(-(pos - _CDR_HEADER) % 8)
+
+
+_AFTER_LABEL = [_after_label(n) for n in range(8)]
+""":func:`_after_label` by label length modulo 8 (it depends on nothing else)."""
 
 
 def encode_strut_cdr(values: np.ndarray | Sequence[float], sample_index: int) -> bytes:
@@ -122,15 +138,14 @@ def encode_strut_cdr(values: np.ndarray | Sequence[float], sample_index: int) ->
     Raises:
         ValueError: ``values`` does not hold exactly six numbers or ``sample_index`` < 0.
     """
-    flat = np.ascontiguousarray(values, dtype='<f8').reshape(-1)
-    if flat.shape[0] != STRUT_COUNT:
-        raise ValueError(f'expected {STRUT_COUNT} strut values, got {flat.shape[0]}')
-    label = sample_label(sample_index).encode() + b'\x00'
-    pos = len(_CDR_PREFIX) + 4 + len(label)
-    pad = -(pos - _CDR_HEADER) % 4
-    pos += pad + len(_CDR_SAMPLE_TAIL)
-    return b''.join((_CDR_PREFIX, _U32.pack(len(label)), label, bytes(pad), _CDR_SAMPLE_TAIL,
-                     bytes(-(pos - _CDR_HEADER) % 8), flat.tobytes()))
+    flat = np.asarray(values, dtype='<f8')
+    if flat.size != STRUT_COUNT:
+        raise ValueError(f'expected {STRUT_COUNT} strut values, got {flat.size}')
+    if sample_index < 0:
+        raise ValueError(f'sample index must be >= 0, got {sample_index}')
+    label = _LABEL_FORMAT % sample_index
+    return b''.join((_CDR_PREFIX, _U32.pack(len(label)), label, _AFTER_LABEL[len(label) % 8],
+                     flat.tobytes()))
 
 
 def parse_strut_array(msg: Float64MultiArray) -> tuple[np.ndarray, int | None]:
