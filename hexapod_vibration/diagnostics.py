@@ -10,10 +10,15 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 HARDWARE_ID = "pph_sim"
 
 
+def _sec_nanosec(sample: int, sample_rate_hz: float) -> tuple[int, int]:
+    """Sim time of loop sample ``sample`` (n / fs s, 0 before sample 0) as (s, ns)."""
+    return divmod(int(round(max(sample, 0) * 1e9 / sample_rate_hz)), 1_000_000_000)
+
+
 def sample_time(sample: int, sample_rate_hz: float = 1000.0) -> Time:
     """Sim time of loop sample ``sample`` (n / fs s), as ``builtin_interfaces/Time``."""
-    ns = int(round(max(sample, 0) * 1e9 / sample_rate_hz))
-    return Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
+    sec, nanosec = _sec_nanosec(sample, sample_rate_hz)
+    return Time(sec=sec, nanosec=nanosec)
 
 
 _CLOCK_CDR = struct.Struct("<4siI")     # encapsulation (LE CDR), sec (int32), nanosec
@@ -25,8 +30,7 @@ def clock_cdr(sample: int, sample_rate_hz: float = 1000.0) -> bytes:
     What rclpy serializes from ``Clock(clock=sample_time(sample))`` (tested), built without
     the Python message: the driver publishes it every sample.
     """
-    ns = int(round(max(sample, 0) * 1e9 / sample_rate_hz))
-    return _CLOCK_CDR.pack(b"\x00\x01\x00\x00", ns // 1_000_000_000, ns % 1_000_000_000)
+    return _CLOCK_CDR.pack(b"\x00\x01\x00\x00", *_sec_nanosec(sample, sample_rate_hz))
 
 
 def format_value(value: object) -> str:

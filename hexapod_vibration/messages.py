@@ -94,7 +94,6 @@ class StrutArrayPublisher:
 
     def __init__(self, publisher: Any) -> None:
         """Wrap an rclpy publisher of ``std_msgs/Float64MultiArray``."""
-        self.publisher = publisher
         # rclpy's Publisher.publish(bytes) is this call behind a type check and a
         # destruction guard (~3 us); the node outlives its loop, so call it directly.
         self._publish_raw = publisher.handle.publish_raw
@@ -168,10 +167,8 @@ def parse_strut_array(msg: Float64MultiArray) -> tuple[np.ndarray, int | None]:
             ``layout.dim[1]`` is present but not a well-formed ``sample:<n>`` label.
     """
     data = msg.data
-    if len(data) != STRUT_COUNT:
-        raise InvalidStrutMessage(f'expected {STRUT_COUNT} strut values, got {len(data)}')
-    if not all(map(math.isfinite, data)):
-        raise InvalidStrutMessage(f'non-finite strut value in {list(data)}')
+    _check_count(len(data))
+    _check_finite(data)
     if isinstance(data, array.array):
         values = np.frombuffer(data, dtype=_FLOAT64)
     else:
@@ -205,18 +202,26 @@ def decode_strut_cdr(raw: bytes) -> tuple[np.ndarray, int | None]:
     try:
         pos, label = _skip_layout(raw)
         (count,) = _U32.unpack_from(raw, pos)
-        pos += 4
-        pos += -(pos - _CDR_HEADER) % 8                    # float64 alignment
-        if count != STRUT_COUNT:
-            raise InvalidStrutMessage(f'expected {STRUT_COUNT} strut values, got {count}')
-        values = np.frombuffer(raw, dtype='<f8', count=count, offset=pos)
-    except (struct.error, ValueError, UnicodeDecodeError) as exc:
-        if isinstance(exc, InvalidStrutMessage):
-            raise
+    except (struct.error, ValueError) as exc:        # also UnicodeDecodeError
         raise UnsupportedCdr(f'malformed Float64MultiArray CDR: {exc}') from None
-    if not all(map(math.isfinite, values.tolist())):
-        raise InvalidStrutMessage(f'non-finite strut value in {values.tolist()}')
+    _check_count(count)
+    pos += 4
+    pos += -(pos - _CDR_HEADER) % 8                        # float64 alignment
+    if pos + 8 * count > len(raw):
+        raise UnsupportedCdr(f'malformed Float64MultiArray CDR: {len(raw)} bytes')
+    values = np.frombuffer(raw, dtype='<f8', count=count, offset=pos)
+    _check_finite(values.tolist())
     return values, None if label is None else parse_sample_label(label)
+
+
+def _check_count(count: int) -> None:
+    if count != STRUT_COUNT:
+        raise InvalidStrutMessage(f'expected {STRUT_COUNT} strut values, got {count}')
+
+
+def _check_finite(values: Sequence[float]) -> None:
+    if not all(map(math.isfinite, values)):
+        raise InvalidStrutMessage(f'non-finite strut value in {list(values)}')
 
 
 def _skip_layout(raw: bytes) -> tuple[int, str | None]:

@@ -168,6 +168,7 @@ class RosTestContext:
         predicate: Callable[[], bool],
         timeout_s: float,
         step: Callable[[], None] | None = None,
+        spin: Callable[[], None] | None = None,
     ) -> bool:
         """Spin until ``predicate()`` holds; False after ``timeout_s`` (a hang guard only).
 
@@ -175,6 +176,7 @@ class RosTestContext:
             predicate: Condition to wait for.
             timeout_s: Give up after this long (s); choose it generously.
             step: Called before each spin (e.g. to publish something repeatedly).
+            spin: One spin (default: the context's executor, up to 50 ms).
         """
         deadline = time.monotonic() + timeout_s
         while not predicate():
@@ -182,7 +184,10 @@ class RosTestContext:
                 return False
             if step is not None:
                 step()
-            self.executor.spin_once(timeout_sec=0.05)
+            if spin is None:
+                self.executor.spin_once(timeout_sec=0.05)
+            else:
+                spin()
         return True
 
     def shutdown(self) -> None:

@@ -50,15 +50,8 @@ class Graph:
         return LoopSpinner(self.ctx.executor, [self.loop_sub], fast, service_period_s)
 
     def spin_until(self, spinner: LoopSpinner, predicate, step=None) -> bool:
-        import time
-        deadline = time.monotonic() + HANG_GUARD_S
-        while not predicate():
-            if time.monotonic() > deadline:
-                return False
-            if step is not None:
-                step()
-            spinner.spin_once(0.02)
-        return True
+        return self.ctx.wait_for(predicate, HANG_GUARD_S, step,
+                                 spin=lambda: spinner.spin_once(0.02))
 
     def connect(self, spinner: LoopSpinner) -> None:
         """Publish index 0 until the listener has it (discovery), then forget it."""

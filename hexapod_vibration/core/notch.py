@@ -337,9 +337,8 @@ class AdaptiveNotchCanceller:
         np.add(self._v, self._y, out=self._v)
 
     def _advance_gain(self) -> None:
+        """One sample of the enable/disable ramp towards ``_target`` (the caller checks)."""
         target = self._target
-        if self._gain == target:
-            return
         if self._gain_step <= 0.0:
             self._gain = target
         elif self._gain < target:

@@ -127,10 +127,8 @@ class PointingController:
         self._damping = np.diag(damping)
         # Statics J^-T folded into each gain: Cartesian gains -> strut forces.
         jac_inv_t = np.linalg.inv(self._jac_t)
-        self._force_p = jac_inv_t @ self._k_p
-        self._force_i = jac_inv_t @ self._k_int
-        self._force_d = jac_inv_t @ self._damping
-        self._law = self._law_matrix()
+        self._law = self._law_matrix(jac_inv_t @ self._k_p, jac_inv_t @ self._k_int,
+                                     jac_inv_t @ self._damping)
         previous = getattr(self, "_lowpass", None)
         self._lowpass = SosFilterBank.butter_lowpass(2, gains.output_lowpass_hz,
                                                      self.sample_rate_hz, 6)
@@ -139,7 +137,7 @@ class PointingController:
         else:
             self._lowpass.reset(self._last_force)
 
-    def _law_matrix(self) -> np.ndarray:
+    def _law_matrix(self, f_p: np.ndarray, f_i: np.ndarray, f_d: np.ndarray) -> np.ndarray:
         """The law as one (24, 24) matrix on the stacked inputs, 6 values each.
 
         Inputs: gaps (m), gap change since the last sample (m), target (m, rad), integral
@@ -147,11 +145,12 @@ class PointingController:
         and the candidate integral c = integral + e dt, the outputs are: c (m s, rad s); its
         strut forces F_i c (N); the strut forces F_p e - F_d rate + F_i c (N); and the same
         with the integral held, F_p e - F_d rate + F_i integral (N), for the anti-windup.
+        ``f_p``, ``f_i``, ``f_d`` are the proportional, integral and rate gains mapped to
+        strut forces (J^-T K).
         """
         pose, dt = self._pose_from_gaps, self.dt_s
-        f_p, f_i = self._force_p, self._force_i
         eye, zero = np.eye(6), np.zeros((6, 6))
-        rate_force = -self._force_d @ pose / dt
+        rate_force = -f_d @ pose / dt
         return np.block([
             [-dt * pose, zero, dt * eye, eye],
             [-dt * f_i @ pose, zero, dt * f_i, f_i],

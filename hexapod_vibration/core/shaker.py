@@ -69,9 +69,7 @@ class Shaker:
         # Instantaneous frequency f + df sin(2 pi t / T): phase integrates it exactly.
         phase = 2.0 * np.pi * self._f * t - self._df * self._tp * np.cos(2.0 * np.pi * t / self._tp)
         force = np.sin(phase + self._p) @ self._a if self._a.size else np.zeros(t.shape[0])
-        if self.noise_rms_n > 0.0:
-            force = force + self._rng.normal(0.0, self.noise_rms_n, t.shape[0])
-        return np.clip(force, -self.force_limit_n, self.force_limit_n)
+        return self._add_noise_and_limit(force)
 
     def force_into(self, start_s: float, step_s: float, out: np.ndarray) -> np.ndarray:
         """Write the force (N) at the times ``start_s + step_s * k`` (s) into ``out[k]``.
@@ -87,10 +85,14 @@ class Shaker:
             self._tone_sum(start_s, step_s, out)
         else:
             out.fill(0.0)
+        return self._add_noise_and_limit(out)
+
+    def _add_noise_and_limit(self, force: np.ndarray) -> np.ndarray:
+        """Add one noise draw per time point and clip to the force limit, in place (N)."""
         if self.noise_rms_n > 0.0:
-            np.add(out, self._rng.normal(0.0, self.noise_rms_n, out.shape[0]), out=out)
-        np.maximum(out, -self.force_limit_n, out=out)
-        return np.minimum(out, self.force_limit_n, out=out)
+            np.add(force, self._rng.normal(0.0, self.noise_rms_n, force.shape[0]), out=force)
+        np.maximum(force, -self.force_limit_n, out=force)
+        return np.minimum(force, self.force_limit_n, out=force)
 
     def _tone_sum(self, start_s: float, step_s: float, out: np.ndarray) -> None:
         """Sum of the drift-free tones (N) at ``start_s + step_s * k`` (s), into ``out``.
