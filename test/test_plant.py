@@ -138,6 +138,44 @@ def test_lifted_sample_equals_the_internal_step_loop():
     np.testing.assert_allclose(lifted, looped, atol=1e-9)
 
 
+def test_set_state_continues_exactly_as_the_plant_that_stepped_there():
+    """After set_state the next samples use its strokes for the voice-coil force constant."""
+    command = -60.0 * np.ones(6)                    # ~-3.5 mm stroke: force constant ~0.9
+    stepped, moved = PPHPlant(CFG, seed=1), PPHPlant(CFG, seed=2)
+    for _ in range(40):
+        stepped.step(command)
+    for _ in range(5):                              # warm caches from a different state
+        moved.step(np.zeros(6))
+    moved.set_state(stepped.state)
+    for _ in range(3):
+        want, got = stepped.step(command), moved.step(command)
+        np.testing.assert_allclose(got.applied_force_n, want.applied_force_n, rtol=1e-12)
+        np.testing.assert_allclose(got.stroke_m, want.stroke_m, rtol=1e-12)
+        np.testing.assert_allclose(moved.state, stepped.state, rtol=1e-12,
+                                   atol=1e-12 * np.abs(stepped.state).max())
+        assert np.all(want.applied_force_n / command < 0.95)
+
+
+def test_set_state_redoes_the_start_of_sample_contact_regime_test():
+    """A plant held in the contact regime must not carry that decision to a new state."""
+    warm, looped = PPHPlant(CFG), PPHPlant(CFG)
+    looped._lifted_step = lambda *_: False          # reference: internal steps one by one
+    for _ in range(5):
+        warm.step(np.zeros(6))
+    assert warm._start_in_regime                    # joints settled in contact
+    joint_map, state = warm.model.joint_map, warm.state
+    half_play = 0.5 * CFG.strut.joint_free_play_m
+    # joints just inside the clearance, closing it again within the first internal step
+    state[:18] += np.linalg.lstsq(joint_map, 0.9 * half_play - joint_map @ state[:18],
+                                  rcond=None)[0]
+    state[18:] += np.linalg.lstsq(joint_map, 0.05 * np.ones(6), rcond=None)[0]
+    for plant in (warm, looped):
+        plant.set_state(state)
+        plant.step(np.zeros(6))
+    np.testing.assert_allclose(warm.state, looped.state, rtol=1e-12,
+                               atol=1e-12 * np.abs(looped.state).max())
+
+
 def test_accelerometers_clip_at_2g_and_quantise_to_16_bits():
     bank = AccelerometerBank(CFG.accelerometer, 10000.0, 1000.0, seed=0)
     levels_g = np.array([-3.0, -1.0, 0.0, 0.5, 1.9, 3.0])

@@ -227,6 +227,19 @@ class PPHPlant:
     def set_state(self, state: np.ndarray) -> None:
         """Overwrite the mechanical state (for tests and initial conditions)."""
         self._xu[:N_STATE] = state
+        self._refresh_carried_over()
+
+    def _refresh_carried_over(self) -> None:
+        """Recompute what :meth:`step` carries from one sample to the next from the state.
+
+        ``_nl`` holds the strokes (force constant, hard stops), stroke rates and joint
+        deflections at the start of the next sample; ``_start_in_regime`` says whether the
+        start-of-sample regime test (and so ``_contact_side`` and the held free-play
+        correction) may be skipped. Both describe the state, so they follow it when it is
+        overwritten.
+        """
+        self._nl = self._nl_out @ self._xu[:N_STATE]
+        self._start_in_regime = False
 
     def reset_to_equilibrium(self) -> None:
         """Static equilibrium under gravity with no command, sensors settled on it."""
@@ -239,8 +252,7 @@ class PPHPlant:
             q = np.linalg.solve(k, bq[:, IN_GRAVITY] + bq[:, IN_JOINT] @ corr)
         self._xu[:N_STATE] = 0.0
         self._xu[:N_DOF] = q
-        self._nl = self._nl_out @ self._xu[:N_STATE]
-        self._start_in_regime = False
+        self._refresh_carried_over()
         g = self.config.simulation.gravity_m_s2
         self.accelerometers.settle(g * self.config.geometry.unit_vectors[:, 2])
 
