@@ -319,6 +319,22 @@ def test_bench_quick_writes_positive_finite_numbers(tmp_path, capsys):
     assert targets['cost_ratio_met'] == (targets['cost_ratio_6x8'] >= 10.0
                                          and results['equal_attenuation'])
     assert '## Issue targets' in summary
+    floor = results['numpy_floor_us_per_sample']
+    assert _positive_finite(floor) and floor < results['notch_us_per_sample']['6x8']
+    assert targets['numpy_cost_ratio_bound'] == pytest.approx(max(
+        *results['scaling']['fxlms_vs_path_taps']['us_per_sample'].values(),
+        *results['fxlms_8tones_us_per_sample'].values()) / floor)
+    compiled = results['compiled']
+    assert set(compiled['notch_us_per_sample']) == {'6x1', '6x2', '6x4', '6x8', '6x16'}
+    for key in ('fxlms_us_per_sample', 'fxlms_8tones_us_per_sample'):
+        assert set(compiled[key]) == {'32', '64', '128'}
+        assert all(_positive_finite(v) for v in compiled[key].values())
+    assert compiled['cost_ratio_fxlms_over_notch_6x8'] == pytest.approx(
+        compiled['fxlms_us_per_sample']['64'] / compiled['notch_us_per_sample']['6x8'])
+    assert all(d < 1e-12 for d in compiled['max_relative_difference_vs_numpy'].values())
+    assert targets['compiled_cost_ratio_met'] == (
+        compiled['cost_ratio_fxlms_over_notch_6x8'] >= 10.0 and results['equal_attenuation'])
+    assert '## Controller cost per sample, compiled' in summary
     for name in ('notch', 'fxlms'):
         assert set(results['attenuation_db'][name]) == {'40', '80'}
         assert all(_positive_finite(v) for v in results['attenuation_db'][name].values())
