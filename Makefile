@@ -31,7 +31,10 @@ test: venv
 lint: venv
 	$(VENV)/bin/ruff check .
 
+# A new run replaces out/demo; the run before it is kept as out/demo.previous (the
+# experiment itself never overwrites a bag).
 demo: venv
+	if [ -d out/demo ]; then rm -rf out/demo.previous && mv out/demo out/demo.previous; fi
 	$(VENV)/bin/experiment --demo --out out/demo
 
 bench: venv
