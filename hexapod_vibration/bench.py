@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import functools
 import gc
 import json
 import os
@@ -159,23 +160,42 @@ def time_steps_us(steps: dict[str, tuple[Step, int]], timing: TimingSettings,
         name -> {"median": us, "min": us}.
     """
     rng = np.random.default_rng(seed)
-    prepared = {}
+    runners = {}
     for name, (step, n_channels) in steps.items():
         errors = 0.01 * rng.standard_normal((1024, n_channels))
         out = np.zeros(n_channels)
         for k in range(timing.warmup):
             step(errors[k & 1023], out)
-        prepared[name] = (step, errors, out)
-    runs: dict[str, list[float]] = {name: [] for name in steps}
+        runners[name] = _step_runner(step, errors, out, timing.number)
+    return _round_robin_us(runners, timing.number, timing.repeat)
+
+
+def _step_runner(step: Step, errors: np.ndarray, out: np.ndarray,
+                 number: int) -> Callable[[], None]:
+    """A call of ``number`` steps on the cycled ``errors`` (what one round times)."""
+    def run() -> None:
+        for k in range(number):
+            step(errors[k & 1023], out)
+
+    return run
+
+
+def _round_robin_us(runners: dict[str, Callable[[], None]], samples_per_run: int,
+                    repeat: int) -> dict[str, dict[str, float]]:
+    """Median and minimum time per sample (us) of each runner over ``repeat`` rounds.
+
+    Each round calls every runner once (garbage collector off), so a change of machine
+    load affects all of them alike.
+    """
+    runs: dict[str, list[float]] = {name: [] for name in runners}
     was_enabled = gc.isenabled()
     gc.disable()
     try:
-        for _ in range(timing.repeat):
-            for name, (step, errors, out) in prepared.items():
+        for _ in range(repeat):
+            for name, run in runners.items():
                 t0 = time.perf_counter_ns()
-                for k in range(timing.number):
-                    step(errors[k & 1023], out)
-                runs[name].append((time.perf_counter_ns() - t0) / timing.number / 1e3)
+                run()
+                runs[name].append((time.perf_counter_ns() - t0) / samples_per_run / 1e3)
     finally:
         if was_enabled:
             gc.enable()
@@ -379,7 +399,7 @@ def time_blocks_us(kernels: dict[str, BlockKernel], timing: TimingSettings,
                    seed: int = 0) -> dict[str, dict[str, float]]:
     """Per-sample time (us) of compiled kernels that step over a block of errors per call.
 
-    Like :func:`time_steps_us`, round-robin over ``timing.repeat`` rounds; each round runs
+    Like :func:`time_steps_us` (round-robin, garbage collector off); each round runs
     one block of ``timing.number`` samples (0.01 m/s^2 RMS random errors) per kernel. A
     first block per kernel compiles it and fills the FxLMS warm-up; it is not timed.
 
@@ -387,32 +407,27 @@ def time_blocks_us(kernels: dict[str, BlockKernel], timing: TimingSettings,
         name -> {"median": us, "min": us}.
     """
     rng = np.random.default_rng(seed)
-    blocks = {}
+    runners = {}
     for name, kernel in kernels.items():
         errors = 0.01 * rng.standard_normal((timing.number, kernel.n_channels))
         out = np.zeros_like(errors)
         kernel.run(errors, out)
-        blocks[name] = (kernel, errors, out)
-    runs: dict[str, list[float]] = {name: [] for name in kernels}
-    for _ in range(timing.repeat):
-        for name, (kernel, errors, out) in blocks.items():
-            t0 = time.perf_counter_ns()
-            kernel.run(errors, out)
-            runs[name].append((time.perf_counter_ns() - t0) / timing.number / 1e3)
-    return {name: {'median': float(np.median(r)), 'min': float(np.min(r))}
-            for name, r in runs.items()}
+        runners[name] = functools.partial(kernel.run, errors, out)
+    return _round_robin_us(runners, timing.number, timing.repeat)
 
 
-def compiled_equivalence(kernels: Any, samples: int = EQUIVALENCE_SAMPLES) -> dict[str, float]:
+def compiled_equivalence(samples: int = EQUIVALENCE_SAMPLES) -> dict[str, float]:
     """Largest command difference, compiled kernel vs numpy controller, relative to the peak.
 
     The notch 6x8 and the FxLMS (L=64, 2 tones) of the benchmark step ``samples`` random
-    errors both ways from the same state.
+    errors both ways from the same state. Needs numba.
     """
+    from hexapod_vibration.core.compiled_kernels import CompiledFxlms, CompiledNotch
+
     errors = 0.01 * np.random.default_rng(1).standard_normal((samples, STRUTS))
-    pairs = {'notch_6x8': (make_notch(STRUTS, RATIO_NOTCH_TONES, False), kernels.CompiledNotch),
+    pairs = {'notch_6x8': (make_notch(STRUTS, RATIO_NOTCH_TONES, False), CompiledNotch),
              'fxlms_L64': (make_fxlms(DEFAULT_PATH_TAPS, DEFAULT_CONTROL_TAPS),
-                           kernels.CompiledFxlms)}
+                           CompiledFxlms)}
     result = {}
     for name, (controller, compiled) in pairs.items():
         kernel = compiled(controller)
@@ -445,7 +460,7 @@ def measure_compiled_costs(timing: TimingSettings) -> dict[str, Any]:
             make_fxlms(n, DEFAULT_CONTROL_TAPS))
         kernels[f'fxlms_L{n}_{FXLMS_SAME_TONES}tones'] = compiled_kernels.CompiledFxlms(
             make_fxlms(n, DEFAULT_CONTROL_TAPS, tones_hz=same_tones))
-    equivalence = compiled_equivalence(compiled_kernels)     # also compiles both kernels
+    equivalence = compiled_equivalence()                     # also compiles both kernels
     compile_s = time.perf_counter() - t0
     raw = time_blocks_us(kernels, timing)
     med = {name: v['median'] for name, v in raw.items()}

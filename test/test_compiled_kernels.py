@@ -84,7 +84,7 @@ def test_compiled_notch_refuses_states_it_does_not_model():
         CompiledNotch(fading)
 
 
-def test_compiled_fxlms_refuses_a_used_or_leaky_controller():
+def test_compiled_fxlms_refuses_a_used_or_frozen_controller():
     used = make_fxlms(32, 32)
     used.step(np.zeros(6))
     with pytest.raises(ValueError, match='fresh'):

@@ -192,8 +192,8 @@ class CompiledFxlms:
         f = controller
         fresh = f._warmup == f._nl + f._n_taps - 1 and f._hist.pos == f._hist.block + 1
         if not fresh or not f.enabled or f._frozen or f._keep != 1.0:
-            raise ValueError('the compiled FxLMS starts from a fresh, enabled controller '
-                             'without leakage')
+            raise ValueError('the compiled FxLMS starts from a fresh, enabled, adapting '
+                             'controller without leakage')
         k, n = f._freqs.size, f._n_taps
         self.n_channels = f._ni           # error channels I (commands: J = f._nj)
         self._paths_rev = np.ascontiguousarray(
