@@ -27,14 +27,14 @@ setup(
     extras_require={'test': ['pytest']},
     entry_points={
         'console_scripts': [
-            'pph_driver = hexapod_vibration.pph_driver:main',
-            'notch_controller = hexapod_vibration.notch_controller:main',
-            'pointing_controller = hexapod_vibration.pointing_controller:main',
-            'pph_graph = hexapod_vibration.pph_graph:main',
-            'pph_recorder = hexapod_vibration.recorder:main',
-            'experiment = hexapod_vibration.experiment:main',
-            'analyze = hexapod_vibration.analyze:main',
-            'hexapod_bench = hexapod_vibration.bench:main',
+            'pph_driver = hexapod_vibration.nodes.pph_driver:main',
+            'notch_controller = hexapod_vibration.nodes.notch_controller:main',
+            'pointing_controller = hexapod_vibration.nodes.pointing_controller:main',
+            'pph_graph = hexapod_vibration.nodes.pph_graph:main',
+            'pph_recorder = hexapod_vibration.nodes.recorder:main',
+            'experiment = hexapod_vibration.tools.experiment:main',
+            'analyze = hexapod_vibration.tools.analyze:main',
+            'hexapod_bench = hexapod_vibration.bench.core_bench:main',
         ],
     },
 )

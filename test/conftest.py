@@ -29,8 +29,18 @@ DOMAIN_LIMIT = 230  # exclusive; Fast DDS port arithmetic allows up to 232
 _domain_base = int(os.environ.get('HEXAPOD_TEST_DOMAIN_BASE') or random.randint(DOMAIN_MIN, 200))
 _domain_counter = itertools.count()
 
+ROS_FIXTURES = frozenset({'ros_env', 'node_processes', 'ros_context'})
+"""Fixtures that put a test on a ROS domain: such a test is marked ``ros``."""
+
 BIN_DIR = Path(sys.executable).parent
 """Folder of the virtualenv's console scripts (pph_recorder, ...)."""
+
+
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    """Mark every test that uses a ROS fixture ``ros`` (process or rclpy tests)."""
+    for item in items:
+        if ROS_FIXTURES.intersection(getattr(item, 'fixturenames', ())):
+            item.add_marker(pytest.mark.ros)
 
 
 def next_domain_id() -> int:

@@ -23,8 +23,8 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from rosgraph_msgs.msg import Clock
 from std_msgs.msg import Float64MultiArray
 
-from hexapod_vibration.messages import parse_strut_array
-from hexapod_vibration.qos import DIAGNOSTICS_QOS
+from hexapod_vibration.ros.messages import parse_strut_array
+from hexapod_vibration.ros.qos import DIAGNOSTICS_QOS
 
 HANG_GUARD_S = 90.0
 """Longest wait for anything (s): a guard against hangs, never a timing requirement."""

@@ -1,0 +1,1 @@
+"""Bags to reports: bag I/O, tone levels, report.json, figures (no rclpy import)."""

@@ -1,0 +1,1 @@
+"""Reference controllers the notch canceller is compared with (FxLMS, compiled kernels)."""

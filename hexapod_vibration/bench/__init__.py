@@ -1,0 +1,1 @@
+"""Benchmarks (make bench): controller cost and the ROS loop."""

@@ -1,0 +1,1 @@
+"""Control laws, filters and identification (no ROS import)."""

@@ -1,0 +1,495 @@
+"""Adaptive Notch Canceller (paper eqs. 6-10), vectorized over tones x channels.
+
+For every tone ``t`` (frequency ``f_t``) and channel ``i`` the canceller holds one complex
+weight ``W[t, i] = a - j b`` (N) and drives
+
+    u_n[i] = g_n * sum_t Re{W[t, i] e^{j phi_t,n}} = g_n * sum_t (a cos phi + b sin phi)
+
+where ``phi_t`` (rad) is a wrapped phase accumulator advancing by ``2 pi f_t / fs`` per sample
+and ``g_n`` the output gain (0..1, ramped for bumpless enable/disable). The weights adapt with
+the generalised paper update (eqs. 8-9, ``P = I`` is the paper as printed)
+
+    W_t += mu * P_t @ (e_n * e^{-j phi_t,n})
+
+with ``e_n`` the (DC-blocked) accelerations (m/s^2) of sample ``n``. A diagonal ``P`` takes an
+O(T*C) path (the paper's decentralised SISO loops); a full ``P`` costs O(T*C*C).
+Timing (docs/architecture.md): the command returned for sample ``n`` is held over
+``[n/fs, (n+1)/fs)`` and first seen in the error of sample ``n+1``.
+
+Implementation: ``e^{j phi_t}`` comes from a
+:class:`~hexapod_vibration.core.control.phasor.PhasorBank` (one complex multiply per tone
+and sample, exactly re-synchronised to the phase grid), and
+the weights are stored conjugated and transposed, ``V[i, t] = conj(W[t, i]) = a + j b``, so
+that the output ``sum_t a cos phi + b sin phi`` is one real matrix-vector product of the
+float views of ``V`` and ``e^{j phi}``, and the update ``V += conj(mu P) e e^{+j phi}``
+needs no conjugation per sample.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import numpy as np
+
+from hexapod_vibration.core.control.phasor import TWO_PI, PhasorBank
+
+SAME_FREQUENCY_TOL_HZ = 1e-9
+DEFAULT_RAMP_SAMPLES = 50
+
+
+def validate_frequencies(
+    freqs_hz: Sequence[float] | np.ndarray, sample_rate_hz: float
+) -> np.ndarray:
+    """Return tone frequencies (Hz) as a float array or raise ValueError.
+
+    Args:
+        freqs_hz: tone frequencies (Hz); may be empty.
+        sample_rate_hz: loop sample rate (Hz).
+
+    Returns:
+        1-D float array of the frequencies, in the given order.
+    """
+    f = np.asarray(freqs_hz, dtype=float).reshape(-1)
+    if not np.all(np.isfinite(f)):
+        raise ValueError(f'tone frequencies must be finite, got {f.tolist()}')
+    nyquist = 0.5 * sample_rate_hz
+    bad = f[(f <= 0.0) | (f >= nyquist)]
+    if bad.size:
+        raise ValueError(
+            f'tone frequencies must be in (0, {nyquist:g}) Hz (fs/2), got {bad.tolist()}'
+        )
+    if f.size > 1:
+        sorted_f = np.sort(f)
+        if np.any(np.diff(sorted_f) <= SAME_FREQUENCY_TOL_HZ):
+            raise ValueError(f'duplicate tone frequencies in {f.tolist()}')
+    return f
+
+
+def validate_mu(mu: float) -> float:
+    """Return ``mu`` as float or raise ValueError if it is not finite and >= 0."""
+    try:
+        value = float(mu)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f'mu must be a real number, got {mu!r}') from exc
+    if not np.isfinite(value) or value < 0.0:
+        raise ValueError(f'mu must be finite and >= 0, got {value}')
+    return value
+
+
+def validate_coefficients(
+    coefficients: np.ndarray | None, n_tones: int, n_channels: int
+) -> np.ndarray:
+    """Return adaptation coefficients as a complex (T, C, C) array or raise ValueError.
+
+    Args:
+        coefficients: complex (T, C, C) matrices P_t, or (T, C) diagonals, or None for
+            the paper's raw ``P = I``.
+        n_tones: number of tones T.
+        n_channels: number of channels C.
+
+    Returns:
+        A new complex (T, C, C) array.
+    """
+    if coefficients is None:
+        return np.broadcast_to(np.eye(n_channels, dtype=complex),
+                               (n_tones, n_channels, n_channels)).copy()
+    p = np.array(coefficients, dtype=complex)
+    if p.shape == (n_tones, n_channels):
+        p = p[:, :, None] * np.eye(n_channels)
+    if p.shape != (n_tones, n_channels, n_channels):
+        raise ValueError(
+            f'coefficients must have shape (T, C, C) = ({n_tones}, {n_channels}, {n_channels})'
+            f' or (T, C) for diagonal P, got {p.shape}'
+        )
+    if not np.all(np.isfinite(p)):
+        raise ValueError('coefficients must be finite')
+    return p
+
+
+def _validate_ramp(ramp_samples: int) -> int:
+    ramp = int(ramp_samples)
+    if ramp != ramp_samples or ramp < 0:
+        raise ValueError(f'ramp_samples must be an integer >= 0, got {ramp_samples!r}')
+    return ramp
+
+
+def _diagonal_or_none(p_full: np.ndarray) -> np.ndarray | None:
+    """Return the (T, C) diagonals if every P_t is diagonal, else None."""
+    diag = np.diagonal(p_full, axis1=1, axis2=2)
+    off = p_full - diag[:, :, None] * np.eye(p_full.shape[1])
+    return diag.copy() if not np.any(off) else None
+
+
+class _FadingTones:
+    """Tones removed from the canceller, faded out linearly so the output never jumps."""
+
+    def __init__(self, n_channels: int) -> None:
+        self._c = n_channels
+        self.clear()
+
+    def clear(self) -> None:
+        """Drop all fading tones."""
+        self.w = np.zeros((0, self._c), dtype=complex)
+        self.phi = np.zeros(0)
+        self.dphi = np.zeros(0)
+        self.gain = np.zeros(0)
+        self.step_size = np.zeros(0)
+        self.active = False
+        self._alloc()
+
+    def _alloc(self) -> None:
+        self._rot = np.zeros(self.phi.size, dtype=complex)
+        self._rot_re, self._rot_im = self._rot.real, self._rot.imag
+        self._contrib = np.zeros(self._c, dtype=complex)
+        self._contrib_re = self._contrib.real
+
+    def add(self, w: np.ndarray, phi: np.ndarray, dphi: np.ndarray, ramp: int) -> None:
+        """Start fading tones with weights ``w`` (K, C), phases and increments (rad)."""
+        if ramp == 0 or w.shape[0] == 0:
+            return
+        self.w = np.concatenate([self.w, w])
+        self.phi = np.concatenate([self.phi, phi])
+        self.dphi = np.concatenate([self.dphi, dphi])
+        self.gain = np.concatenate([self.gain, np.ones(w.shape[0])])
+        self.step_size = np.concatenate([self.step_size, np.full(w.shape[0], 1.0 / ramp)])
+        self.active = True
+        self._alloc()
+
+    def advance(self, samples: int) -> None:
+        """Skip ``samples`` samples: the same state as that many :meth:`accumulate` calls."""
+        if self.phi.size == 0:
+            return
+        self.gain -= samples * self.step_size
+        np.maximum(self.gain, 0.0, out=self.gain)
+        self.phi += samples * self.dphi
+        np.remainder(self.phi, TWO_PI, out=self.phi)
+        if not np.any(self.gain):
+            self.clear()
+
+    def accumulate(self, out: np.ndarray) -> None:
+        """Add this sample's faded output (N) to ``out`` (C,) and advance one sample."""
+        if self.phi.size == 0:
+            return
+        self.gain -= self.step_size
+        np.maximum(self.gain, 0.0, out=self.gain)
+        np.cos(self.phi, out=self._rot_re)
+        np.sin(self.phi, out=self._rot_im)
+        np.multiply(self._rot_re, self.gain, out=self._rot_re)
+        np.multiply(self._rot_im, self.gain, out=self._rot_im)
+        np.matmul(self._rot, self.w, out=self._contrib)
+        np.add(out, self._contrib_re, out=out)
+        self.phi += self.dphi
+        np.remainder(self.phi, TWO_PI, out=self.phi)
+        if not np.any(self.gain):
+            self.clear()
+
+
+class AdaptiveNotchCanceller:
+    """Multichannel, multi-tone Adaptive Notch Canceller (paper eqs. 6-10, generalised).
+
+    Args:
+        n_channels: number of channels C (6 struts).
+        tone_frequencies_hz: tone frequencies f_t (Hz), each in (0, fs/2), no duplicates.
+        sample_rate_hz: loop sample rate fs (Hz).
+        mu: adaptation rate (dimensionless with a normalised P; m/s^2 -> N scaling for P=I).
+        coefficients: complex (T, C, C) adaptation matrices P_t (or (T, C) diagonals);
+            None gives the paper's raw ``P = I``. Diagonal P uses the O(T*C) fast path.
+    """
+
+    def __init__(
+        self,
+        n_channels: int,
+        tone_frequencies_hz: Sequence[float] | np.ndarray,
+        sample_rate_hz: float,
+        mu: float,
+        coefficients: np.ndarray | None = None,
+    ) -> None:
+        """Validate the arguments (ValueError) and allocate the per-sample buffers."""
+        if int(n_channels) != n_channels or n_channels < 1:
+            raise ValueError(f'n_channels must be a positive integer, got {n_channels!r}')
+        fs = float(sample_rate_hz)
+        if not np.isfinite(fs) or fs <= 0.0:
+            raise ValueError(f'sample_rate_hz must be finite and > 0, got {sample_rate_hz!r}')
+        self._c = int(n_channels)
+        self._fs = fs
+        freqs = validate_frequencies(tone_frequencies_hz, fs)
+        self._mu = validate_mu(mu)
+        p_full = validate_coefficients(coefficients, freqs.size, self._c)
+        self._enabled = True
+        self._frozen = False
+        self._gain = 1.0
+        self._target = 1.0
+        self._gain_step = 0.0
+        self._fading = _FadingTones(self._c)
+        self._u = np.zeros(self._c)
+        self._install(freqs, np.zeros((freqs.size, self._c), dtype=complex),
+                      np.zeros(freqs.size), p_full, np.ones(freqs.size, dtype=bool))
+
+    # ------------------------------------------------------------------ state management
+    def _install(self, freqs: np.ndarray, w: np.ndarray, phi: np.ndarray,
+                 p_full: np.ndarray, adapting: np.ndarray) -> None:
+        """Replace the tone set and (re)allocate every per-sample buffer."""
+        t = freqs.size
+        self._freqs = freqs.copy()
+        self._dphi = TWO_PI * freqs / self._fs
+        self._osc = PhasorBank(self._dphi, phi)
+        self._z_r = self._osc.z.view(float)                 # (2T,) cos, sin, cos, ...
+        self._z_row_r = self._z_r.reshape(1, 2 * t)
+        self._z_stack = self._osc.z[:, None, None]          # (T, 1, 1)
+        self._v = np.ascontiguousarray(np.conj(w).T, dtype=complex)   # V = W^H, (C, T)
+        self._v_r = self._v.view(float)                     # (C, 2T) a, b, a, b, ...
+        self._y = np.zeros((self._c, t), dtype=complex)     # update of V
+        self._y_r = self._y.view(float)
+        self._y_flat = self._y_r.reshape(-1)
+        self._y_stack = self._y.T[:, None, :]               # (T, 1, C) view of y
+        self._m = np.zeros((self._c, t), dtype=complex)     # conj(mu P) e (full P)
+        self._m_flat = self._m.view(float).reshape(-1)
+        self._m_stack = self._m.T[:, None, :]
+        self._adapting = adapting.astype(bool).copy()
+        self._set_p(p_full)
+
+    def _set_p(self, p_full: np.ndarray) -> None:
+        self._p_full = p_full.copy()
+        self._p_diag = _diagonal_or_none(self._p_full)
+        self._update_rate()
+
+    def _update_rate(self) -> None:
+        """Rate-scaled, conjugated coefficients in the layouts :meth:`_adapt` uses.
+
+        Diagonal P: ``Q[i, t] = mu_t conj(P_t[i, i])`` (C, T) complex. Full P: the real
+        (C*T*2, C) stack of ``Re, Im`` of ``mu_t conj(P_t[i, j])`` over rows (i, t), so
+        that its product with the real error is the complex (C, T) array
+        ``sum_j mu_t conj(P_t[i, j]) e_j`` in memory. ``mu_t = mu`` for adapting tones, else 0.
+        """
+        rate = self._mu * self._adapting
+        q = np.conj(rate[:, None, None] * self._p_full).transpose(1, 0, 2)    # (C, T, C)
+        if self._p_diag is not None:
+            self._q = np.ascontiguousarray(np.diagonal(q, axis1=0, axis2=2).T)
+            self._q_stack = None
+        else:
+            self._q = None
+            self._q_stack = np.ascontiguousarray(
+                np.stack([q.real, q.imag], axis=2).reshape(-1, self._c))
+
+    # ------------------------------------------------------------------ hot path
+    def step(self, error: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+        """Adapt on the error of sample n and return the command of sample n.
+
+        Args:
+            error: e_n, (C,) accelerations (m/s^2) of sample n, DC removed.
+            out: optional (C,) float array to write the command into (no allocation).
+
+        Returns:
+            u_n, (C,) command forces (N) for sample n (``out`` if given, else a new array).
+        """
+        e = np.asarray(error, dtype=float)
+        if e.shape != (self._c,):
+            raise ValueError(f'error must have shape ({self._c},), got {e.shape}')
+        if not math.isfinite(sum(e.tolist())):         # a NaN would poison the weights
+            raise ValueError(f'error must be finite, got {e.tolist()}')
+        if self._enabled and not self._frozen and self._mu > 0.0:
+            self._adapt(e)
+        if self._gain != self._target:
+            self._advance_gain()
+        np.dot(self._v_r, self._z_r, out=self._u)          # sum_t a cos phi + b sin phi
+        if self._fading.active:
+            self._fading.accumulate(self._u)
+        if self._gain != 1.0:
+            self._u *= self._gain
+        self._osc.rotate()
+        if out is None:
+            return self._u.copy()
+        out[...] = self._u
+        return out
+
+    def advance(self, samples: int) -> None:
+        """Skip ``samples`` samples whose error is unknown (missing messages).
+
+        Phases, the enable ramp and fading tones move on exactly as ``samples`` calls of
+        :meth:`step` with a zero error would move them, at O(1) cost; weights are unchanged.
+        """
+        samples = int(samples)
+        if samples < 0:
+            raise ValueError(f'samples must be >= 0, got {samples}')
+        target = self._target
+        if self._gain_step <= 0.0 or samples * self._gain_step >= abs(target - self._gain):
+            self._gain = target if samples else self._gain
+        else:
+            self._gain += np.copysign(samples * self._gain_step, target - self._gain)
+        self._fading.advance(samples)
+        self._osc.advance(samples)
+
+    def _adapt(self, e: np.ndarray) -> None:
+        """V += conj(mu P) e e^{j phi} (i.e. W += mu P e e^{-j phi}), masked per tone.
+
+        Three calls, all with ``out=``, same dtypes and no broadcasting ufunc (those
+        allocate iterator buffers): diagonal P forms the outer product ``e e^{j phi}`` as
+        a real (C, 1) x (1, 2T) matrix product into the float view of ``y`` and scales it
+        by ``Q``; full P takes ``conj(mu P) e`` as one real matrix-vector product and
+        multiplies it by ``e^{j phi_t}`` as T stacked 1 x 1 products.
+        """
+        if self._q is not None:
+            np.dot(e[:, None], self._z_row_r, out=self._y_r)
+            np.multiply(self._y, self._q, out=self._y)
+        else:
+            np.dot(self._q_stack, e, out=self._m_flat)
+            np.matmul(self._z_stack, self._m_stack, out=self._y_stack)
+        np.add(self._v, self._y, out=self._v)
+
+    def _advance_gain(self) -> None:
+        """One sample of the enable/disable ramp towards ``_target`` (the caller checks)."""
+        target = self._target
+        if self._gain_step <= 0.0:
+            self._gain = target
+        elif self._gain < target:
+            self._gain = min(target, self._gain + self._gain_step)
+        else:
+            self._gain = max(target, self._gain - self._gain_step)
+
+    # ------------------------------------------------------------------ configuration
+    def set_mu(self, mu: float) -> None:
+        """Set the adaptation rate (>= 0, finite); raise ValueError and keep the old one."""
+        self._mu = validate_mu(mu)
+        self._update_rate()
+
+    def set_coefficients(self, coefficients: np.ndarray | None) -> None:
+        """Set P for every tone ((T, C, C) or (T, C) diagonal; None = raw P = I).
+
+        Every tone adapts afterwards. Weights and phases are kept, so the output is
+        continuous. Raises ValueError (object unchanged) on a bad shape or value.
+        """
+        p_full = validate_coefficients(coefficients, self._freqs.size, self._c)
+        self._adapting[:] = True
+        self._set_p(p_full)
+
+    def set_tone_frequencies(
+        self,
+        freqs_hz: Sequence[float] | np.ndarray,
+        coefficients: np.ndarray | None = None,
+        ramp_samples: int = DEFAULT_RAMP_SAMPLES,
+    ) -> None:
+        """Change the tone set without an output jump.
+
+        Tones whose frequency is unchanged (within 1e-9 Hz) keep weight, phase, coefficient
+        and adapting flag. New tones start with W = 0 and phase 0; they adapt only if
+        ``coefficients`` is given. If given, ``coefficients`` ((T, C, C) or (T, C)) sets P
+        for every tone of the new set. Removed tones fade out linearly over
+        ``ramp_samples`` (frozen), so the command never steps.
+
+        Raises:
+            ValueError: bad frequencies, coefficients or ramp; the object is unchanged.
+        """
+        freqs = validate_frequencies(freqs_hz, self._fs)
+        ramp = _validate_ramp(ramp_samples)
+        given = None if coefficients is None else validate_coefficients(
+            coefficients, freqs.size, self._c)
+        t_new = freqs.size
+        w = np.zeros((t_new, self._c), dtype=complex)
+        phi = np.zeros(t_new)
+        p_full = np.zeros((t_new, self._c, self._c), dtype=complex)
+        adapting = np.zeros(t_new, dtype=bool)
+        kept_old = np.zeros(self._freqs.size, dtype=bool)
+        w_old, phi_old = self.weights, self.phases_rad
+        for k, f in enumerate(freqs):
+            match = np.flatnonzero(np.abs(self._freqs - f) <= SAME_FREQUENCY_TOL_HZ)
+            if match.size:
+                old = match[0]
+                kept_old[old] = True
+                w[k], phi[k] = w_old[old], phi_old[old]
+                p_full[k], adapting[k] = self._p_full[old], self._adapting[old]
+        if given is not None:
+            p_full, adapting[:] = given, True
+        gone = ~kept_old
+        self._fading.add(w_old[gone], phi_old[gone], self._dphi[gone], ramp)
+        self._install(freqs, w, phi, p_full, adapting)
+
+    def reset_weights(self, ramp_samples: int = DEFAULT_RAMP_SAMPLES) -> None:
+        """Set every weight to 0; the present output fades out over ``ramp_samples``."""
+        ramp = _validate_ramp(ramp_samples)
+        self._fading.add(self.weights, self.phases_rad, self._dphi.copy(), ramp)
+        self._v[:] = 0.0
+
+    def set_weights(self, weights: np.ndarray) -> None:
+        """Overwrite the complex (T, C) weights (N); the output follows immediately."""
+        w = np.array(weights, dtype=complex)
+        shape = (self._freqs.size, self._c)
+        if w.shape != shape or not np.all(np.isfinite(w)):
+            raise ValueError(f'weights must be finite with shape {shape}, got {w.shape}')
+        self._v[...] = np.conj(w).T
+
+    def set_enabled(self, flag: bool, ramp_samples: int = DEFAULT_RAMP_SAMPLES) -> None:
+        """Enable/disable the output with a linear gain ramp 0 <-> 1 over ``ramp_samples``.
+
+        While disabled adaptation is frozen and the weights are kept, so re-enabling
+        resumes from the last weights.
+        """
+        ramp = _validate_ramp(ramp_samples)
+        self._enabled = bool(flag)
+        self._target = 1.0 if self._enabled else 0.0
+        self._gain_step = 1.0 / ramp if ramp > 0 else 0.0
+
+    def set_frozen(self, flag: bool) -> None:
+        """Freeze (True) or resume (False) adaptation; the output keeps running."""
+        self._frozen = bool(flag)
+
+    # ------------------------------------------------------------------ read-only views
+    @property
+    def weights(self) -> np.ndarray:
+        """Complex (T, C) weights W = a - j b (N), a copy."""
+        return np.conj(self._v).T.copy()
+
+    @property
+    def tone_frequencies_hz(self) -> np.ndarray:
+        """Tone frequencies (Hz), a copy."""
+        return self._freqs.copy()
+
+    @property
+    def phases_rad(self) -> np.ndarray:
+        """Phase accumulators phi_t (rad, in [0, 2 pi)) of the next sample, a copy."""
+        return self._osc.phases_rad
+
+    @property
+    def coefficients(self) -> np.ndarray:
+        """Complex (T, C, C) adaptation matrices P_t, a copy."""
+        return self._p_full.copy()
+
+    @property
+    def is_diagonal(self) -> bool:
+        """True when every P_t is diagonal (O(T*C) update path)."""
+        return self._p_diag is not None
+
+    @property
+    def adapting(self) -> np.ndarray:
+        """Per-tone adapting flags (T,), a copy."""
+        return self._adapting.copy()
+
+    @property
+    def mu(self) -> float:
+        """Adaptation rate."""
+        return self._mu
+
+    @property
+    def enabled(self) -> bool:
+        """Whether the output is (ramping) on."""
+        return self._enabled
+
+    @property
+    def frozen(self) -> bool:
+        """Whether adaptation is frozen by :meth:`set_frozen`."""
+        return self._frozen
+
+    @property
+    def output_gain(self) -> float:
+        """Present output gain in [0, 1]."""
+        return self._gain
+
+    @property
+    def n_channels(self) -> int:
+        """Number of channels C."""
+        return self._c
+
+    @property
+    def sample_rate_hz(self) -> float:
+        """Loop sample rate (Hz)."""
+        return self._fs

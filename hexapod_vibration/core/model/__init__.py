@@ -1,0 +1,1 @@
+"""The physical model of the Precision Pointing Hexapod: geometry, plant, sensors, shaker."""

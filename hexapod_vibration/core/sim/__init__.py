@@ -1,0 +1,1 @@
+"""The whole loop without ROS: scenarios and the core closed loop."""

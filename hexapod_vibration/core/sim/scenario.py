@@ -1,0 +1,139 @@
+"""Experiment scenarios (``config/scenarios/*.yaml``): shaker, plant, controllers, timeline.
+
+A scenario says what the paper's experiment does, in SI units; the same file drives the
+core-only closed loop (:mod:`hexapod_vibration.core.sim.closed_loop`) and the ROS experiment
+runner. Timeline: the pointing loop holds its pose from t = 0, the notch controller
+identifies the plant at its tones at ``identify_at_s`` (control still off), the
+uncontrolled spectrum is taken over the ``window_s`` before ``control_on_s``, control goes
+on at ``control_on_s``, and the controlled spectrum is taken over the last ``window_s``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from hexapod_vibration.core.model.shaker import ShakerTone, tones_from_arrays
+
+ADAPTATION_MODES = ("centralized", "decentralized", "raw")
+
+
+@dataclass(frozen=True)
+class ShakerSettings:
+    """Shaker tones (Hz, N peak, rad), slow drift (Hz peak, s period), noise (N RMS)."""
+
+    frequencies_hz: tuple[float, ...] = ()
+    amplitudes_n: tuple[float, ...] = ()
+    phases_rad: tuple[float, ...] = ()
+    drift_hz: float = 0.0
+    drift_period_s: float = 60.0
+    noise_rms_n: float = 0.0
+
+    def tones(self) -> list[ShakerTone]:
+        """The tones as :class:`ShakerTone` (validated)."""
+        return tones_from_arrays(self.frequencies_hz, self.amplitudes_n, self.phases_rad,
+                                 self.drift_hz, self.drift_period_s)
+
+
+@dataclass(frozen=True)
+class NotchSettings:
+    """Notch controller: tones (Hz), normalised rate mu (-), adaptation mode."""
+
+    tone_frequencies_hz: tuple[float, ...] = ()
+    mu: float = 0.002
+    adaptation: str = "decentralized"
+
+
+@dataclass(frozen=True)
+class TestSineSettings:
+    """A sinusoid added to every actuator in phase (paper Fig. 4): Hz, N peak."""
+
+    frequency_hz: float = 0.0
+    amplitude_n: float = 0.0
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """One experiment of the paper on the simulated hexapod."""
+
+    name: str
+    description: str = ""
+    seed: int = 1
+    duration_s: float = 32.0
+    control_on_s: float = 16.0
+    identify_at_s: float = 1.0
+    window_s: float = 10.0
+    nonlinear: bool = True
+    model_overrides: dict[str, Any] = field(default_factory=dict)
+    shaker: ShakerSettings = ShakerSettings()
+    notch: NotchSettings = NotchSettings()
+    test_sine: TestSineSettings = TestSineSettings()
+    target_pose: tuple[float, ...] = (0.0,) * 6
+    report_tones_hz: tuple[float, ...] = ()
+    report_harmonics_of_hz: float = 0.0
+
+    def __post_init__(self) -> None:
+        """Check the timeline and settings; ValueError with the field's name otherwise."""
+        self.shaker.tones()
+        if not (self.window_s > 0.0 and self.duration_s > 0.0):
+            raise ValueError("window_s and duration_s must be > 0")
+        if self.notch.adaptation not in ADAPTATION_MODES:
+            raise ValueError(f"notch.adaptation must be one of {ADAPTATION_MODES}")
+        if not np.isfinite(self.notch.mu) or self.notch.mu < 0.0:
+            raise ValueError(f"notch.mu must be >= 0, got {self.notch.mu}")
+        if len(self.target_pose) != 6:
+            raise ValueError("target_pose must have 6 values [x, y, z (m), rx, ry, rz (rad)]")
+        if self.notch.tone_frequencies_hz and not (
+                self.control_on_s - self.window_s >= self.identify_at_s):
+            raise ValueError("the uncontrolled window must start after identification begins")
+        if self.control_on_s > self.duration_s:
+            raise ValueError("control_on_s must not be after duration_s")
+
+    def with_timeline(self, duration_s: float | None = None,
+                      control_on_s: float | None = None) -> Scenario:
+        """Copy with a different duration/control-on time (CLI overrides)."""
+        values = dict(self.__dict__)
+        if duration_s is not None:
+            values["duration_s"] = float(duration_s)
+        if control_on_s is not None:
+            values["control_on_s"] = float(control_on_s)
+        return Scenario(**values)
+
+    @property
+    def samples(self) -> int:
+        """Samples in the run at 1 kHz."""
+        return int(round(self.duration_s * 1000.0))
+
+
+def load_scenario(path: str | Path) -> Scenario:
+    """Read a scenario YAML; unknown keys and bad values raise ValueError naming the file."""
+    path = Path(path)
+    with open(path, encoding="utf-8") as stream:
+        data = yaml.safe_load(stream)
+    try:
+        return scenario_from_dict(data)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{path}: {exc}") from None
+
+
+def scenario_from_dict(data: dict[str, Any]) -> Scenario:
+    """Build a :class:`Scenario` from the YAML layout."""
+    if not isinstance(data, dict) or "name" not in data:
+        raise ValueError("a scenario is a mapping with at least a 'name'")
+    values = dict(data)
+    sections = {"shaker": ShakerSettings, "notch": NotchSettings, "test_sine": TestSineSettings}
+    for key, cls in sections.items():
+        if key in values:
+            values[key] = cls(**_tuples(values[key]))
+    return Scenario(**_tuples(values))
+
+
+def _tuples(values: dict[str, Any]) -> dict[str, Any]:
+    if not isinstance(values, dict):
+        raise ValueError(f"expected a mapping, got {values!r}")
+    return {k: tuple(float(x) for x in v) if isinstance(v, list) else v
+            for k, v in values.items()}

@@ -1,0 +1,194 @@
+"""Executor choice for the 1 kHz nodes, and the loop spinner that serves their hot path.
+
+Each node has a read-only ``executor`` parameter:
+
+- ``waitset`` (the default): the node's 1 kHz loop subscriptions are served from one
+  persistent rcl wait set and taken directly and serialized (``take_message``: no
+  conversion to a Python message, which costs about 19 us per message here), every queued
+  message at each wake-up; their callbacks get the CDR bytes (``messages.receive_strut_array``
+  reads both); everything else (parameter services, ``~/identify``, graph events) is
+  served by a SingleThreadedExecutor at least every ``SERVICE_PERIOD_S``, running or
+  idle. rclpy's executors rebuild a wait set from every entity of the node and go through
+  a task per callback on every spin. Measured on the project's 2-core machine: a
+  ping-pong between two processes takes 388 us per round trip with the executor and
+  222 us with a wait set; the notch controller's CPU per 1 kHz sample fell from 656 to
+  288 us (the README's Performance section has the loop as a whole).
+- ``single_threaded``: rclpy's SingleThreadedExecutor for everything.
+- ``events``: rclpy's experimental EventsExecutor (Jazzy), for comparison only: on this
+  machine it misses more samples than ``waitset`` in realtime and does not stop on SIGINT
+  (``make bench``; it stalled while a 1 kHz ``/clock`` subscriber was in its process).
+
+All three run in the node's one thread: a parameter change is never applied in the middle
+of a sample's computation.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from collections.abc import Callable, Sequence
+
+import rclpy
+from rclpy._rclpy_pybind11 import RCLError
+from rclpy.exceptions import InvalidHandle, ParameterException
+from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedExecutor
+from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
+from rclpy.node import Node
+from rclpy.subscription import Subscription
+
+from hexapod_vibration.ros.parameters import declare_string
+
+EXECUTORS = ("waitset", "single_threaded", "events")
+DEFAULT_EXECUTOR = "waitset"
+SERVICE_PERIOD_S = 0.05
+"""Longest time (s, wall) between two services of the non-loop callbacks by ``waitset``.
+
+One service (an executor ``spin_once`` over every entity of the process's nodes) costs
+0.2-0.4 ms here; every 50 ms that is under 1 % of the loop, and ``ros2 param set`` is
+answered within 50 ms."""
+IDLE_SPIN_S = 0.01
+"""Longest single wait (s) of a node's main loop, so shutdown is noticed promptly."""
+
+
+def declare_executor_parameter(node: Node) -> str:
+    """Declare the node's read-only ``executor`` parameter; returns its value."""
+    return declare_string(node, "executor", DEFAULT_EXECUTOR, "how the node is served: "
+                          "waitset (loop topics from a persistent wait set, the rest by a "
+                          "SingleThreadedExecutor), single_threaded or events (rclpy's "
+                          "executors for everything)", EXECUTORS, read_only=True)
+
+
+def make_executor(name: str) -> Executor:
+    """Create the rclpy executor behind ``name`` (one of :data:`EXECUTORS`)."""
+    if name in ("waitset", "single_threaded"):
+        return SingleThreadedExecutor()
+    if name == "events":
+        from rclpy.experimental import EventsExecutor
+
+        return EventsExecutor()
+    raise ValueError(f"executor must be one of {EXECUTORS}, got {name!r}")
+
+
+class LoopSpinner:
+    """``spin_once`` for a node with 1 kHz loop subscriptions (see the module docstring).
+
+    With ``fast=False`` it is the executor's own ``spin_once``. With ``fast=True`` the loop
+    subscriptions are waited on in a persistent wait set and their callbacks are called
+    directly with the serialized message (bytes), in arrival order per subscription; the
+    executor serves the rest (and calls the same callbacks with Python messages if it
+    takes a loop message itself), so a loop callback must accept both.
+    """
+
+    def __init__(self, executor: Executor, subscriptions: Sequence[Subscription],
+                 fast: bool, service_period_s: float = SERVICE_PERIOD_S) -> None:
+        """Bind to ``executor`` (which holds the node) and its loop ``subscriptions``."""
+        self.executor = executor
+        self.subscriptions = list(subscriptions)
+        self.fast = fast and bool(self.subscriptions)
+        self.service_period_s = service_period_s
+        self._served_s = 0.0
+        self._wait_set = None
+        if self.fast:
+            self._wait_set = _rclpy.WaitSet(len(self.subscriptions), 0, 0, 0, 0, 0,
+                                            executor.context.handle)
+
+    def spin_once(self, timeout_sec: float) -> None:
+        """Dispatch ready callbacks, waiting up to ``timeout_sec`` (s) for a loop message."""
+        if not self.fast:
+            self.executor.spin_once(timeout_sec=timeout_sec)
+            return
+        now = time.perf_counter()
+        if now - self._served_s >= self.service_period_s:
+            # The executor may take a loop message too (its callback runs): return so the
+            # caller sees it rather than waiting for the next one.
+            self._served_s = now
+            self.executor.spin_once(timeout_sec=0.0)
+            self._take_all()
+            return
+        if self._take_all() or timeout_sec <= 0.0:
+            return
+        if self._wait(timeout_sec):
+            self._take_all()
+
+    def _wait(self, timeout_sec: float) -> bool:
+        """Block until a loop subscription has data or ``timeout_sec`` passes."""
+        wait_set = self._wait_set
+        try:
+            wait_set.clear_entities()
+            for sub in self.subscriptions:
+                wait_set.add_subscription(sub.handle)
+            wait_set.wait(int(timeout_sec * 1e9))
+        except (RuntimeError, RCLError, InvalidHandle):
+            self._raise_if_shut_down()
+            raise
+        self._raise_if_shut_down()
+        return bool(wait_set.get_ready_entities("subscription"))
+
+    def _take_all(self) -> int:
+        """Take every queued loop message and call its callback; the number taken."""
+        taken = 0
+        for sub in self.subscriptions:
+            while (item := self._take(sub)) is not None:
+                sub.callback(item[0])
+                taken += 1
+        return taken
+
+    def _take(self, sub: Subscription) -> tuple | None:
+        """One message of ``sub`` (with its info), or None if none is queued."""
+        try:
+            with sub.handle:
+                return sub.handle.take_message(sub.msg_type, True)
+        except (RuntimeError, RCLError, InvalidHandle):
+            # rclpy's executors treat a failing take after shutdown (Ctrl-C) as the end.
+            self._raise_if_shut_down()
+            raise
+
+    def _raise_if_shut_down(self) -> None:
+        if not self.executor.context.ok():
+            raise ExternalShutdownException()
+
+
+def spin_loop(node: Node, spinner: LoopSpinner) -> None:
+    """Serve ``node`` until shutdown (the main loop of a controller node)."""
+    while rclpy.ok():
+        spinner.spin_once(IDLE_SPIN_S)
+
+
+def run_node(name: str, factory: Callable[[], Node],
+             loop: Callable[[Node, LoopSpinner], None] = spin_loop,
+             args: list[str] | None = None,
+             companions: Sequence[Callable[[], Node]] = ()) -> None:
+    """Init rclpy, build the node, run ``loop`` (default: serve it), shut down cleanly.
+
+    The node's 1 kHz subscriptions are those it lists in ``loop_subscriptions`` (empty if
+    it has no such attribute); its ``executor`` parameter chooses how they are served.
+    ``companions`` are more nodes composed into the same process and thread (built after
+    the main node, served by the same executor; their loop subscriptions are taken before
+    the main node's, so a message they publish in a callback reaches it in the same spin).
+    Ctrl-C / SIGTERM end the process quietly with the bag-friendly clean shutdown; a bad
+    parameter (ValueError) or a missing file ends it with exit code 2 and the reason.
+    """
+    rclpy.init(args=args)
+    nodes: list[Node] = []
+    try:
+        nodes.append(factory())
+        nodes.extend(make() for make in companions)
+        executor_name = nodes[0].get_parameter("executor").value
+        executor = make_executor(executor_name)
+        for node in nodes:
+            executor.add_node(node)
+        subscriptions = [sub for node in nodes[1:] + nodes[:1]
+                         for sub in getattr(node, "loop_subscriptions", ())]
+        loop(nodes[0], LoopSpinner(executor, subscriptions, fast=executor_name == "waitset"))
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except RCLError:
+        if rclpy.ok():        # a real error, not the context closed by a signal
+            raise
+    except (ValueError, FileNotFoundError, ParameterException) as exc:
+        print(f"{name}: {exc}", file=sys.stderr, flush=True)
+        raise SystemExit(2) from None
+    finally:
+        for node in reversed(nodes):
+            node.destroy_node()
+        rclpy.try_shutdown()

@@ -1,0 +1,146 @@
+"""The pointing law sample by sample against a reference written from its documented equations.
+
+The reference follows the module docstring of ``core/pointing.py`` step by step (pose from
+the gaps, PID per axis, anti-windup on the integral's strut forces, statics J^-T, then the
+Butterworth low-pass run by ``scipy.signal.sosfilt``), with none of the controller's code.
+"""
+
+import numpy as np
+import pytest
+from scipy import signal
+
+from hexapod_vibration.core.control.pointing import PointingGains
+from hexapod_vibration.core.model.config import load_model_config
+from hexapod_vibration.core.model.plant import rigid_body_mass_matrix
+from hexapod_vibration.core.model.sensors import EddySensorArray
+from hexapod_vibration.core.sim.closed_loop import make_pointing_controller, strut_stiffness_n_per_m
+from hexapod_vibration.paths import config_path
+
+MODEL = load_model_config(config_path("pph_model.yaml"))
+SENSING = EddySensorArray(MODEL.eddy, float(MODEL.geometry.top_joints_m[0, 2])).sensing_matrix
+FS = MODEL.simulation.sample_rate_hz
+STROKE_M = MODEL.strut.stroke_limit_m
+SAMPLES = 20000
+TARGETS = {3000: np.deg2rad([0.0, 0.0, 0.0, 1.0, 0.0, 0.0]),
+           8000: np.array([0.0, 0.0, 0.0, -np.deg2rad(0.5), np.deg2rad(0.8), 0.0]),
+           12000: np.array([2e-4, -1e-4, 5e-4, 0.0, 0.0, np.deg2rad(2.0)]),
+           17000: np.zeros(6)}
+GAINS = {6000: PointingGains(bandwidth_hz=3.0, damping_ratio=0.5, output_lowpass_hz=25.0,
+                             force_limit_n=70.0),
+         14000: PointingGains(bandwidth_hz=0.8, damping_ratio=1.2, output_lowpass_hz=8.0,
+                              force_limit_n=25.0)}
+RESET_AT = 11000
+
+
+def _gaps(wander: float, seed: int = 1) -> np.ndarray:
+    """Eddy gaps (m): pose lagging the target by 0.2 s, offset, wander, 40/80 Hz, noise."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(SAMPLES) / FS
+    target = np.zeros((SAMPLES, 6))
+    for n, pose in sorted(TARGETS.items()):
+        target[n:] = pose
+    lagged = signal.lfilter([1.0 - np.exp(-1.0 / (0.2 * FS))],
+                            [1.0, -np.exp(-1.0 / (0.2 * FS))], target, axis=0)
+    wander_pose = wander * np.array([2e-6, 2e-6, 1e-6, 2e-4, 2e-4, 2e-4])
+    pose = lagged + 2e-6 + wander_pose * np.sin(2 * np.pi * 0.15 * t[:, None]
+                                                + rng.uniform(0, 6.3, 6))
+    pose += np.outer(np.sin(2 * np.pi * 40.0 * t), rng.normal(0.0, 1e-6, 6))
+    pose += np.outer(np.sin(2 * np.pi * 80.0 * t + 0.3), rng.normal(0.0, 3e-7, 6))
+    pose += rng.normal(0.0, 1e-7, pose.shape)
+    return pose @ SENSING.T
+
+
+def _run_controller(gaps: np.ndarray) -> np.ndarray:
+    law = make_pointing_controller(MODEL, SENSING, FS)
+    forces = np.empty_like(gaps)
+    for n, sample in enumerate(gaps):
+        if n in TARGETS:
+            law.set_target(TARGETS[n], STROKE_M)
+        if n in GAINS:
+            law.set_gains(GAINS[n])
+        if n == RESET_AT:
+            law.reset()
+        forces[n] = law.step(sample)
+    return forces
+
+
+def _axis_gains(gains: PointingGains) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per-axis Kp, Ki, D of the module docstring for the model's stiffness and masses."""
+    jac = MODEL.geometry.top_jacobian
+    k = strut_stiffness_n_per_m(MODEL) * np.diag(jac.T @ jac)
+    m = np.diag(rigid_body_mass_matrix(MODEL.top_plate))
+    w_c = 2.0 * np.pi * gains.bandwidth_hz
+    w_n = np.maximum(np.sqrt(k / m), 2.0 * w_c)
+    zeta = gains.damping_ratio
+    k_i = m * w_c * w_n**2
+    k_p = np.maximum(m * (w_n**2 + 2.0 * zeta * w_n * w_c) - k, 0.0)
+    d = np.minimum(m * (2.0 * zeta * w_n + w_c), m * 2.0 * np.pi * 3.0)
+    return k_p, k_i, d
+
+
+def _reference(gaps: np.ndarray) -> tuple[np.ndarray, int]:
+    """Strut forces (N) from the documented equations, and the number of held integrals."""
+    jac_t = MODEL.geometry.top_jacobian.T
+    poses = np.linalg.solve(SENSING, gaps.T).T
+    gains = PointingGains()
+    k_p, k_i, d = _axis_gains(gains)
+    target, integral, previous = np.zeros(6), np.zeros(6), None
+    raw = np.empty_like(gaps)
+    restarts = {0: (gains, False)}             # sample -> low-pass design, keep its output
+    held = 0
+    for n, pose in enumerate(poses):
+        target = TARGETS.get(n, target)
+        if n in GAINS:
+            gains = GAINS[n]
+            k_p, k_i, d = _axis_gains(gains)
+            restarts[n] = (gains, True)
+        if n == RESET_AT:
+            integral, previous = np.zeros(6), None
+            restarts[n] = (gains, False)
+        rate = np.zeros(6) if previous is None else (pose - previous) * FS
+        previous = pose
+        error = target - pose
+        candidate = integral + error / FS
+        if np.max(np.abs(np.linalg.solve(jac_t, k_i * candidate))) > gains.force_limit_n:
+            held += 1
+        else:
+            integral = candidate
+        raw[n] = np.linalg.solve(jac_t, k_p * error + k_i * integral - d * rate)
+    return _lowpass_segments(raw, restarts), held
+
+
+def _lowpass_segments(raw: np.ndarray, restarts: dict) -> np.ndarray:
+    """2nd-order Butterworth per segment: from the last output after a gain change, else 0."""
+    out = np.empty_like(raw)
+    starts = sorted(restarts) + [len(raw)]
+    for start, stop in zip(starts[:-1], starts[1:], strict=True):
+        gains, keep = restarts[start]
+        sos = signal.butter(2, gains.output_lowpass_hz, fs=FS, output="sos")
+        level = out[start - 1] if keep else np.zeros(6)
+        zi = signal.sosfilt_zi(sos)[:, :, None] * level
+        out[start:stop] = signal.sosfilt(sos, raw[start:stop], axis=0, zi=zi)[0]
+    return out
+
+
+@pytest.mark.parametrize("wander", [1.0, 30.0])
+def test_step_follows_the_documented_law_with_gain_target_and_reset_changes(wander):
+    gaps = _gaps(wander)
+    reference, held = _reference(gaps)
+    assert 1000 < held < SAMPLES - 5000        # the anti-windup engages and releases
+    forces = _run_controller(gaps)
+    error = np.max(np.abs(forces - reference))
+    assert error <= 1e-12 * np.max(np.abs(reference)), f"max error {error:.3g} N"
+
+
+def test_step_returns_an_array_of_its_own():
+    gaps = _gaps(1.0)[:300]
+    law = make_pointing_controller(MODEL, SENSING, FS)
+    law.set_target(TARGETS[3000], STROKE_M)
+    kept = []
+    for sample in gaps:
+        force = law.step(sample)
+        kept.append(force.copy())
+        force[:] = 1e9                          # the caller may scribble on it
+    again = make_pointing_controller(MODEL, SENSING, FS)
+    again.set_target(TARGETS[3000], STROKE_M)
+    assert np.array_equal(np.array(kept), np.array([again.step(g) for g in gaps]))

@@ -1,0 +1,313 @@
+"""Every parameter of the three nodes through rclpy's parameter client (as ``ros2 param``).
+
+Each node runs as a process on the test's own ROS domain. A valid value is accepted, read
+back with get_parameters and, where it is observable, seen in the data (by sample index,
+"eventually", never timed); each bad value is rejected with a non-empty reason and the
+old value kept. ``config/pph.yaml`` holds every parameter at its default, and a params
+file given with ``--ros-args --params-file`` is applied.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import yaml
+from node_graph import (
+    HANG_GUARD_S,
+    Diagnostics,
+    ParameterClient,
+    StrutTopic,
+    assert_close,
+    assert_rejected,
+    db,
+    tone_amplitude,
+    wait_until,
+)
+from rclpy.parameter import Parameter
+
+ROOT = Path(__file__).resolve().parents[2]
+PARAMS_FILE = ROOT / 'config' / 'pph.yaml'
+NODES = ('pph_driver', 'notch_controller', 'pointing_controller')
+RCLPY_OWN = {'use_sim_time', 'start_type_description_service'}
+EMPTY_DEFAULTS = {'pph_driver': {'shaker_phases_rad': []}}
+"""Parameters at an empty-array default: a params file cannot hold them (see pph.yaml)."""
+
+
+def _check_rejected(client: ParameterClient, name: str, bad_values, *words: str) -> None:
+    """Each bad value is rejected with a reason (containing ``words``); value unchanged."""
+    before = client.get(name)[name]
+    for bad in bad_values:
+        result = client.set(name, bad)
+        try:
+            assert_rejected(result, *words)
+        except AssertionError as exc:
+            raise AssertionError(f'{client.target} {name}={bad!r}: {exc}') from None
+        assert_close(client.get(name)[name], before)
+
+
+def _check_accepted(client: ParameterClient, name: str, value) -> None:
+    result = client.set(name, value)
+    assert result.successful, f'{client.target} {name}={value!r}: {result.reason}'
+    assert_close(client.get(name)[name], value)
+
+
+def _check_read_only(client: ParameterClient, values: dict) -> None:
+    for name, value in values.items():
+        _check_rejected(client, name, [value], 'read-only')
+
+
+def test_params_yaml_holds_every_parameter_at_its_default(ros_context, node_processes):
+    for name in NODES:
+        node_processes.start(name)
+    node = ros_context.create_node('param_reader')
+    expected = yaml.safe_load(PARAMS_FILE.read_text())
+    for name in NODES:
+        actual = ParameterClient(ros_context, node, name).get_all()
+        for own in RCLPY_OWN:
+            actual.pop(own)
+        documented = {**expected[name]['ros__parameters'], **EMPTY_DEFAULTS.get(name, {})}
+        assert actual == documented, name
+
+
+def test_params_file_is_applied(ros_context, node_processes, tmp_path):
+    params = yaml.safe_load(PARAMS_FILE.read_text())
+    changed = {
+        'pph_driver': {'shaker_frequencies_hz': [45.0, 90.0], 'shaker_amplitudes_n': [60.0, 5.0],
+                       'shaker_phases_rad': [0.0, 1.5], 'command_timeout_samples': 7,
+                       'clock_mode': 'realtime', 'lockstep_controllers': ['pointing']},
+        'notch_controller': {'mu': 0.004, 'tone_frequencies_hz': [45.0, 90.0],
+                             'enabled': False, 'adaptation': 'centralized',
+                             'identify_delay_s': 0.5, 'dc_cutoff_hz': 0.25},
+        'pointing_controller': {'target_tilt_x_deg': 1.0, 'target_twist_deg': -2.0,
+                                'target_translation_m': [0.0, 1e-4, 0.0],
+                                'bandwidth_hz': 1.0},
+    }
+    for name, values in changed.items():
+        params[name]['ros__parameters'].update(values)
+    path = tmp_path / 'my_pph.yaml'
+    path.write_text(yaml.safe_dump(params))
+    for name in NODES:
+        node_processes.start(name, '--ros-args', '--params-file', str(path))
+    node = ros_context.create_node('param_reader')
+    for name, values in changed.items():
+        client = ParameterClient(ros_context, node, name)
+        actual = client.get(*values)
+        for key, value in values.items():
+            assert_close(actual[key], value)
+        # The rest is at the defaults of the file.
+        others = client.get_all()
+        for key, value in params[name]['ros__parameters'].items():
+            assert_close(others[key], value)
+
+
+def test_notch_controller_parameters(ros_context, node_processes):
+    driver = node_processes.start('pph_driver', '--ros-args', '-p',
+                                  'lockstep_controllers:=[notch]')
+    notch = node_processes.start('notch_controller', '--ros-args',
+                                 '-p', 'tone_frequencies_hz:=[40.0]', '-p', 'mu:=0.01',
+                                 '-p', 'identify_delay_s:=0.2')
+    node = ros_context.create_node('param_client')
+    command = StrutTopic(node, '/pph/notch_command')
+    diagnostics = Diagnostics(node)
+    client = ParameterClient(ros_context, node, 'notch_controller')
+
+    def logs() -> str:
+        return driver.output() + notch.output()
+
+    def identified(tones: list[float]) -> bool:
+        return (diagnostics.value('notch_controller', 'state') == 'adapting'
+                and diagnostics.value('notch_controller', 'identified_tones_hz') == str(tones))
+
+    assert wait_until(ros_context, lambda: identified([40.0]), HANG_GUARD_S), logs()
+    bound = float(diagnostics.value('notch_controller', 'mu_bound'))
+    assert 0.0 < bound < 0.9
+
+    # mu
+    _check_accepted(client, 'mu', 0.005)
+    _check_rejected(client, 'mu', [-0.1, math.nan, math.inf, -math.inf, 'fast', 1])
+    _check_rejected(client, 'mu', [0.9, min(bound * 1.01, 1.0)], 'stability bound',
+                    f'{bound:.4g}')
+    # adaptation
+    _check_rejected(client, 'adaptation', ['magic', ''], 'adaptation')
+    _check_rejected(client, 'adaptation', [3.0])
+    _check_accepted(client, 'adaptation', 'centralized')
+    _check_accepted(client, 'adaptation', 'decentralized')
+    # tone_frequencies_hz
+    _check_rejected(client, 'tone_frequencies_hz', [[math.nan], [40.0, math.nan], [math.inf]],
+                    'finite')
+    _check_rejected(client, 'tone_frequencies_hz', [[-40.0], [0.0], [500.0], [40.0, 600.0]],
+                    '500')
+    _check_rejected(client, 'tone_frequencies_hz', [[40.0, 40.0], [80.0, 40.0, 80.0]],
+                    'duplicate')
+    _check_rejected(client, 'tone_frequencies_hz', [[10.0 + 20.0 * k for k in range(17)]],
+                    '16')
+    _check_rejected(client, 'tone_frequencies_hz', ['40', [40, 80], 40.0])  # wrong types
+    # A new tone: accepted, identified (it was unknown), then adapted.
+    _check_accepted(client, 'tone_frequencies_hz', [40.0, 80.0])
+    assert wait_until(ros_context, lambda: identified([40.0, 80.0]), HANG_GUARD_S), logs()
+    # Removing a tone needs no identification (bumpless).
+    statuses = len(diagnostics.history)
+    mark = command.last_index
+    _check_accepted(client, 'tone_frequencies_hz', [40.0])
+    later = []
+
+    def two_later_statuses() -> bool:
+        later[:] = [s for s in diagnostics.history[statuses:] if s.name == 'notch_controller'
+                    and int({kv.key: kv.value for kv in s.values}['last_sample']) > mark]
+        return len(later) >= 2
+    assert wait_until(ros_context, two_later_statuses, HANG_GUARD_S), logs()
+    assert all(s.message == 'adapting' for s in later), [s.message for s in later]
+
+    # enabled: off -> the command fades to exactly zero; on -> it comes back.
+    def commands_after(start: int) -> np.ndarray:
+        return command.window(start, command.last_index + 1)[1]
+
+    _check_accepted(client, 'enabled', False)
+    mark = command.last_index
+    off = wait_until(ros_context,
+        lambda: len(commands_after(mark)) > 200
+        and not np.any(commands_after(mark)[-100:]), HANG_GUARD_S)
+    assert off, commands_after(mark)[-5:]
+    _check_accepted(client, 'enabled', True)
+    mark = command.last_index
+    assert wait_until(ros_context,
+        lambda: np.any(np.abs(commands_after(mark)) > 0.01), HANG_GUARD_S)
+    _check_rejected(client, 'enabled', ['yes', 1])
+
+    # The other run-time parameters.
+    for name, good, bad in (('ramp_s', 0.1, [-1.0, 6.0, math.nan]),
+                            ('identify_delay_s', 2.0, [-1.0, 61.0]),
+                            ('identification_amplitude_n', 3.0, [0.0, -1.0, 21.0]),
+                            ('auto_identify', False, ['no'])):
+        _check_accepted(client, name, good)
+        _check_rejected(client, name, bad)
+    _check_read_only(client, {'identification_settle_s': 0.2, 'identification_measure_s': 0.5,
+                              'dc_cutoff_hz': 1.0, 'loop_delay_samples': 1.0,
+                              'executor': 'events'})
+    assert notch.running() and driver.running(), logs()
+
+
+def test_driver_parameters(ros_context, node_processes):
+    driver = node_processes.start('pph_driver', '--ros-args', '-p', 'clock_mode:=realtime',
+                                  '-p', 'lockstep_controllers:=[]')
+    node = ros_context.create_node('param_client')
+    accel = StrutTopic(node, '/pph/accel')
+    force = StrutTopic(node, '/pph/actuator_force')
+    client = ParameterClient(ros_context, node, 'pph_driver')
+    assert client.get('clock_mode', 'lockstep_controllers') == {
+        'clock_mode': 'realtime', 'lockstep_controllers': []}
+
+    # The shaker tone is in the accelerometers, and gone once its amplitude is 0.
+    assert wait_until(ros_context, lambda: accel.last_index > 1500, HANG_GUARD_S), driver.output()
+    on = tone_amplitude(*accel.window(accel.last_index - 1000, accel.last_index + 1), 40.0)
+    _check_accepted(client, 'shaker_amplitudes_n', [0.0])
+    mark = accel.last_index
+    assert wait_until(ros_context, lambda: accel.last_index > mark + 3000, HANG_GUARD_S)
+    off = tone_amplitude(*accel.window(mark + 2000, mark + 3000), 40.0)
+    assert np.all(on > 0.05) and db(np.linalg.norm(on) / np.linalg.norm(off)) > 20.0, (on, off)
+
+    # Shaker arrays: lengths must match, elements within bounds and finite.
+    _check_rejected(client, 'shaker_frequencies_hz', [[40.0, 80.0]], 'same length')
+    _check_rejected(client, 'shaker_phases_rad', [[0.1, 0.2]], 'phases')
+    result = client.set_atomically(shaker_frequencies_hz=[40.0, 80.0],
+                                   shaker_amplitudes_n=[80.0, 10.0])
+    assert result.successful, result.reason
+    assert client.get('shaker_frequencies_hz', 'shaker_amplitudes_n') == {
+        'shaker_frequencies_hz': [40.0, 80.0], 'shaker_amplitudes_n': [80.0, 10.0]}
+    _check_accepted(client, 'shaker_phases_rad', [0.0, 1.0])
+    _check_rejected(client, 'shaker_amplitudes_n', [[-1.0, 10.0]], 'minimum')
+    _check_rejected(client, 'shaker_amplitudes_n', [[150.0, 10.0]], 'maximum')
+    _check_rejected(client, 'shaker_amplitudes_n', [[math.nan, 10.0]], 'finite')
+    _check_rejected(client, 'shaker_amplitudes_n', ['loud', [80, 10]])
+    _check_rejected(client, 'shaker_frequencies_hz', [[600.0, 80.0], [0.0, 80.0]])
+    _check_rejected(client, 'shaker_frequencies_hz', [[math.nan, 80.0]], 'finite')
+    _check_rejected(client, 'shaker_phases_rad', [[0.0, 11.0]], 'maximum')
+
+    # The paper's test sine: the same force on all six actuators.
+    _check_accepted(client, 'test_sine_amplitude_n', 5.0)
+    _check_accepted(client, 'test_sine_frequency_hz', 45.0)
+
+    def sine_applied() -> bool:
+        _, f = force.window(force.last_index - 200, force.last_index + 1)
+        return (len(f) > 150 and np.allclose(f, f[:, :1])
+                and 4.5 < np.max(np.abs(f)) <= 5.0 + 1e-9)
+    assert wait_until(ros_context, sine_applied, HANG_GUARD_S), (
+        force.window(force.last_index - 5, force.last_index + 1), driver.output())
+    _check_accepted(client, 'test_sine_amplitude_n', 0.0)
+    assert wait_until(ros_context,
+        lambda: not np.any(force.window(force.last_index - 200, force.last_index + 1)[1]),
+        HANG_GUARD_S), (accel.last_index, force.last_index, accel.messages, force.messages,
+                        driver.running(), driver.output())
+    _check_rejected(client, 'test_sine_amplitude_n', [-1.0, 41.0, math.nan])
+    _check_rejected(client, 'test_sine_frequency_hz', [0.0, 500.0, math.inf])
+
+    for name, good, bad in (('shaker_drift_hz', 0.5, [-0.1, 6.0, math.nan]),
+                            ('shaker_drift_period_s', 30.0, [0.5, 4000.0]),
+                            ('shaker_noise_rms_n', 1.0, [-1.0, 21.0]),
+                            ('command_timeout_samples', 10, [0, 1001, 5.5]),
+                            ('lockstep_timeout_s', 0.5, [0.0, 11.0, math.nan]),
+                            ('hold_at_time_s', 100.0, [-2.0, math.nan])):
+        _check_accepted(client, name, good)
+        _check_rejected(client, name, bad)
+    _check_accepted(client, 'hold_at_time_s', -1.0)
+    _check_read_only(client, {'clock_mode': 'lockstep', 'model_file': '/tmp/model.yaml',
+                              'nonlinear': False, 'seed': 2, 'executor': 'events',
+                              'lockstep_controllers': ['notch']})
+    assert driver.running(), driver.output()
+    last = accel.last_index
+    assert wait_until(ros_context, lambda: accel.last_index > last + 100, HANG_GUARD_S)
+
+
+def test_pointing_controller_parameters(ros_context, node_processes):
+    driver = node_processes.start('pph_driver', '--ros-args',
+                                  '-p', 'lockstep_controllers:=[pointing]')
+    pointing = node_processes.start('pointing_controller')
+    node = ros_context.create_node('param_client')
+    command = StrutTopic(node, '/pph/pointing_command')
+    client = ParameterClient(ros_context, node, 'pointing_controller')
+
+    def recent_mean(samples: int = 300) -> np.ndarray:
+        return command.window(command.last_index - samples, command.last_index + 1)[1].mean(0)
+
+    assert wait_until(ros_context, lambda: command.last_index > 2000, HANG_GUARD_S), (
+        driver.output() + pointing.output())
+    level = recent_mean()
+
+    # A tilt set-point changes the forces that hold the plate.
+    _check_accepted(client, 'target_tilt_x_deg', 1.0)
+    assert wait_until(ros_context,
+        lambda: np.max(np.abs(recent_mean() - level)) > 1.0, HANG_GUARD_S), (
+            level, recent_mean())
+    _check_rejected(client, 'target_tilt_x_deg', [2.6, -3.0, math.nan, '1'])
+    _check_accepted(client, 'target_tilt_x_deg', 2.0)
+    _check_rejected(client, 'target_tilt_y_deg', [2.0, -1.6], 'tilt', '2.5')   # norm > 2.5
+    _check_accepted(client, 'target_tilt_y_deg', 1.0)
+    _check_rejected(client, 'target_tilt_x_deg', [2.4], 'tilt')
+    _check_accepted(client, 'target_tilt_x_deg', 0.0)
+    _check_accepted(client, 'target_tilt_y_deg', 0.0)
+    _check_rejected(client, 'target_twist_deg', [10.5, -11.0, math.inf])
+    _check_accepted(client, 'target_twist_deg', 5.0)
+    _check_accepted(client, 'target_twist_deg', 0.0)
+    _check_rejected(client, 'target_translation_m', [[0.0, 0.0], [0.0, 0.0, 0.0, 0.0]], '3')
+    _check_rejected(client, 'target_translation_m', [[2e-3, 0.0, 0.0], [0.0, math.nan, 0.0]])
+    _check_rejected(client, 'target_translation_m',
+                    [Parameter('target_translation_m', Parameter.Type.DOUBLE_ARRAY, [])], '3')
+    _check_accepted(client, 'target_translation_m', [1e-4, 0.0, 0.0])
+    for name, good, bad in (('bandwidth_hz', 2.0, [0.0, 10.0, math.nan]),
+                            ('damping_ratio', 0.5, [0.0, 3.0]),
+                            ('output_lowpass_hz', 20.0, [1.0, 200.0])):
+        _check_accepted(client, name, good)
+        _check_rejected(client, name, bad)
+
+    # Disabled: exactly zero force.
+    _check_accepted(client, 'enabled', False)
+    mark = command.last_index
+    assert wait_until(ros_context,
+        lambda: command.last_index > mark + 200
+        and not np.any(command.window(command.last_index - 100, command.last_index + 1)[1]),
+        HANG_GUARD_S)
+    _check_accepted(client, 'enabled', True)
+    _check_read_only(client, {'model_file': '/tmp/model.yaml', 'executor': 'events'})
+    assert pointing.running() and driver.running()

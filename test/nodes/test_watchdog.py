@@ -1,0 +1,175 @@
+"""The driver's command watchdog and its handling of bad commands, with real processes.
+
+Judged per sample index on what the driver reports it applied (/pph/actuator_force)
+against what the controllers sent, never on timing.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from node_graph import HANG_GUARD_S, Diagnostics, StrutTopic, wait_until
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from std_msgs.msg import Float64MultiArray, MultiArrayDimension
+
+from hexapod_vibration.core.model.config import load_model_config
+from hexapod_vibration.core.model.plant import saturate_commands
+from hexapod_vibration.paths import config_path
+from hexapod_vibration.ros.messages import make_strut_array
+
+TIMEOUT_SAMPLES = 5          # the driver's command_timeout_samples default (documented)
+DRIVER = 'pph_driver: loop'
+STRUT = load_model_config(config_path('pph_model.yaml')).strut
+
+
+def _notch_part(force: StrutTopic, pointing: StrutTopic, n: int) -> np.ndarray:
+    """What the driver applied at sample n beyond the pointing command of sample n."""
+    return force.by_index[n] - saturate_commands(np.zeros(6), pointing.by_index[n], STRUT)
+
+
+def test_killed_notch_controller_is_dropped_within_the_timeout(ros_context, node_processes):
+    # Each of the last TIMEOUT_SAMPLES samples waits lockstep_timeout_s for the dead one.
+    driver = node_processes.start('pph_driver', '--ros-args', '-p', 'lockstep_timeout_s:=0.2')
+    notch = node_processes.start(
+        'notch_controller', '--ros-args', '-p', 'tone_frequencies_hz:=[40.0]',
+        '-p', 'mu:=0.01', '-p', 'identify_delay_s:=0.2')
+    pointing = node_processes.start('pointing_controller')
+    processes = (driver, notch, pointing)
+
+    def logs() -> str:
+        return '\n'.join(p.output() for p in processes)
+
+    node = ros_context.create_node('watchdog_listener')
+    force = StrutTopic(node, '/pph/actuator_force')
+    pointing_cmd = StrutTopic(node, '/pph/pointing_command')
+    notch_cmd = StrutTopic(node, '/pph/notch_command')
+    diagnostics = Diagnostics(node)
+    assert driver.running()
+
+    # Kill the notch controller while it adapts (its command is far from zero).
+    adapting = wait_until(ros_context,
+        lambda: diagnostics.value('notch_controller', 'state') == 'adapting'
+        and notch_cmd.last_index > diagnostics.int_value('notch_controller',
+                                                         'enabled_since_sample') + 200,
+        HANG_GUARD_S)
+    assert adapting, logs()
+    notch.process.kill()        # SIGKILL: no goodbye on the graph
+    assert notch.wait(HANG_GUARD_S) is not None
+    wait_until(ros_context, lambda: False, 1.0)     # take in what it sent before it died
+    last = notch_cmd.last_index
+    assert abs(notch_cmd.by_index[last]).max() > 0.1
+
+    # The driver runs on: sample indices keep increasing well past the kill, and its next
+    # status reports the stale stream.
+    def reported() -> bool:
+        return (diagnostics.int_value(DRIVER, 'sample') > last
+                and diagnostics.int_value(DRIVER, 'notch_stale_events') >= 1)
+    ok = wait_until(ros_context,
+        lambda: force.last_index > last + 1000 and reported(), HANG_GUARD_S)
+    assert ok, (diagnostics.values(DRIVER), logs())
+    assert driver.running(), driver.output()
+    status = diagnostics.latest[DRIVER]
+    assert 'stale' in status.message and 'notch' in status.message, status
+    assert status.level == status.WARN
+
+    # Per sample: before the kill the driver applied notch + pointing of the same sample;
+    # after the last notch command, the held command for at most TIMEOUT_SAMPLES samples,
+    # then pointing only (notch force zero).
+    for n in range(last - 50, last + 1):
+        expected = saturate_commands(notch_cmd.by_index[n], pointing_cmd.by_index[n], STRUT)
+        np.testing.assert_allclose(force.by_index[n], expected, atol=1e-9, err_msg=str(n))
+    after = range(last + 1, last + 300)
+    assert all(n in force.by_index and n in pointing_cmd.by_index for n in after)
+    held = [n for n in after if np.any(_notch_part(force, pointing_cmd, n) != 0.0)]
+    assert held == list(range(last + 1, last + 1 + len(held))), held
+    print(f'last notch command: sample {last}; held for {len(held)} samples; driver: '
+          f'{diagnostics.values(DRIVER)}')
+    # The test may have missed the last command(s) the driver got (the controller was
+    # killed mid-send; a command whose sample the driver had already passed after a
+    # timeout is still applied as the latest): each one the driver got for sample
+    # last + k ends the hold k samples later and adds at most one distinct value.
+    # Without any, the hold is exactly TIMEOUT_SAMPLES samples of the last command.
+    extra = len(held) - TIMEOUT_SAMPLES
+    assert 0 <= extra <= 2, held
+    values = [tuple(np.round(_notch_part(force, pointing_cmd, n), 9)) for n in held]
+    assert len(set(values)) <= 1 + extra, values
+    if extra == 0:
+        np.testing.assert_allclose(_notch_part(force, pointing_cmd, held[0]),
+                                   notch_cmd.by_index[last], atol=1e-9)
+    for process in (driver, pointing):
+        assert process.stop() == 0, process.output()
+
+
+def _invalid_commands(sample: int) -> list[Float64MultiArray]:
+    """Wrong length, NaN, inf, a garbled sample label, a command from the future."""
+    short = make_strut_array(np.full(6, 30.0), sample)
+    short.data = short.data[:5]
+    nan = make_strut_array(np.full(6, 30.0), sample)
+    nan.data[2] = math.nan
+    inf = make_strut_array(np.full(6, 30.0), None)
+    inf.data[0] = math.inf
+    garbled = make_strut_array(np.full(6, 30.0), sample)
+    garbled.layout.dim[1] = MultiArrayDimension(label='sample:x', size=1, stride=1)
+    future = make_strut_array(np.full(6, 30.0), sample + 10**9)
+    return [short, nan, inf, garbled, future]
+
+
+def test_invalid_notch_commands_are_counted_and_never_applied(ros_context, node_processes):
+    driver = node_processes.start('pph_driver', '--ros-args',
+                                  '-p', 'lockstep_controllers:=[pointing]')
+    pointing = node_processes.start('pointing_controller')
+    node = ros_context.create_node('bad_notch_controller')
+    force = StrutTopic(node, '/pph/actuator_force')
+    pointing_cmd = StrutTopic(node, '/pph/pointing_command')
+    diagnostics = Diagnostics(node)
+    publisher = node.create_publisher(Float64MultiArray, '/pph/notch_command',
+                                      QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE))
+    sent = 0
+
+    def send_invalid() -> None:
+        nonlocal sent
+        for msg in _invalid_commands(max(force.last_index, 0)):
+            publisher.publish(msg)
+            sent += 1
+
+    started = wait_until(ros_context, lambda: force.last_index > 0, HANG_GUARD_S)
+    assert started, driver.output() + pointing.output()
+    first = force.last_index
+    counted = wait_until(ros_context,
+        lambda: diagnostics.int_value(DRIVER, 'notch_invalid') >= 50, HANG_GUARD_S,
+        step=send_invalid)
+    assert counted, (diagnostics.values(DRIVER), driver.output())
+
+    def observed() -> list[int]:
+        return [n for n in range(first, force.last_index)
+                if n in force.by_index and n in pointing_cmd.by_index]
+
+    # Keep sending while enough samples with both topics are seen (subscriptions of this
+    # test process may match late on a loaded machine).
+    assert wait_until(ros_context, lambda: len(observed()) > 100, HANG_GUARD_S,
+                      step=send_invalid), driver.output()
+    stop = force.last_index
+    invalid = diagnostics.int_value(DRIVER, 'notch_invalid')
+    assert invalid <= sent
+    assert diagnostics.latest[DRIVER].level == diagnostics.latest[DRIVER].WARN
+    # Never applied: the applied force is the pointing command alone at every sample.
+    samples = [n for n in range(first, stop) if n in force.by_index and n in pointing_cmd.by_index]
+    assert len(samples) > 100
+    for n in samples:
+        assert np.all(np.isfinite(force.by_index[n]))
+        np.testing.assert_array_equal(_notch_part(force, pointing_cmd, n), np.zeros(6),
+                                      err_msg=str(n))
+
+    # The same check sees a valid command (no sample index: taken for the current sample).
+    valid = np.arange(1.0, 7.0)
+    start = force.last_index
+    seen = wait_until(ros_context,
+        lambda: any(n in force.by_index and n in pointing_cmd.by_index and np.array_equal(
+            _notch_part(force, pointing_cmd, n), valid)
+            for n in range(start + 1, force.last_index + 1)),
+        HANG_GUARD_S, step=lambda: publisher.publish(make_strut_array(valid, None)))
+    assert seen, driver.output()
+    assert driver.running() and pointing.running()
+    for process in (driver, pointing):
+        assert process.stop() == 0, process.output()
