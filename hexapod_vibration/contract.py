@@ -10,6 +10,9 @@ from __future__ import annotations
 STRUT_COUNT = 6
 """Number of struts, hence of values in every ``/pph/*`` message."""
 
+SAMPLE_RATE_HZ = 1000.0
+"""Loop rate (Hz): sample n is at n / SAMPLE_RATE_HZ s of sim time."""
+
 STRUT_LABEL = 'strut'
 """Label of ``layout.dim[0]``."""
 

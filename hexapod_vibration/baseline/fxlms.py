@@ -37,6 +37,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from hexapod_vibration.core.control.adaptation import SampledRun
+from hexapod_vibration.core.control.filters import DCBlocker
 from hexapod_vibration.core.control.notch import TWO_PI, validate_frequencies, validate_mu
 from hexapod_vibration.core.control.phasor import PhasorBank
 from hexapod_vibration.core.model.config import ModelConfig
@@ -470,6 +471,7 @@ class FxlmsCoreLoop(CoreLoop):
         """Build plant and loops as CoreLoop does; the FxLMS is created after identification."""
         super().__init__(config, scenario)
         self.notch = None                    # the notch of the base class is not used
+        self.dc_blocker = DCBlocker(STRUTS, self.fs)
         tones = scenario.notch.tone_frequencies_hz
         if not tones:
             raise ValueError('the scenario has no controller tones (notch.tone_frequencies_hz)')
@@ -490,7 +492,10 @@ class FxlmsCoreLoop(CoreLoop):
         self.fxlms: FilteredXLMSController | None = None
         self.secondary_paths: np.ndarray | None = None
 
-    def _notch_step(self, n: int, error: np.ndarray, record: LoopRecord) -> np.ndarray:
+    def _controller_step(self, n: int, accel_m_s2: np.ndarray,
+                         record: LoopRecord) -> np.ndarray:
+        """The FxLMS command (N) for sample ``n`` from the raw accelerations (m/s^2)."""
+        error = self.dc_blocker.step(accel_m_s2)
         if n == int(round(self.scenario.identify_at_s * self.fs)):
             self.path_identifier = SecondaryPathIdentifier(STRUTS, self.fs, **self._id_args)
         if self.path_identifier is not None:

@@ -1,8 +1,10 @@
-"""The whole loop on the numerical core alone (no ROS): plant, DC blocker, notch, pointing.
+"""The whole loop on the numerical core alone (no ROS): plant, notch supervisor, pointing.
 
-It runs a :class:`~hexapod_vibration.core.sim.scenario.Scenario` exactly as the ROS graph does
-(same sample timing, same identification, same actuator limits), so the ROS experiment can
-be compared sample for sample with it, and tests and benchmarks need no ROS.
+It runs a :class:`~hexapod_vibration.core.sim.scenario.Scenario` exactly as the ROS graph does:
+the same :class:`~hexapod_vibration.core.control.notch_supervisor.NotchSupervisor` as the
+``notch_controller`` node, given the settings the experiment runner gives the node
+(:func:`notch_config`), the same sample timing and actuator limits. So the ROS experiment
+can be compared sample for sample with it, and tests, benchmarks and sweeps need no ROS.
 """
 
 from __future__ import annotations
@@ -11,9 +13,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from hexapod_vibration.core.control import adaptation
-from hexapod_vibration.core.control.filters import DCBlocker
-from hexapod_vibration.core.control.notch import AdaptiveNotchCanceller
+from hexapod_vibration.contract import STRUT_COUNT
+from hexapod_vibration.core.control.notch_supervisor import NotchConfig, NotchSupervisor
 from hexapod_vibration.core.control.pointing import PointingController
 from hexapod_vibration.core.model.config import ModelConfig
 from hexapod_vibration.core.model.plant import (
@@ -25,10 +26,7 @@ from hexapod_vibration.core.model.plant import (
 from hexapod_vibration.core.model.shaker import Shaker
 from hexapod_vibration.core.sim.scenario import Scenario
 
-STRUTS = 6
-# Loop delay seen by the canceller's weights (samples): the command of sample n is first
-# seen in the error of sample n+1, plus the anti-aliasing filter's group delay (~1 sample).
-LOOP_DELAY_SAMPLES = 2.0
+STRUTS = STRUT_COUNT
 
 
 @dataclass
@@ -63,17 +61,16 @@ def make_pointing_controller(config: ModelConfig, sensing_matrix: np.ndarray,
                               rigid_body_mass_matrix(config.top_plate), sample_rate_hz)
 
 
-def coefficients_for(plant_response: np.ndarray, mode: str, mu: float) -> tuple[np.ndarray, float]:
-    """Adaptation coefficients for ``mode`` and the stability bound on ``mu`` (eq. 18).
+def notch_config(scenario: Scenario) -> NotchConfig:
+    """The notch controller's settings for a scenario's run (what the runner gives the node).
 
-    Raises ValueError when ``mu`` is at or beyond the bound of any tone.
+    Control starts off (``enabled`` goes on at ``control_on_s``); the identification starts
+    ``identify_at_s`` after the first sample.
     """
-    coefficients = adaptation.normalized_coefficients(plant_response, mode)
-    bound = min(adaptation.mu_bound(g, p, LOOP_DELAY_SAMPLES)
-                for g, p in zip(plant_response, coefficients, strict=True))
-    if mu >= bound:
-        raise ValueError(f"mu={mu:g} is outside the stability bound {bound:.4g} ({mode})")
-    return coefficients, bound
+    notch = scenario.notch
+    return NotchConfig(mu=notch.mu, tone_frequencies_hz=tuple(notch.tone_frequencies_hz),
+                       adaptation=notch.adaptation, enabled=False,
+                       identify_delay_s=scenario.identify_at_s)
 
 
 class CoreLoop:
@@ -92,37 +89,27 @@ class CoreLoop:
         self.pointing = make_pointing_controller(self.config, self.plant.eddy.sensing_matrix, fs)
         self.pointing.set_target(np.asarray(scenario.target_pose),
                                  self.config.strut.stroke_limit_m)
-        self.dc_blocker = DCBlocker(STRUTS, fs)
         tones = scenario.notch.tone_frequencies_hz
-        self.notch = AdaptiveNotchCanceller(STRUTS, tones, fs, scenario.notch.mu) if tones else None
-        if self.notch is not None:
-            self.notch.set_enabled(False, ramp_samples=0)
-        self.identifier: adaptation.ToneResponseIdentifier | None = None
+        self.notch = NotchSupervisor(notch_config(scenario), fs) if tones else None
 
-    def _notch_step(self, n: int, error: np.ndarray, record: LoopRecord) -> np.ndarray:
-        sc = self.scenario
+    def _controller_step(self, n: int, accel_m_s2: np.ndarray,
+                         record: LoopRecord) -> np.ndarray:
+        """The vibration controller's command (N) for sample ``n`` from the raw accelerations."""
         if self.notch is None:
             return np.zeros(STRUTS)
-        if n == int(round(sc.identify_at_s * self.fs)):
-            self.identifier = adaptation.ToneResponseIdentifier(
-                STRUTS, sc.notch.tone_frequencies_hz, self.fs)
-        if self.identifier is not None:
-            command = self.identifier.step(error)
-            self.notch.step(error)                     # keeps its phase running
-            if self.identifier.done:
-                self._install_coefficients(record)
-            return command
         if n == record.control_on_sample:
-            self.notch.set_enabled(True)
-        return self.notch.step(error)
+            self.notch.apply({"enabled": True})
+        return self.notch.step(n, accel_m_s2)
 
-    def _install_coefficients(self, record: LoopRecord) -> None:
-        response = self.identifier.result()
-        coefficients, bound = coefficients_for(response, self.scenario.notch.adaptation,
-                                               self.scenario.notch.mu)
-        self.notch.set_coefficients(coefficients)
-        record.plant_response, record.coefficients, record.mu_bound = response, coefficients, bound
-        self.identifier = None
+    def _finish(self, record: LoopRecord) -> None:
+        """Copy the notch's identification and what it reported into the record."""
+        if self.notch is None:
+            return
+        record.plant_response = self.notch.plant_response
+        if record.plant_response is not None:
+            record.coefficients = self.notch.canceller.coefficients
+        record.mu_bound = self.notch.bound
+        record.notes.extend(event.message for event in self.notch.drain_events())
 
     def run(self) -> LoopRecord:
         """Simulate the whole scenario and return every sample."""
@@ -134,7 +121,7 @@ class CoreLoop:
         sample = self.plant.step(np.zeros(STRUTS))
         sine = sc.test_sine
         for n in range(n_samples):
-            notch = self._notch_step(n, self.dc_blocker.step(sample.accel_m_s2), rec)
+            notch = self._controller_step(n, sample.accel_m_s2, rec)
             notch = notch + actuator_test_sine(n, sine.frequency_hz, sine.amplitude_n, self.fs)
             pointing = self.pointing.step(sample.eddy_m)
             applied = saturate_commands(notch, pointing, self.config.strut)
@@ -144,6 +131,7 @@ class CoreLoop:
             rec.relative_pose_true[n] = sample.relative_pose_true
             rec.top_accel_true[n] = sample.top_accel_true
             if self.notch is not None:
-                rec.weights[n] = self.notch.weights
+                rec.weights[n] = self.notch.canceller.weights
             sample = self.plant.step(applied)
+        self._finish(rec)
         return rec

@@ -1,0 +1,514 @@
+"""The whole notch controller, without ROS: canceller, identification, bounds and sequencing.
+
+:class:`NotchSupervisor` is what the ``notch_controller`` node runs and what the core
+closed loop (:mod:`hexapod_vibration.core.sim.closed_loop`) runs, so that both take exactly
+the same steps. Per sample it removes the DC from the raw accelerations (m/s^2), steps the
+Adaptive Notch Canceller (:mod:`~hexapod_vibration.core.control.notch`) and, when one is
+running, the plant identification at the tones, and returns the command (N). Between
+samples it takes parameter changes as a checked set: :meth:`NotchSupervisor.check` refuses
+a set with the reason and changes nothing, :meth:`NotchSupervisor.apply` applies a set that
+passed (the node's on-set and post-set parameter callbacks).
+
+Sequencing (the paper leaves "finding the adaptation rate coefficient" to the user; here
+the supervisor finds it):
+- the normalised adaptation modes (``decentralized``, ``centralized``) wait for an
+  identification of the plant at their tones, started ``identify_delay_s`` after the
+  first sample (``auto_identify``), on request, or when tones or the mode change; the
+  canceller is frozen meanwhile and its output stays as it was;
+- the identification gives ``G`` (T, C, C), the coefficients ``P`` and the stability bound
+  on ``mu`` (eq. 18 with the loop delay, the minimum over the tones); a ``mu`` at or above
+  the bound is lowered to half of it at once; a bound of 0 (no stable rate) keeps control
+  off;
+- ``raw`` (the paper as printed, ``P = I``) adapts from the first sample; its
+  identification only measures G and the bound (and freezes the weights meanwhile).
+
+Missing samples (a gap in the indices) move the phases on as if the samples had been
+there (:meth:`AdaptiveNotchCanceller.advance`); a gap during an identification restarts it.
+
+What the supervisor decides and the node must tell (log lines, a ``mu`` it lowered that
+the ROS parameter must mirror) is queued as :class:`SupervisorEvent` for
+:meth:`NotchSupervisor.drain_events`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from hexapod_vibration.contract import SAMPLE_RATE_HZ, STRUT_COUNT
+from hexapod_vibration.core.control import adaptation
+from hexapod_vibration.core.control.filters import DCBlocker
+from hexapod_vibration.core.control.notch import (
+    AdaptiveNotchCanceller,
+    validate_frequencies,
+    validate_mu,
+)
+
+MAX_TONES = 16
+"""Largest number of tones the controller accepts."""
+
+
+class NotchState:
+    """State names of the notch controller, as reported on ``/diagnostics``."""
+
+    IDENTIFYING = "identifying"
+    ADAPTING = "adapting"
+    ENABLED = "enabled"
+    DISABLED = "disabled"
+    REFUSED = "refused"
+    """Control kept off: the identification gave no usable coefficients or no stable mu."""
+
+
+@dataclass(frozen=True)
+class NotchConfig:
+    """Settings of the notch controller; the field names are the node's ROS parameters.
+
+    Attributes:
+        mu: normalised adaptation rate (1/sample): the weights converge as (1 - mu)^n.
+        tone_frequencies_hz: tones to cancel (Hz), each in (0, fs/2), distinct, at most 16.
+        enabled: control output on (ramped over ``ramp_s``); while off the weights are kept.
+        adaptation: ``decentralized`` (six SISO loops, the paper), ``centralized``
+            (P = -2 G^-1) or ``raw`` (P = I, mu not normalised).
+        auto_identify: identify at start-up and whenever the tones or the mode change.
+        identify_delay_s: wait after the first sample before the start-up identification (s).
+        identification_amplitude_n: test-tone amplitude per tone (N peak).
+        identification_settle_s: discarded settling time per identification segment (s).
+        identification_measure_s: fitted time per identification segment (s).
+        dc_cutoff_hz: corner of the DC blocker before the canceller (Hz).
+        loop_delay_samples: loop delay used in the stability bound (samples).
+        ramp_s: enable/disable fade time (s).
+    """
+
+    mu: float = 0.002
+    tone_frequencies_hz: tuple[float, ...] = (40.0, 80.0)
+    enabled: bool = True
+    adaptation: str = "decentralized"
+    auto_identify: bool = True
+    identify_delay_s: float = 1.0
+    identification_amplitude_n: float = 2.0
+    identification_settle_s: float = 0.1
+    identification_measure_s: float = 0.3
+    dc_cutoff_hz: float = 0.5
+    loop_delay_samples: float = 2.0
+    ramp_s: float = 0.05
+
+    def replaced(self, changes: Mapping[str, Any]) -> NotchConfig:
+        """A copy with ``changes`` (parameter name -> value); unknown names raise KeyError."""
+        unknown = set(changes) - {f.name for f in dataclasses.fields(self)}
+        if unknown:
+            raise KeyError(f"not a notch setting: {', '.join(sorted(unknown))}")
+        values = dict(changes)
+        if "tone_frequencies_hz" in values:
+            values["tone_frequencies_hz"] = tuple(float(f) for f in
+                                                  values["tone_frequencies_hz"] or ())
+        return dataclasses.replace(self, **values)
+
+
+@dataclass(frozen=True)
+class SupervisorEvent:
+    """Something the supervisor did that the node reports.
+
+    Attributes:
+        level: ``info``, ``warn`` or ``error`` (the log level).
+        message: one line for the log.
+        parameter: (name, value) of a setting the supervisor changed itself (a lowered
+            ``mu``), for the node to mirror into its ROS parameter; None otherwise.
+    """
+
+    level: str
+    message: str
+    parameter: tuple[str, Any] | None = None
+
+
+@dataclass(frozen=True)
+class _Plan:
+    """A checked set of changes: resulting tones, mode, known response, P and bound."""
+
+    tones: list[float]
+    mode: str
+    response: np.ndarray | None
+    coefficients: np.ndarray | None
+    bound: float
+
+
+def _tone_key(frequency_hz: float) -> float:
+    return round(float(frequency_hz), 6)
+
+
+def coefficients_and_bound(response: np.ndarray, mode: str,
+                           delay_samples: float) -> tuple[np.ndarray, float]:
+    """Adaptation coefficients P (T, C, C) for ``mode`` and the bound on ``mu``.
+
+    The bound is eq. 18 with the loop delay (:func:`adaptation.mu_bound`) at every tone,
+    the smallest over the tones: the rate must be stable at all of them.
+
+    Args:
+        response: identified plant response G (T, C, C), (m/s^2)/N.
+        mode: one of :data:`adaptation.COEFFICIENT_MODES`.
+        delay_samples: loop delay beyond the one-sample command hold (samples).
+
+    Raises:
+        ValueError: G unusable for ``mode`` (ill-conditioned, zero diagonal, not finite).
+    """
+    coefficients = adaptation.normalized_coefficients(response, mode)
+    bound = min(adaptation.mu_bound(g, c, delay_samples)
+                for g, c in zip(response, coefficients, strict=True))
+    return coefficients, float(bound)
+
+
+class NotchSupervisor:
+    """The notch controller: raw accelerations in, strut commands out, one call per sample.
+
+    Args:
+        config: initial settings (checked as a whole; ValueError with the reason).
+        sample_rate_hz: loop rate fs (Hz).
+        channels: number of struts C.
+    """
+
+    def __init__(self, config: NotchConfig, sample_rate_hz: float = SAMPLE_RATE_HZ,
+                 channels: int = STRUT_COUNT) -> None:
+        """Build the canceller and the DC blocker; identification waits for the first sample."""
+        self.fs = float(sample_rate_hz)
+        self.channels = int(channels)
+        self._config = config
+        tones = list(config.tone_frequencies_hz)
+        raw = config.adaptation == "raw"
+        # Raw (paper as printed, P = I) adapts at once; the normalised modes wait for the
+        # identification to give them their coefficients.
+        self.canceller = AdaptiveNotchCanceller(self.channels, tones if raw else [], self.fs,
+                                                validate_mu(config.mu))
+        if not raw:
+            self.canceller.set_tone_frequencies(tones, ramp_samples=0)
+        self.canceller.set_enabled(False, ramp_samples=0)
+        self.dc_blocker = DCBlocker(self.channels, self.fs, config.dc_cutoff_hz)
+        self._command = np.zeros(self.channels)
+        self.identifier: adaptation.ToneResponseIdentifier | None = None
+        self.plant_response: np.ndarray | None = None
+        self.identified_tones: list[float] = []
+        self._responses: dict[float, np.ndarray] = {}
+        self.bound = self._normalised_bound()
+        self.last_sample = -1
+        self.first_sample = -1
+        self.enabled_since_sample = -1
+        self.identification_start_sample = -1
+        self.identification_end_sample = -1
+        self.refusal = ""
+        self.counters = {"gaps": 0, "missed_samples": 0, "duplicates": 0}
+        self._events: list[SupervisorEvent] = []
+        self.bound = self._plan({"mu": config.mu, "tone_frequencies_hz": tones,
+                                 "adaptation": config.adaptation}).bound
+        if raw or not config.auto_identify:
+            self.canceller.set_enabled(config.enabled, ramp_samples=0)
+
+    # ------------------------------------------------------------------ settings
+    @property
+    def config(self) -> NotchConfig:
+        """The settings in force."""
+        return self._config
+
+    @property
+    def ramp_samples(self) -> int:
+        """Fade length (samples) for enable/disable and removed tones."""
+        return int(round(self._config.ramp_s * self.fs))
+
+    def check(self, changes: Mapping[str, Any]) -> None:
+        """Check a set of changes (parameter name -> value) as a whole; change nothing.
+
+        Raises:
+            ValueError: the reason the set is refused (for the caller, one line).
+        """
+        self._plan(changes)
+
+    def apply(self, changes: Mapping[str, Any]) -> None:
+        """Apply a set of changes that :meth:`check` accepted.
+
+        Raises:
+            ValueError: the set is refused (nothing changed), as :meth:`check` would say.
+        """
+        plan = self._plan(changes)
+        old = self._config
+        self._config = old.replaced(changes)
+        if "mu" in changes:
+            self.canceller.set_mu(changes["mu"])
+        tones_changed = "tone_frequencies_hz" in changes
+        mode_changed = "adaptation" in changes
+        if tones_changed:
+            self.canceller.set_tone_frequencies(plan.tones, coefficients=plan.coefficients,
+                                                ramp_samples=self.ramp_samples)
+        elif mode_changed and plan.coefficients is not None:
+            self.canceller.set_coefficients(plan.coefficients)
+        self.plant_response, self.bound = plan.response, plan.bound
+        self.identified_tones = plan.tones if plan.response is not None else []
+        if "enabled" in changes:
+            self._set_enabled(bool(changes["enabled"]))
+        if tones_changed or mode_changed:
+            self._after_tone_or_mode_change(plan, mode_changed)
+
+    def _check_tones(self, changes: Mapping[str, Any]) -> None:
+        if "tone_frequencies_hz" not in changes:
+            return
+        tones = list(changes["tone_frequencies_hz"] or [])
+        if len(tones) > MAX_TONES:
+            raise ValueError(f"at most {MAX_TONES} tones, got {len(tones)}")
+        try:
+            validate_frequencies(tones, self.fs)
+        except ValueError as exc:
+            raise ValueError(f"tone_frequencies_hz rejected: {exc}") from None
+
+    def _plan(self, changes: Mapping[str, Any]) -> _Plan:
+        """Check a set of changes as a whole, changing nothing.
+
+        The stability bound is that of the resulting mode and tone set (the identified
+        plant at those tones, else the normalised bound), so a change of ``adaptation`` or
+        of the tones is refused too if it would leave the present ``mu`` unstable.
+        ``mu = 0`` (no adaptation) is always stable.
+
+        Raises:
+            ValueError: the reason to refuse the changes.
+        """
+        self._check_tones(changes)
+        if "tone_frequencies_hz" in changes:
+            tones = [float(f) for f in changes["tone_frequencies_hz"] or []]
+        else:
+            tones = [float(f) for f in self.canceller.tone_frequencies_hz]
+        mode = changes.get("adaptation", self._config.adaptation)
+        if mode not in adaptation.COEFFICIENT_MODES:
+            raise ValueError(f"adaptation must be one of {adaptation.COEFFICIENT_MODES}, "
+                             f"got {mode!r}")
+        if "tone_frequencies_hz" in changes or "adaptation" in changes:
+            response = self._known_response(tones)
+            try:
+                coefficients, bound = self._coefficients_for(tones, response, mode)
+            except ValueError as exc:
+                raise ValueError(f"adaptation={mode!r} rejected: {exc}") from None
+        else:
+            response, coefficients, bound = self.plant_response, None, self.bound
+        mu = changes.get("mu", self.canceller.mu)
+        if not np.isfinite(mu) or mu < 0.0:
+            raise ValueError(f"mu must be finite and >= 0, got {mu}")
+        if mu > 0.0 and mu >= bound and any(k in changes for k in ("mu", "adaptation",
+                                                                   "tone_frequencies_hz")):
+            raise ValueError(f"mu={mu:g} is outside the stability bound {bound:.4g} ({mode} "
+                             f"adaptation at {tones} Hz, eq. 18 with a "
+                             f"{self._config.loop_delay_samples:g}-sample loop delay)")
+        return _Plan(tones, mode, response, coefficients, bound)
+
+    def _after_tone_or_mode_change(self, plan: _Plan, mode_changed: bool) -> None:
+        """Identify what the new tone set or mode needs; drop an identification it does not."""
+        if plan.response is not None or plan.mode == "raw" or not plan.tones:
+            if self.identifier is not None:    # nothing to measure any more: bumpless stop
+                self._event("info", "identification no longer needed: stopped")
+                self.identifier = None
+                self.canceller.set_frozen(False)
+                self.canceller.set_enabled(self._config.enabled, self.ramp_samples)
+            return
+        if mode_changed:      # a normalised mode must not adapt with another mode's P
+            self.canceller.set_frozen(True)
+        running = self.identifier is not None and np.array_equal(
+            self.identifier.tone_frequencies_hz, plan.tones)
+        if self._config.auto_identify and self.first_sample >= 0 and not running:
+            self.start_identification(plan.tones)
+
+    def _set_enabled(self, flag: bool) -> None:
+        if self.identifier is None and not (flag and self.refusal):
+            self.canceller.set_enabled(flag, self.ramp_samples)
+        self.enabled_since_sample = self.last_sample + 1 if flag else -1
+        self._event("info", f"control {'on' if flag else 'off'} from sample "
+                            f"{self.last_sample + 1}")
+
+    # ------------------------------------------------------------------ identification
+    def _normalised_bound(self) -> float:
+        return adaptation.delayed_mode_mu_bound(1.0, self._config.loop_delay_samples)
+
+    def _known_response(self, tones: list[float]) -> np.ndarray | None:
+        """Identified G (T, C, C) at ``tones``, or None if a tone was never identified."""
+        rows = [self._responses.get(_tone_key(f)) for f in tones]
+        if not rows or any(r is None for r in rows):
+            return None
+        return np.stack(rows)
+
+    def _coefficients_for(self, tones: list[float], response: np.ndarray | None,
+                          mode: str) -> tuple[np.ndarray | None, float]:
+        """Coefficients for the canceller (None: new tones wait) and the mu bound."""
+        if response is not None:
+            return coefficients_and_bound(response, mode, self._config.loop_delay_samples)
+        if mode == "raw":
+            identity = np.broadcast_to(np.eye(self.channels, dtype=complex),
+                                       (len(tones), self.channels, self.channels))
+            return (identity.copy() if tones else None), np.inf
+        return None, self._normalised_bound()
+
+    def start_identification(self, tones: list[float] | None = None) -> str:
+        """Begin measuring G at the tones from the next sample on; the canceller is frozen.
+
+        Args:
+            tones: tones to identify (Hz); None: the canceller's tones.
+
+        Returns:
+            A one-line description of the run.
+
+        Raises:
+            ValueError: there are no tones to identify.
+        """
+        return self._start_identification(tones, self.last_sample + 1)
+
+    def _start_identification(self, tones: list[float] | None, first_sample: int) -> str:
+        """Start an identification whose first sample is ``first_sample``."""
+        tones = [float(f) for f in (tones if tones is not None
+                                    else self.canceller.tone_frequencies_hz)]
+        if not tones:
+            raise ValueError("no tones to identify")
+        cfg = self._config
+        self.identifier = adaptation.ToneResponseIdentifier(
+            self.channels, tones, self.fs, cfg.identification_amplitude_n,
+            cfg.identification_settle_s, cfg.identification_measure_s)
+        self.canceller.set_frozen(True)
+        self.identification_start_sample = first_sample
+        self.identification_end_sample = -1
+        text = (f"identifying the plant at {tones} Hz "
+                f"({self.identifier.duration_s:.1f} s of samples)")
+        self._event("info", text)
+        return text
+
+    def _finish_identification(self) -> None:
+        response = self.identifier.result()
+        for f, g in zip(self.identifier.tone_frequencies_hz, response, strict=True):
+            self._responses[_tone_key(f)] = g
+        self.identifier = None
+        self.identification_end_sample = self.last_sample
+        self.canceller.set_frozen(False)
+        tones = [float(f) for f in self.canceller.tone_frequencies_hz]
+        mode = self._config.adaptation
+        current = self._known_response(tones)
+        try:
+            if current is None:
+                raise ValueError(f"no identified response at {tones} Hz")
+            coefficients, bound = coefficients_and_bound(current, mode,
+                                                         self._config.loop_delay_samples)
+        except ValueError as exc:
+            self._refuse(f"identification unusable for {mode}: {exc}; not adapting")
+            return
+        self.plant_response, self.identified_tones, self.bound = current, tones, bound
+        self.canceller.set_coefficients(coefficients)
+        gains = np.abs(np.diagonal(current, axis1=1, axis2=2)).mean(axis=1)
+        self._event("info", f"identified: |G_ii| {np.round(gains, 4)} (m/s^2)/N, mu bound "
+                            f"{bound:.4g}")
+        if bound <= 0.0:
+            self._clamp_mu(0.0)
+            self._refuse(f"identified mu bound is 0 ({mode} adaptation at {tones} Hz): no "
+                         "stable rate, control stays off")
+            return
+        self.refusal = ""
+        self._clamp_mu(bound)
+        self.canceller.set_enabled(self._config.enabled, self.ramp_samples)
+        if self._config.enabled and self.enabled_since_sample < 0:
+            self.enabled_since_sample = self.last_sample + 1
+
+    def _refuse(self, reason: str) -> None:
+        """Keep control off (frozen, faded out) and say why."""
+        self.refusal = reason
+        self.canceller.set_frozen(True)
+        self.canceller.set_enabled(False, self.ramp_samples)
+        self._event("error", reason)
+
+    def _clamp_mu(self, bound: float) -> None:
+        """Lower ``mu`` to half the bound (0 for a bound of 0) if it is not below it."""
+        mu = self.canceller.mu
+        if mu < bound or mu == 0.0:
+            return
+        clamped = 0.5 * bound
+        self.canceller.set_mu(clamped)
+        self._config = self._config.replaced({"mu": clamped})
+        self._event("warn", f"mu={mu:g} is outside the identified stability bound "
+                            f"{bound:.4g}: clamped to {clamped:.4g}", ("mu", clamped))
+
+    # ------------------------------------------------------------------ loop
+    def step(self, index: int | None, accel_m_s2: np.ndarray) -> np.ndarray | None:
+        """Take the raw accelerations of sample ``index``; the command (N) for that sample.
+
+        Args:
+            index: the loop's sample index (None: the one after the last one taken).
+            accel_m_s2: (C,) raw accelerations, gravity included (m/s^2), finite.
+
+        Returns:
+            (C,) command forces (N), a buffer reused by the next call; None if the sample
+            is not after the last one taken (a duplicate or out of order: not used).
+        """
+        index = self.last_sample + 1 if index is None else int(index)
+        if index <= self.last_sample:
+            self.counters["duplicates"] += 1
+            return None
+        self._catch_up(index)
+        error = self.dc_blocker.step(accel_m_s2)
+        command = self.canceller.step(error, out=self._command)
+        if self.identifier is not None:
+            command += self.identifier.step(error)
+            if self.identifier.done:
+                self._finish_identification()
+        return command
+
+    def _catch_up(self, index: int) -> None:
+        """Keep the phase references on the sample grid across missing samples."""
+        if self.first_sample < 0:
+            self.first_sample = index
+        elif index > self.last_sample + 1:
+            gap = index - self.last_sample - 1
+            self.counters["gaps"] += 1
+            self.counters["missed_samples"] += gap
+            self.canceller.advance(gap)
+            self._event("warn", f"/pph/accel: {gap} samples missing before {index}")
+            if self.identifier is not None:
+                self._event("warn", "samples missed during identification: restarting it")
+                self._start_identification(list(self.identifier.tone_frequencies_hz), index)
+        self.last_sample = index
+        delay = int(round(self._config.identify_delay_s * self.fs))
+        if (index - self.first_sample == delay and self.plant_response is None
+                and self.identifier is None and self._config.auto_identify
+                and self.canceller.tone_frequencies_hz.size):
+            self._start_identification(None, index)
+
+    # ------------------------------------------------------------------ reporting
+    @property
+    def state(self) -> str:
+        """One of :class:`NotchState`'s names."""
+        if self.identifier is not None:
+            return NotchState.IDENTIFYING
+        if self.refusal:
+            return NotchState.REFUSED
+        if self.canceller.enabled and self.plant_response is not None:
+            return NotchState.ADAPTING
+        return NotchState.ENABLED if self.canceller.enabled else NotchState.DISABLED
+
+    def status(self) -> dict[str, Any]:
+        """The controller's state as plain values, for ``/diagnostics``."""
+        values: dict[str, Any] = {
+            "state": self.state, "enabled": self._config.enabled,
+            "enabled_since_sample": self.enabled_since_sample,
+            "last_sample": self.last_sample, "mu": self.canceller.mu, "mu_bound": self.bound,
+            "adaptation": self._config.adaptation,
+            "tones_hz": [float(f) for f in self.canceller.tone_frequencies_hz],
+            "identified_tones_hz": self.identified_tones,
+            "identification_start_sample": self.identification_start_sample,
+            "identification_end_sample": self.identification_end_sample,
+            **self.counters}
+        if self.refusal:
+            values["refusal"] = self.refusal
+        if self.plant_response is not None:
+            diag = np.diagonal(self.plant_response, axis1=1, axis2=2)
+            values["plant_gain_m_s2_per_n"] = np.round(np.abs(diag).mean(axis=1), 6).tolist()
+            values["plant_phase_deg"] = np.round(np.rad2deg(np.angle(diag.mean(axis=1))),
+                                                 2).tolist()
+        return values
+
+    def _event(self, level: str, message: str,
+               parameter: tuple[str, Any] | None = None) -> None:
+        self._events.append(SupervisorEvent(level, message, parameter))
+
+    def drain_events(self) -> list[SupervisorEvent]:
+        """The events since the last call, oldest first (and forget them)."""
+        events, self._events = self._events, []
+        return events

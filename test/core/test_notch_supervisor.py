@@ -1,0 +1,174 @@
+"""The notch supervisor alone: sequencing, bounds, clamping, refusal and missing samples.
+
+The plant is static with a one-sample command hold: ``a_n = g + d_n + K u_{n-1}`` (m/s^2),
+with gravity ``g`` on every strut and a 40 Hz disturbance ``d``, so every number the
+supervisor derives (G, the bound) follows from ``K`` by hand.
+"""
+
+import numpy as np
+import pytest
+
+from hexapod_vibration.core.control import adaptation
+from hexapod_vibration.core.control.notch_supervisor import (
+    NotchConfig,
+    NotchState,
+    NotchSupervisor,
+)
+
+FS = 1000.0
+GRAVITY = 9.80665
+TONE = 40.0
+
+
+def coupled_gain(coupling: float, gain: float = 0.1) -> np.ndarray:
+    """K (6x6, (m/s^2)/N): ``gain`` on the diagonal, ``coupling * gain`` elsewhere."""
+    return gain * (np.eye(6) + coupling * (np.ones((6, 6)) - np.eye(6)))
+
+
+def run(sup: NotchSupervisor, k: np.ndarray, samples: int, start: int = 0,
+        amplitude: float = 0.05, skip: frozenset[int] = frozenset()) -> np.ndarray:
+    """Close the loop for ``samples`` samples; returns the disturbance-free error per sample."""
+    u = np.zeros(6)
+    residual = np.zeros((samples, 6))
+    mix = np.linspace(0.5, 1.5, 6)
+    for i, n in enumerate(range(start, start + samples)):
+        d = amplitude * mix * np.cos(2 * np.pi * TONE * n / FS + 0.3)
+        accel = GRAVITY + d + k @ u
+        residual[i] = d + k @ u
+        if n in skip:
+            continue
+        command = sup.step(n, accel)
+        u = np.zeros(6) if command is None else command.copy()
+    return residual
+
+
+def tone_rms(x: np.ndarray) -> float:
+    """RMS (m/s^2) of the 40 Hz component of x (samples x 6), by least squares."""
+    n = np.arange(x.shape[0])
+    basis = np.column_stack([np.cos(2 * np.pi * TONE * n / FS), np.sin(2 * np.pi * TONE * n / FS)])
+    coef, *_ = np.linalg.lstsq(basis, x, rcond=None)
+    return float(np.sqrt(np.mean(np.sum(coef**2, axis=0) / 2)))
+
+
+def config(**changes) -> NotchConfig:
+    base = NotchConfig(tone_frequencies_hz=(TONE,), enabled=False, identify_delay_s=0.1)
+    return base.replaced(changes)
+
+
+def test_identifies_after_the_delay_then_adapts_and_cancels_once_enabled():
+    sup = NotchSupervisor(config())
+    duration = 8 * 400                               # C + 2 segments of 0.4 s
+    end = 100 + duration
+    off = run(sup, coupled_gain(0.0), end + 1000)[end:]
+    status = sup.status()
+    assert status["identification_start_sample"] == 100
+    assert status["identification_end_sample"] == end - 1
+    assert sup.state == NotchState.DISABLED         # identified, control still off
+    g = np.diagonal(sup.plant_response[0])
+    assert np.allclose(np.abs(g), 0.1, rtol=0.05)   # |K_ii| (the DC blocker barely acts)
+    sup.apply({"enabled": True})
+    assert sup.state == NotchState.ADAPTING
+    on = run(sup, coupled_gain(0.0), 6000, end + 1000)
+    assert tone_rms(on[-1000:]) < 1e-3 * tone_rms(off)          # more than 60 dB
+
+
+def test_a_mu_beyond_the_bound_is_refused_and_changes_nothing():
+    sup = NotchSupervisor(config())
+    run(sup, coupled_gain(0.0), 100 + 3200)
+    bound = sup.bound
+    assert 0.5 < bound < 0.7                        # lambda = 1, 2-sample delay: 0.618
+    before = (sup.config, sup.canceller.mu)
+    with pytest.raises(ValueError, match="stability bound"):
+        sup.check({"mu": 0.9})
+    with pytest.raises(ValueError, match="stability bound"):
+        sup.apply({"mu": 0.9})
+    assert (sup.config, sup.canceller.mu) == before
+    sup.apply({"mu": 0.01})
+    assert sup.canceller.mu == 0.01 and sup.config.mu == 0.01
+
+
+def test_an_identified_bound_below_mu_clamps_mu_at_once_and_says_so():
+    k = coupled_gain(0.15)          # eigenvalues of the normalised loop: 1.75 and 0.85
+    sup = NotchSupervisor(config(mu=0.4))
+    run(sup, k, 100 + 3200)
+    p = adaptation.normalized_coefficients(sup.plant_response, "decentralized")
+    bound = adaptation.mu_bound(sup.plant_response[0], p[0], 2.0)
+    assert bound < 0.4 and sup.bound == pytest.approx(bound)
+    assert sup.canceller.mu == pytest.approx(0.5 * bound)      # in force, not only reported
+    assert sup.config.mu == pytest.approx(0.5 * bound)
+    mirrored = [e.parameter for e in sup.drain_events() if e.parameter]
+    assert mirrored == [("mu", pytest.approx(0.5 * bound))]
+    sup.check({"mu": 0.5 * bound})                            # the node's mirror is accepted
+
+
+def test_a_bound_of_zero_keeps_control_off_even_when_enabled():
+    k = coupled_gain(1.2)           # an eigenvalue of diag(1/K_ii) K is 1 - 1.2 < 0
+    sup = NotchSupervisor(config(mu=0.002, enabled=True))
+    run(sup, k, 100 + 3200)
+    assert sup.bound == 0.0
+    assert sup.state == NotchState.REFUSED
+    assert sup.canceller.mu == 0.0 and not sup.canceller.enabled
+    assert "bound is 0" in sup.status()["refusal"]
+    events = sup.drain_events()
+    assert any(e.level == "error" and "control stays off" in e.message for e in events)
+    sup.apply({"enabled": True})
+    assert sup.state == NotchState.REFUSED and not sup.canceller.enabled
+    with pytest.raises(ValueError, match="stability bound 0"):
+        sup.check({"mu": 0.001})
+    residual = run(sup, k, 2000, 3300)
+    free = run(NotchSupervisor(config(tone_frequencies_hz=())), k, 2000, 3300)
+    assert np.array_equal(residual, free)           # exactly what no control gives
+
+
+def test_duplicates_and_out_of_order_samples_are_counted_and_not_used():
+    sup = NotchSupervisor(config())
+    run(sup, coupled_gain(0.0), 10)
+    assert sup.step(9, np.full(6, GRAVITY)) is None
+    assert sup.step(3, np.full(6, GRAVITY)) is None
+    assert sup.counters["duplicates"] == 2 and sup.last_sample == 9
+
+
+def test_a_gap_advances_the_phases_and_restarts_a_running_identification():
+    sup = NotchSupervisor(config())
+    run(sup, coupled_gain(0.0), 600, skip=frozenset(range(300, 305)))
+    assert sup.counters == {"gaps": 1, "missed_samples": 5, "duplicates": 0}
+    assert sup.state == NotchState.IDENTIFYING
+    assert sup.status()["identification_start_sample"] == 305
+    events = [e.message for e in sup.drain_events()]
+    assert any("5 samples missing before 305" in m for m in events)
+    assert any("restarting" in m for m in events)
+
+
+def test_raw_adapts_from_the_first_sample_and_identifies_only_to_measure():
+    sup = NotchSupervisor(config(adaptation="raw", enabled=True, mu=1e-4))
+    assert sup.state == NotchState.ENABLED
+    run(sup, coupled_gain(0.0), 100)
+    assert sup.identifier is None and np.any(sup.canceller.weights != 0)
+    run(sup, coupled_gain(0.0), 3200, 100)
+    assert sup.status()["identification_start_sample"] == 100
+    assert np.array_equal(sup.canceller.coefficients[0], np.eye(6))     # P = I stays
+
+
+def test_new_tones_are_identified_and_known_tones_are_not():
+    sup = NotchSupervisor(config())
+    run(sup, coupled_gain(0.0), 100 + 3200)
+    sup.apply({"tone_frequencies_hz": [40.0, 80.0]})
+    assert sup.state == NotchState.IDENTIFYING
+    assert sup.status()["identification_start_sample"] == 3300
+    run(sup, coupled_gain(0.0), 3200, 3300)
+    assert sup.plant_response.shape == (2, 6, 6)
+    sup.apply({"tone_frequencies_hz": [80.0]})
+    assert sup.state == NotchState.DISABLED         # 80 Hz is known: no new identification
+
+
+def test_bad_settings_are_refused_with_a_reason():
+    sup = NotchSupervisor(config())
+    for changes, words in (({"tone_frequencies_hz": [40.0, 40.0]}, "duplicate"),
+                           ({"tone_frequencies_hz": [600.0]}, "fs/2"),
+                           ({"tone_frequencies_hz": list(range(1, 18))}, "at most 16"),
+                           ({"adaptation": "fancy"}, "adaptation must be one of"),
+                           ({"mu": float("nan")}, "finite")):
+        with pytest.raises(ValueError, match=words):
+            sup.check(changes)
+    with pytest.raises(KeyError, match="not a notch setting"):
+        sup.apply({"gain": 1.0})
