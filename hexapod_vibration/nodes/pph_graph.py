@@ -27,7 +27,8 @@ from hexapod_vibration.ros.executors import run_node
 def main(args: list[str] | None = None) -> None:
     """Entry point of ``ros2 run hexapod_vibration pph_graph``."""
     run_node("pph_graph", PPHDriver, run_driver, args=args,
-             companions=(NotchControllerNode, PointingControllerNode))
+             companions=(NotchControllerNode, PointingControllerNode),
+             nodes=("pph_driver", "notch_controller", "pointing_controller"))
 
 
 if __name__ == "__main__":
