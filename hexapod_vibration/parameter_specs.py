@@ -16,6 +16,7 @@ else is derived from that declaration:
 from __future__ import annotations
 
 import math
+import textwrap
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -452,7 +453,8 @@ def params_yaml(nodes: Sequence[str] = LOOP_NODES) -> str:
         lines += ["", f"{node}:", "  ros__parameters:"]
         for spec in NODE_SPECS[node].parameters:
             lines.append(f"    {spec.name}: {_yaml_value(spec.default)}")
-            lines.append(f"      # {_yaml_comment(spec)}")
+            lines += textwrap.wrap(_yaml_comment(spec), 96, initial_indent="      # ",
+                                   subsequent_indent="      #   ")
     return "\n".join(lines) + "\n"
 
 
