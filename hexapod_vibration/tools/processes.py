@@ -70,7 +70,7 @@ class Child:
         except subprocess.TimeoutExpired:
             return None
 
-    def signal(self, signum: int) -> None:
+    def send(self, signum: int) -> None:
         """Send ``signum`` to the process (not its group) if it still runs."""
         if self.alive():
             with contextlib.suppress(ProcessLookupError):
@@ -79,7 +79,7 @@ class Child:
     def stop(self, timeout_s: float = STOP_TIMEOUT_S, signum: int = signal.SIGINT) -> int:
         """``signum``, wait up to ``timeout_s``, then SIGKILL the group; the exit code."""
         if self.alive():
-            self.signal(signum)
+            self.send(signum)
             if self.wait(timeout_s) is None:
                 self.kill()
         self.close_logs()
