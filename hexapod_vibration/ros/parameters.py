@@ -34,7 +34,12 @@ from rcl_interfaces.msg import (
     ParameterType,
     SetParametersResult,
 )
-from rclpy.exceptions import ParameterException, ParameterUninitializedException
+from rclpy.exceptions import (
+    InvalidParameterTypeException,
+    InvalidParameterValueException,
+    ParameterException,
+    ParameterUninitializedException,
+)
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
@@ -104,7 +109,7 @@ class NodeParameters:
             self._declare(parameter)
         reason = spec.check(self.values())
         if reason:
-            raise ValueError(reason)
+            raise ValueError(reason)    # exactly the reason a run-time change would get
         self.unknown = self._report_unknown()
 
     def _declare(self, spec: ParameterSpec) -> None:
@@ -115,8 +120,16 @@ class NodeParameters:
                                _TYPES[spec.type])
             else:
                 self.node.declare_parameter(spec.name, spec.default, descriptor)
+        except InvalidParameterValueException as exc:   # the reason a run-time set gets
+            reason = str(exc.args[0]).split("Reason: ", 1)[-1].removesuffix(f": {spec.name}")
+            raise ValueError(_naming(spec.name, reason)) from None
+        except InvalidParameterTypeException:
+            given = self.node._parameter_overrides[spec.name].type_
+            reason = (f"Wrong parameter type, expected '{Parameter.Type(descriptor.type)}' "
+                      f"got '{given}'")                 # rclpy's run-time wording
+            raise ValueError(_naming(spec.name, reason)) from None
         except ParameterException as exc:
-            raise ValueError(f"parameter {spec.name}: {_one_line(exc)}") from None
+            raise ValueError(_naming(spec.name, _one_line(exc))) from None
 
     def _report_unknown(self) -> list[str]:
         """Warn about parameters given to the node (CLI, params file) that it does not have."""
@@ -186,6 +199,12 @@ class NodeParameters:
 
 def _one_line(exc: BaseException) -> str:
     return " ".join(str(exc).split())
+
+
+def _naming(name: str, reason: str) -> str:
+    """``reason`` in one line, prefixed with the parameter's name unless it names it."""
+    reason = " ".join(reason.split())
+    return reason if name in reason else f"parameter {name}: {reason}"
 
 
 def descriptor(description: str, read_only: bool = False) -> ParameterDescriptor:
