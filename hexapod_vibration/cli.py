@@ -11,10 +11,12 @@ scipy, matplotlib) it lets an executable defer until its arguments are known to 
   a ``--params-file`` that does not exist or is not a YAML mapping.
 - **Signals.** :func:`install_stop_handlers` makes the first SIGINT or SIGTERM raise
   :class:`StopSignal` (a ``KeyboardInterrupt``) in the main thread, wherever it is,
-  including in the middle of the start-up imports; further signals are recorded only, so a
-  clean shutdown is never cut short. The exit code is then ``128 + signal``: 130 for
-  SIGINT, 143 for SIGTERM. :func:`deferred` holds the exception back over a section that
-  must finish (stopping child processes, moving finished outputs into place).
+  including in the middle of the start-up imports (a raise swallowed there, e.g. in an
+  import lock's callback, is caught up by :func:`exit_if_stopped` after the imports). The
+  exit code is ``128 + the first signal``: 130 for SIGINT, 143 for SIGTERM. Clean-up runs
+  inside :func:`deferred`, which holds a later signal back until the section ends, so a
+  clean shutdown (stopping child processes, closing a bag, moving finished outputs into
+  place) is never cut short.
 - **Exit.** :func:`exit_now` flushes and ends the process with ``os._exit``, after the
   caller's clean shutdown: the interpreter's own teardown (module cleanup and a final
   garbage collection of every object rclpy, numpy and scipy allocated) cost a node about
@@ -63,8 +65,10 @@ class _StopState:
     def handler(self, signum: int, frame: object) -> None:
         if self.signum is None:
             self.signum = signum
-        if self.raised or self.deferring:
+        if self.deferring:
             return
+        # Raised again by a later signal: the first one may have been swallowed (raised
+        # inside an import lock's or a finalizer's callback, which Python only prints).
         self.raised = True
         raise StopSignal(self.signum)
 
@@ -81,6 +85,13 @@ def install_stop_handlers() -> None:
 def stop_requested() -> int | None:
     """The first stop signal received (``signal.SIGINT`` ...), or None."""
     return _STATE.signum
+
+
+def exit_if_stopped() -> None:
+    """Raise :class:`StopSignal` if a stop signal came and its exception was lost."""
+    if _STATE.signum is not None and not _STATE.deferring:
+        _STATE.raised = True
+        raise StopSignal(_STATE.signum)
 
 
 def interrupted_exit_code(exc: BaseException | None = None) -> int:

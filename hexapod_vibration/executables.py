@@ -24,7 +24,9 @@ def _node(executable: str, module: str, nodes: Sequence[str], argv: Sequence[str
     cli.install_stop_handlers()
     args = cli.node_command_line(executable, nodes, argv)
     try:
-        importlib.import_module(module).main(args)
+        main = importlib.import_module(module).main
+        cli.exit_if_stopped()
+        main(args)
     except cli.StopSignal as stop:
         cli.exit_now(stop.exit_code)
     cli.exit_now(cli.EXIT_OK)
@@ -33,7 +35,9 @@ def _node(executable: str, module: str, nodes: Sequence[str], argv: Sequence[str
 def _tool(module: str, argv: Sequence[str] | None) -> None:
     cli.install_stop_handlers()
     try:
-        code = importlib.import_module(module).main(None if argv is None else list(argv))
+        main = importlib.import_module(module).main
+        cli.exit_if_stopped()
+        code = main(None if argv is None else list(argv))
     except cli.StopSignal as stop:
         code = stop.exit_code
     cli.exit_now(int(code or 0))

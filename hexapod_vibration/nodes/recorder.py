@@ -268,6 +268,8 @@ def _install_stop_handlers() -> threading.Event:
 def run(args: list[str] | None = None) -> int:
     """Record until SIGINT/SIGTERM; return the process exit code."""
     stop = _install_stop_handlers()
+    if cli.stop_requested() is not None:     # it came during the imports
+        return cli.interrupted_exit_code()
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     try:
         try:

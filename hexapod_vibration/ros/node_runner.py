@@ -53,6 +53,7 @@ def _run(name: str, factory, loop, args, companions) -> int:
 
     from hexapod_vibration.ros.executors import LoopSpinner, make_executor, spin_loop
 
+    cli.exit_if_stopped()
     try:
         rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     except RCLError as exc:
