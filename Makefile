@@ -8,7 +8,7 @@ PY := $(VENV)/bin/python
 STAMP := $(VENV)/.hexapod_vibration.installed
 BASE_PYTHON ?= $(shell command -v python3.11 || command -v python3)
 
-.PHONY: venv test lint demo bench clean
+.PHONY: venv test lint demo bench soak clean
 
 venv: $(STAMP)
 
@@ -39,6 +39,14 @@ demo: venv
 
 bench: venv
 	$(VENV)/bin/hexapod_bench --out bench
+
+# Not part of `make test`: SOAK_DURATION simulated seconds of lockstep (default one hour)
+# with a drifting shaker; RSS of every process, divergence and warnings into out/soak
+# (soak.json, rss.csv). SOAK_SCENARIO: any scenario (e.g. one with tracking).
+SOAK_SCENARIO ?= soak_drift
+SOAK_DURATION ?= 3600
+soak: venv
+	$(VENV)/bin/soak --scenario $(SOAK_SCENARIO) --duration $(SOAK_DURATION) --out out/soak
 
 clean:
 	rm -rf build install log out .pytest_cache .ruff_cache *.egg-info

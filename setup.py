@@ -27,14 +27,17 @@ setup(
     extras_require={'test': ['pytest']},
     entry_points={
         'console_scripts': [
-            'pph_driver = hexapod_vibration.nodes.pph_driver:main',
-            'notch_controller = hexapod_vibration.nodes.notch_controller:main',
-            'pointing_controller = hexapod_vibration.nodes.pointing_controller:main',
-            'pph_graph = hexapod_vibration.nodes.pph_graph:main',
-            'pph_recorder = hexapod_vibration.nodes.recorder:main',
-            'experiment = hexapod_vibration.tools.experiment:main',
-            'analyze = hexapod_vibration.tools.analyze:main',
-            'hexapod_bench = hexapod_vibration.bench.core_bench:main',
+            # hexapod_vibration/executables.py: --help and argument errors before any heavy
+            # import, quiet 130/143 exits; test/test_executables.py checks every script here.
+            'pph_driver = hexapod_vibration.executables:pph_driver',
+            'notch_controller = hexapod_vibration.executables:notch_controller',
+            'pointing_controller = hexapod_vibration.executables:pointing_controller',
+            'pph_graph = hexapod_vibration.executables:pph_graph',
+            'pph_recorder = hexapod_vibration.executables:pph_recorder',
+            'experiment = hexapod_vibration.executables:experiment',
+            'analyze = hexapod_vibration.executables:analyze',
+            'soak = hexapod_vibration.executables:soak',
+            'hexapod_bench = hexapod_vibration.executables:hexapod_bench',
         ],
     },
 )

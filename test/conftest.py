@@ -10,8 +10,6 @@ from __future__ import annotations
 import itertools
 import os
 import random
-import signal
-import subprocess
 import sys
 import time
 from collections.abc import Callable, Iterator
@@ -23,6 +21,8 @@ from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
+
+from hexapod_vibration.tools import processes
 
 DOMAIN_MIN = 20
 DOMAIN_LIMIT = 230  # exclusive; Fast DDS port arithmetic allows up to 232
@@ -71,22 +71,23 @@ def ros_env() -> dict[str, str]:
 
 
 class NodeProcess:
-    """A console script of the package run as a separate process, output kept in files."""
+    """A console script of the package run as a separate process, output kept in files.
 
-    def __init__(self, executable: str, args: list[str], env: dict[str, str], log_dir: Path):
-        """Start ``BIN_DIR/executable args`` with ``env``; output goes to ``log_dir``."""
+    Started with ``hexapod_vibration.tools.processes.spawn``: own session (signals from the
+    terminal go to pytest only) and a parent-death signal (it dies with pytest, even when
+    pytest is killed).
+    """
+
+    def __init__(self, executable: str, args: list[str], env: dict[str, str], log_dir: Path,
+                 cwd: Path | None = None, command: list[str] | None = None):
+        """Start ``BIN_DIR/executable args`` (or ``command``) with ``env``, logs in ``log_dir``."""
         self.name = executable
         self.stdout_path = log_dir / f'{executable}.{id(self)}.stdout'
         self.stderr_path = log_dir / f'{executable}.{id(self)}.stderr'
-        with self.stdout_path.open('wb') as out, self.stderr_path.open('wb') as err:
-            self.process = subprocess.Popen(
-                [str(BIN_DIR / executable), *args],
-                env=env,
-                stdin=subprocess.DEVNULL,
-                stdout=out,
-                stderr=err,
-                start_new_session=True,  # signals from the terminal go to pytest only
-            )
+        self.child = processes.spawn(executable, command or [str(BIN_DIR / executable), *args],
+                                     log=self.stdout_path, stderr_log=self.stderr_path,
+                                     env=env, cwd=cwd)
+        self.process = self.child.process
 
     @property
     def pid(self) -> int:
@@ -95,23 +96,15 @@ class NodeProcess:
 
     def running(self) -> bool:
         """Whether the process is still alive."""
-        return self.process.poll() is None
+        return self.child.alive()
 
     def wait(self, timeout_s: float) -> int | None:
         """Wait for the process to exit on its own; its exit code, or None on timeout."""
-        try:
-            return self.process.wait(timeout=timeout_s)
-        except subprocess.TimeoutExpired:
-            return None
+        return self.child.wait(timeout_s)
 
     def stop(self, timeout_s: float = 20.0) -> int:
-        """SIGINT, wait up to ``timeout_s``, then SIGKILL; returns the exit code."""
-        if self.running():
-            self.process.send_signal(signal.SIGINT)
-            if self.wait(timeout_s) is None:
-                self.process.kill()
-                self.process.wait()
-        return self.process.returncode
+        """SIGINT, wait up to ``timeout_s``, then SIGKILL (its group); returns the exit code."""
+        return self.child.stop(timeout_s)
 
     def output(self) -> str:
         """Everything the process wrote so far, stdout then stderr."""
@@ -129,9 +122,11 @@ class NodeProcesses:
         self.log_dir = log_dir
         self.started: list[NodeProcess] = []
 
-    def start(self, executable: str, *args: str, env: dict[str, str] | None = None) -> NodeProcess:
-        """Start a console script of the virtualenv with ``args``."""
-        process = NodeProcess(executable, list(args), env or self.env, self.log_dir)
+    def start(self, executable: str, *args: str, env: dict[str, str] | None = None,
+              cwd: Path | None = None, command: list[str] | None = None) -> NodeProcess:
+        """Start a console script of the virtualenv with ``args`` (or any ``command``)."""
+        process = NodeProcess(executable, list(args), env or self.env, self.log_dir, cwd,
+                              command)
         self.started.append(process)
         return process
 

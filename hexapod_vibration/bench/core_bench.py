@@ -22,7 +22,6 @@ output, never in pass/fail tests.
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import functools
 import gc
@@ -51,6 +50,7 @@ from hexapod_vibration.core.model.config import load_model_config
 from hexapod_vibration.core.sim.closed_loop import CoreLoop
 from hexapod_vibration.core.sim.scenario import Scenario, load_scenario
 from hexapod_vibration.paths import config_path, scenario_path
+from hexapod_vibration.tools import outputs
 
 FS_HZ = 1000.0
 STRUTS = 6
@@ -864,25 +864,14 @@ def _jsonable(obj: Any) -> Any:
 def write_outputs(results: dict[str, Any], out_dir: Path) -> str:
     """Write ``results.json`` and ``summary.md`` into ``out_dir``; return the summary."""
     out_dir.mkdir(parents=True, exist_ok=True)
-    (out_dir / 'results.json').write_text(json.dumps(_jsonable(results), indent=2) + '\n',
-                                          encoding='utf-8')
+    outputs.write_text(out_dir / 'results.json', json.dumps(_jsonable(results), indent=2) + '\n')
     summary = summary_markdown(results)
-    (out_dir / 'summary.md').write_text(summary, encoding='utf-8')
+    outputs.write_text(out_dir / 'summary.md', summary)
     return summary
 
 
-def main(argv: Sequence[str] | None = None) -> int:
-    """Console script ``hexapod_bench --out DIR [--quick] [--skip-ros]``."""
-    parser = argparse.ArgumentParser(
-        prog='hexapod_bench',
-        description='Per-sample cost of the notch vs filtered-x LMS, scaling, and both '
-                    'controllers on the Table 1 scenario; writes results.json and summary.md.')
-    parser.add_argument('--out', required=True, type=Path, help='output folder')
-    parser.add_argument('--quick', action='store_true',
-                        help='short timings and a shortened scenario (smoke test)')
-    parser.add_argument('--skip-ros', action='store_true',
-                        help='leave out the ROS loop benchmark (realtime, lockstep_speedup)')
-    args = parser.parse_args(argv)
+def run(args: Any) -> int:
+    """Run the benchmarks of checked arguments (``bench/cli.py``); returns the exit code."""
     ros_loop_benchmark = None
     if not args.skip_ros:
         try:
@@ -890,8 +879,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         except ModuleNotFoundError as exc:
             if exc.name != 'hexapod_vibration.bench.ros_bench':
                 raise
-            parser.error('the ROS loop benchmark (hexapod_vibration.bench.ros_bench) is not '
-                         'available; run with --skip-ros')
+            print('hexapod_bench: error: the ROS loop benchmark is not available; run with '
+                  '--skip-ros', file=sys.stderr)
+            return 2
     results = run_core_benchmarks(args.quick)
     if ros_loop_benchmark is not None:
         write_outputs(results, args.out)          # keep the core numbers if ROS fails
@@ -899,6 +889,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     summary = write_outputs(results, args.out)
     sys.stdout.write(summary)
     return 0
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Console script ``hexapod_bench --out DIR [--quick] [--skip-ros]`` (``bench/cli.py``)."""
+    from hexapod_vibration.bench.cli import main as checked_main
+
+    return checked_main(argv)
 
 
 if __name__ == '__main__':

@@ -29,14 +29,8 @@ from typing import Any
 
 from hexapod_vibration.core.sim.scenario import load_scenario
 from hexapod_vibration.paths import scenario_path
-from hexapod_vibration.tools.experiment import (
-    Child,
-    ExperimentError,
-    Supervisor,
-    node_parameters,
-    start_child,
-    stop_children,
-)
+from hexapod_vibration.tools.experiment import ExperimentError, Supervisor, node_parameters
+from hexapod_vibration.tools.processes import Child, spawn_module, stop_all
 
 STALL_S = 20.0
 SAMPLE_RATE_HZ = 1000.0
@@ -63,16 +57,13 @@ def _write_params(out: Path, mode: str, executor: str) -> Path:
 def _start_graph(out: Path, mode: str, executor: str, composed: bool
                  ) -> list[Child]:
     """The driver and both controllers: three processes, or one (``pph_graph``)."""
-    common = ["--params-file", str(_write_params(out, mode, executor))]
+    common = ["--ros-args", "--params-file", str(_write_params(out, mode, executor))]
     tag = f"{mode}_{executor}"
-    if composed:
-        return [start_child(f"bench_pph_graph_{tag}", "hexapod_vibration.nodes.pph_graph", common,
-                            out)]
-    children = [start_child(f"bench_{name}_{tag}", f"hexapod_vibration.{name}", common, out)
-                for name in ("notch_controller", "pointing_controller")]
-    children.append(start_child(f"bench_pph_driver_{tag}", "hexapod_vibration.nodes.pph_driver",
-                                common, out))
-    return children
+    names = ("pph_graph",) if composed else ("notch_controller", "pointing_controller",
+                                             "pph_driver")
+    # tools/processes: every child dies with the benchmark, even if it is killed.
+    return [spawn_module(f"bench_{name}_{tag}", f"hexapod_vibration.nodes.{name}", common, out)
+            for name in names]
 
 
 def _run(out: Path, mode: str, executor: str, wall_s: float, composed: bool
@@ -104,7 +95,7 @@ def _run(out: Path, mode: str, executor: str, wall_s: float, composed: bool
         return stats
     finally:
         sup.close()
-        stop_children(children)
+        stop_all(children)
 
 
 def _alive(children: list[Child]) -> None:

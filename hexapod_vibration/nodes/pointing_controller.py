@@ -10,21 +10,23 @@ against the platform's range (tilt within 2.5 deg, twist within 10 deg, stroke w
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.node import Node
-from rclpy.parameter import Parameter
 from std_msgs.msg import Float64MultiArray
 
 from hexapod_vibration.core.control.pointing import PointingGains, validate_target_pose
 from hexapod_vibration.core.model.config import load_model_config
 from hexapod_vibration.core.model.sensors import EddySensorArray
 from hexapod_vibration.core.sim.closed_loop import make_pointing_controller
+from hexapod_vibration.parameter_specs import POINTING_CONTROLLER
 from hexapod_vibration.paths import config_path
-from hexapod_vibration.ros import parameters as p
 from hexapod_vibration.ros.diagnostics import diagnostic_array
-from hexapod_vibration.ros.executors import declare_executor_parameter, run_node
+from hexapod_vibration.ros.executors import run_node
 from hexapod_vibration.ros.messages import StrutArrayPublisher, receive_strut_array
+from hexapod_vibration.ros.parameters import NodeParameters
 from hexapod_vibration.ros.qos import DIAGNOSTICS_QOS, LOOP_PUBLISHER_QOS, LOOP_QOS
 
 TARGET_PARAMS = ("target_tilt_x_deg", "target_tilt_y_deg", "target_twist_deg",
@@ -39,16 +41,17 @@ class PointingControllerNode(Node):
     def __init__(self) -> None:
         """Declare parameters, build the law from the model, wire the topics."""
         super().__init__("pointing_controller")
-        self._declare_parameters()
-        model = load_model_config(self.get_parameter("model_file").value or
-                                  config_path("pph_model.yaml"))
+        self.params = NodeParameters(self, POINTING_CONTROLLER)
+        values = self.params.values()
+        model = load_model_config(values["model_file"] or config_path("pph_model.yaml"))
         self.model = model
         height = float(model.geometry.top_joints_m[0, 2])
         sensing = EddySensorArray(model.eddy, height).sensing_matrix
         self.law = make_pointing_controller(model, sensing, model.simulation.sample_rate_hz)
-        self.law.set_gains(self._gains({}))
-        self.law.set_target(self._target({}), model.strut.stroke_limit_m)
-        self.enabled = bool(self.get_parameter("enabled").value)
+        self.params.serve(check=self._check_parameters, apply=self._apply_parameters)
+        self.law.set_gains(self._gains(values))
+        self.law.set_target(self._target(values), model.strut.stroke_limit_m)
+        self.enabled = bool(values["enabled"])
         self.invalid = 0
         self.last_sample = -1
         self._pub = StrutArrayPublisher(self.create_publisher(
@@ -56,61 +59,40 @@ class PointingControllerNode(Node):
         self._pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", DIAGNOSTICS_QOS)
         self.loop_subscriptions = [self.create_subscription(
             Float64MultiArray, "/pph/eddy", self._on_eddy, LOOP_QOS)]
-        self.add_on_set_parameters_callback(self._on_set_parameters)
         self.get_logger().info(f"pointing controller up: target {np.round(self.law.target, 6)}"
                                f", bandwidth {self.law.gains.bandwidth_hz} Hz")
 
-    def _declare_parameters(self) -> None:
-        p.declare_float(self, "target_tilt_x_deg", 0.0, "commanded tilt about x (deg)",
-                        -2.5, 2.5)
-        p.declare_float(self, "target_tilt_y_deg", 0.0, "commanded tilt about y (deg)",
-                        -2.5, 2.5)
-        p.declare_float(self, "target_twist_deg", 0.0, "commanded twist about z (deg)",
-                        -10.0, 10.0)
-        p.declare_float_array(self, "target_translation_m", [0.0, 0.0, 0.0], "commanded "
-                              "translation x, y, z of the payload (m)", -1e-3, 1e-3)
-        p.declare_float(self, "bandwidth_hz", 1.5, "pointing bandwidth: the integral pole "
-                        "(Hz), far below the vibration tones", 0.05, 5.0)
-        p.declare_float(self, "damping_ratio", 0.7, "damping given to the suspension modes",
-                        0.05, 2.0)
-        p.declare_float(self, "output_lowpass_hz", 15.0, "2nd-order low-pass on the forces "
-                        "(Hz)", 2.0, 100.0)
-        p.declare_bool(self, "enabled", True, "pointing forces on (off: zero force, integral "
-                       "reset)")
-        p.declare_string(self, "model_file", "", "physical model YAML (empty: packaged "
-                         "config/pph_model.yaml)", read_only=True)
-        declare_executor_parameter(self)
+    @staticmethod
+    def _target(values: Mapping) -> np.ndarray:
+        """Commanded pose [x, y, z (m), rx, ry, rz (rad)] from the parameter values."""
+        angles = np.deg2rad([values[n] for n in TARGET_PARAMS[:3]])
+        return np.concatenate([values["target_translation_m"], angles])
 
-    def _value(self, changes: dict, name: str):
-        return changes[name] if name in changes else self.get_parameter(name).value
-
-    def _target(self, changes: dict) -> np.ndarray:
-        translation = list(self._value(changes, "target_translation_m") or [])
-        if len(translation) != 3:
-            raise ValueError(f"target_translation_m needs 3 values (m), got {len(translation)}")
-        angles = np.deg2rad([self._value(changes, n) for n in TARGET_PARAMS[:3]])
-        return np.concatenate([translation, angles])
-
-    def _gains(self, changes: dict) -> PointingGains:
-        return PointingGains(*(float(self._value(changes, n)) for n in GAIN_PARAMS),
+    def _gains(self, values: Mapping) -> PointingGains:
+        return PointingGains(*(float(values[n]) for n in GAIN_PARAMS),
                              force_limit_n=self.model.strut.force_limit_static_n)
 
-    def _on_set_parameters(self, params: list[Parameter]):
-        changes = {q.name: q.value for q in params}
+    def _check_parameters(self, values: Mapping, changed: frozenset) -> str:
+        """The pose within the platform's range (core check), the gains realisable."""
         try:
-            target = self._target(changes)
-            validate_target_pose(target, self.law.geometry, self.model.strut.stroke_limit_m)
-            gains = self._gains(changes)
+            if changed & set(TARGET_PARAMS):
+                validate_target_pose(self._target(values), self.law.geometry,
+                                     self.model.strut.stroke_limit_m)
+            if changed & set(GAIN_PARAMS):
+                self._gains(values)
         except ValueError as exc:
-            return p.reject(str(exc))
+            return str(exc)
+        return ""
+
+    def _apply_parameters(self, changes: dict) -> None:
+        values = self.params.values()
         if any(n in changes for n in TARGET_PARAMS):
-            self.law.set_target(target, self.model.strut.stroke_limit_m)
+            self.law.set_target(self._target(values), self.model.strut.stroke_limit_m)
         if any(n in changes for n in GAIN_PARAMS):
-            self.law.set_gains(gains)
+            self.law.set_gains(self._gains(values))
         if "enabled" in changes and bool(changes["enabled"]) != self.enabled:
             self.enabled = bool(changes["enabled"])
             self.law.reset()
-        return p.accept()
 
     def _on_eddy(self, msg: Float64MultiArray | bytes) -> None:
         parsed = receive_strut_array(msg, self.get_logger(), "/pph/eddy")

@@ -19,27 +19,31 @@ import numpy as np
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.node import Node
-from rclpy.parameter import Parameter
 from rosgraph_msgs.msg import Clock
 from std_msgs.msg import Float64MultiArray
 
 from hexapod_vibration.core.model.config import load_model_config
 from hexapod_vibration.core.model.plant import PPHPlant, actuator_test_sine, saturate_commands
 from hexapod_vibration.core.model.shaker import Shaker, tones_from_arrays
+from hexapod_vibration.parameter_specs import (
+    LOCKSTEP_STREAMS,
+    PPH_DRIVER,
+    shaker_tone_arrays,
+    shaker_unpaired,
+)
 from hexapod_vibration.paths import config_path
-from hexapod_vibration.ros import parameters as p
 from hexapod_vibration.ros.diagnostics import clock_cdr, diagnostic_array
-from hexapod_vibration.ros.executors import LoopSpinner, declare_executor_parameter, run_node
+from hexapod_vibration.ros.executors import LoopSpinner, run_node
 from hexapod_vibration.ros.messages import StrutArrayPublisher, receive_strut_array
+from hexapod_vibration.ros.parameters import NodeParameters
 from hexapod_vibration.ros.qos import CLOCK_QOS, DIAGNOSTICS_QOS, LOOP_PUBLISHER_QOS, LOOP_QOS
 
-STREAMS = ("notch", "pointing")
+STREAMS = LOCKSTEP_STREAMS
 NO_FORCE_N = np.zeros(6)    # read-only: what a stale stream contributes
 NO_FORCE_N.flags.writeable = False
 PUBLISH_HISTORY = 1024      # samples whose publication time is kept for the latency
 STATS_WINDOW = 60000
 """Latencies and periods kept for the percentiles on /diagnostics (the last minute at 1 kHz)."""
-CLOCK_MODES = ("lockstep", "realtime")
 SHAKER_PARAMS = ("shaker_frequencies_hz", "shaker_amplitudes_n", "shaker_phases_rad",
                  "shaker_drift_hz", "shaker_drift_period_s", "shaker_noise_rms_n")
 
@@ -80,11 +84,10 @@ class PPHDriver(Node):
         """Declare parameters, build the plant, create publishers and subscriptions."""
         super().__init__("pph_driver")
         self._declare_parameters()
-        self.mode = self.get_parameter("clock_mode").value
-        model = load_model_config(self.get_parameter("model_file").value or
-                                  config_path("pph_model.yaml"))
-        self.model = model if self.get_parameter("nonlinear").value else model.linear()
-        seed = self.get_parameter("seed").value
+        self.mode = self.params["clock_mode"]
+        model = load_model_config(self.params["model_file"] or config_path("pph_model.yaml"))
+        self.model = model if self.params["nonlinear"] else model.linear()
+        seed = self.params["seed"]
         self.plant = PPHPlant(self.model, shaker=self._make_shaker(seed), seed=seed)
         self.fs = self.model.simulation.sample_rate_hz
         self.sample = 0
@@ -104,7 +107,7 @@ class PPHDriver(Node):
             self.create_subscription(Float64MultiArray, stream.topic,
                                      lambda msg, n=name: self._on_command(n, msg), LOOP_QOS)
             for name, stream in self.streams.items()]
-        self.add_on_set_parameters_callback(self._on_set_parameters)
+        self._serve_parameters()
         self._sample_pending = self.plant.step(np.zeros(6))
         self.get_logger().info(
             f"PPH driver up: {self.mode}, {'nonlinear' if self.model is model else 'linear'}"
@@ -112,90 +115,45 @@ class PPHDriver(Node):
 
     # ------------------------------------------------------------------ parameters
     def _declare_parameters(self) -> None:
-        p.declare_string(self, "clock_mode", "lockstep", "lockstep: advance when the commands "
-                         "of the sample arrived; realtime: paced at 1 kHz wall clock",
-                         CLOCK_MODES, read_only=True)
-        p.declare_string(self, "model_file", "", "physical model YAML (empty: packaged "
-                         "config/pph_model.yaml)", read_only=True)
-        p.declare_bool(self, "nonlinear", True, "free-play and stroke-dependent force "
-                       "constant on (false: linear reference plant)", read_only=True)
-        p.declare_int(self, "seed", 1, "random seed of the sensor and shaker noise",
-                      0, 2**31 - 1, read_only=True)
-        p.declare_float_array(self, "shaker_frequencies_hz", [40.0], "shaker tone "
-                              "frequencies (Hz)", 0.1, 499.0)
-        p.declare_float_array(self, "shaker_amplitudes_n", [80.0], "shaker tone amplitudes "
-                              "(N peak)", 0.0, 100.0)
-        p.declare_float_array(self, "shaker_phases_rad", [], "shaker tone phases (rad); "
-                              "empty = all zero", -10.0, 10.0)
-        p.declare_float(self, "shaker_drift_hz", 0.0, "slow sinusoidal frequency drift of "
-                        "every tone (Hz peak)", 0.0, 5.0)
-        p.declare_float(self, "shaker_drift_period_s", 60.0, "period of the drift (s)",
-                        1.0, 3600.0)
-        p.declare_float(self, "shaker_noise_rms_n", 0.0, "broadband shaker noise (N RMS)",
-                        0.0, 20.0)
-        self._test_sine_frequency_hz = p.declare_float(
-            self, "test_sine_frequency_hz", 40.0, "sinusoid added to every actuator in phase "
-            "(paper Fig. 4) (Hz)", 0.1, 499.0)
-        self._test_sine_amplitude_n = p.declare_float(
-            self, "test_sine_amplitude_n", 0.0, "its amplitude (N peak); 0 = off", 0.0, 40.0)
-        self._timeout_samples = p.declare_int(
-            self, "command_timeout_samples", 5, "watchdog: a command stream older than this "
-            "many samples is dropped to zero force", 1, 1000)
-        self._lockstep_timeout_s = p.declare_float(
-            self, "lockstep_timeout_s", 2.0, "lockstep: longest wait for the commands of one "
-            "sample before advancing without them (s)", 0.001, 10.0)
-        self._hold_at_time_s = p.declare_float(
-            self, "hold_at_time_s", -1.0, "lockstep breakpoint: stop before publishing the "
-            "sample at this sim time (s) until it is changed; negative = never", -1.0, 1e6)
-        declare_executor_parameter(self)
-        self._expected = p.declare_string_array(
-            self, "lockstep_controllers", list(STREAMS), "controllers the lockstep driver "
-            "waits for before sample 0 and then every sample while they are connected "
-            "(subset of notch, pointing; may be empty)", read_only=True)
-        unknown = set(self._expected) - set(STREAMS)
-        if unknown:
-            raise ValueError(f"lockstep_controllers: unknown {sorted(unknown)}, use {STREAMS}")
+        """Declare and check every parameter (``parameter_specs.PPH_DRIVER``)."""
+        self.params = NodeParameters(self, PPH_DRIVER)
+        self._apply_parameters(self.params.values(), startup=True)
+
+    def _serve_parameters(self) -> None:
+        """Run-time changes: validated in on-set, applied in post-set."""
+        self.params.serve(apply=self._apply_parameters)
 
     def _make_shaker(self, seed: int) -> Shaker:
-        tones = self._shaker_tones({})
-        noise = self.get_parameter("shaker_noise_rms_n").value
-        return Shaker(tones, noise, self.model.shaker.force_limit_n, seed=seed + 1)
+        values = self.params.values()
+        return Shaker(self._shaker_tones(values), values["shaker_noise_rms_n"],
+                      self.model.shaker.force_limit_n, seed=seed + 1)
 
-    def _shaker_tones(self, changes: dict) -> list:
-        def value(name: str):
-            if name in changes:
-                return changes[name]
-            return p.parameter_value(self, name)
-        return tones_from_arrays(list(value("shaker_frequencies_hz") or []),
-                                 list(value("shaker_amplitudes_n") or []),
-                                 list(value("shaker_phases_rad") or []),
-                                 value("shaker_drift_hz"), value("shaker_drift_period_s"))
+    @staticmethod
+    def _shaker_tones(values: dict) -> list:
+        """The sounding tones (``parameter_specs.shaker_tone_arrays``) as ShakerTones."""
+        return tones_from_arrays(*shaker_tone_arrays(values), values["shaker_drift_hz"],
+                                 values["shaker_drift_period_s"])
 
-    def _on_set_parameters(self, params: list[Parameter]):
-        changes = {q.name: q.value for q in params}
-        for name, bounds in (("shaker_frequencies_hz", (0.1, 499.0)),
-                             ("shaker_amplitudes_n", (0.0, 100.0)),
-                             ("shaker_phases_rad", (-10.0, 10.0))):
-            if name in changes:
-                values = list(changes[name] or [])
-                reason = p.check_float_array(name, values, *bounds)
-                if reason or not all(np.isfinite(values)):
-                    return p.reject(reason or f"{name} must be finite")
-        if any(name in changes for name in SHAKER_PARAMS):
-            try:
-                tones = self._shaker_tones(changes)
-            except ValueError as exc:
-                return p.reject(str(exc))
-            self.plant.shaker.set_tones(tones)
-            if "shaker_noise_rms_n" in changes:
-                self.plant.shaker.noise_rms_n = float(changes["shaker_noise_rms_n"])
+    def _apply_parameters(self, changes: dict, startup: bool = False) -> None:
+        """Apply validated values (post-set at run time; every value at start-up)."""
         if "command_timeout_samples" in changes:
             self._timeout_samples = int(changes["command_timeout_samples"])
         for name in ("test_sine_frequency_hz", "test_sine_amplitude_n", "hold_at_time_s",
                      "lockstep_timeout_s"):
             if name in changes:
                 setattr(self, f"_{name}", float(changes[name]))
-        return p.accept()
+        if "lockstep_controllers" in changes:
+            self._expected = list(changes["lockstep_controllers"])
+        if not any(name in changes for name in SHAKER_PARAMS):
+            return
+        values = self.params.values()
+        unpaired = shaker_unpaired(values)
+        if unpaired:
+            self.get_logger().warn(unpaired)
+        if startup:
+            return                      # the plant's shaker is built from the same values
+        self.plant.shaker.set_tones(self._shaker_tones(values))
+        self.plant.shaker.noise_rms_n = float(values["shaker_noise_rms_n"])
 
     # ------------------------------------------------------------------ commands
     def _on_command(self, name: str, msg: Float64MultiArray | bytes) -> None:

@@ -12,7 +12,8 @@ and the driver applies them. On the project's 2-core machine this is what sustai
 (numbers in the README's Performance section). Use the separate executables to put the
 controllers on other machines or to restart one alone.
 
-Usage: ``pph_graph --ros-args --params-file config/pph.yaml``: each node takes its own
+Usage: ``ros2 run hexapod_vibration pph_graph --ros-args --params-file
+$(ros2 pkg prefix --share hexapod_vibration)/config/pph.yaml``: each node takes its own
 section of the file. The ``executor`` of ``pph_driver`` serves all three.
 """
 
@@ -27,7 +28,8 @@ from hexapod_vibration.ros.executors import run_node
 def main(args: list[str] | None = None) -> None:
     """Entry point of ``ros2 run hexapod_vibration pph_graph``."""
     run_node("pph_graph", PPHDriver, run_driver, args=args,
-             companions=(NotchControllerNode, PointingControllerNode))
+             companions=(NotchControllerNode, PointingControllerNode),
+             nodes=("pph_driver", "notch_controller", "pointing_controller"))
 
 
 if __name__ == "__main__":

@@ -48,8 +48,10 @@ from rosbags.rosbag2.errors import WriterError
 from rosgraph_msgs.msg import Clock as ClockMessage
 from std_msgs.msg import Float64MultiArray
 
+from hexapod_vibration import cli
 from hexapod_vibration.analysis.bag_io import BAG_VERSION, STRUT_TOPICS, typestore
-from hexapod_vibration.ros.parameters import declare_string
+from hexapod_vibration.parameter_specs import PPH_RECORDER
+from hexapod_vibration.ros.parameters import NodeParameters
 from hexapod_vibration.ros.qos import (
     DIAGNOSTICS_QOS,
     PARAMETER_EVENTS_QOS,
@@ -119,21 +121,9 @@ class BagRecorder(Node):
         """
         super().__init__(NODE_NAME, **kwargs)
         self._default_to_sim_time()
-        bag_path = declare_string(
-            self,
-            'bag_path',
-            '',
-            'rosbag2 bag directory to create (must not exist)',
-            read_only=True,
-        )
-        storage = declare_string(
-            self,
-            'storage',
-            'mcap',
-            'rosbag2 storage plugin',
-            choices=tuple(STORAGES),
-            read_only=True,
-        )
+        params = NodeParameters(self, PPH_RECORDER)   # parameter_specs: bag_path, storage
+        params.serve()
+        bag_path, storage = params['bag_path'], params['storage']
         self.bag_path = Path(bag_path or datetime.now().strftime('rosbag2_%Y_%m_%d-%H_%M_%S'))
         self._writer = _open_writer(self.bag_path, STORAGES[storage])
         self._connections: dict[str, Connection] = {}
@@ -267,6 +257,7 @@ def _install_stop_handlers() -> threading.Event:
     stop = threading.Event()
 
     def handler(signum: int, frame: object) -> None:
+        stop.signum = getattr(stop, 'signum', signum)   # the first one: the exit code
         stop.set()
 
     signal.signal(signal.SIGINT, handler)
@@ -277,6 +268,8 @@ def _install_stop_handlers() -> threading.Event:
 def run(args: list[str] | None = None) -> int:
     """Record until SIGINT/SIGTERM; return the process exit code."""
     stop = _install_stop_handlers()
+    if cli.stop_requested() is not None:     # it came during the imports
+        return cli.interrupted_exit_code()
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     try:
         try:
@@ -296,12 +289,13 @@ def run(args: list[str] | None = None) -> int:
             recorder.destroy_node()
     finally:
         rclpy.try_shutdown()
-    return 0
+    return 128 + stop.signum if stop.is_set() else 0
 
 
 def main(args: list[str] | None = None) -> None:
-    """Console-script entry point of ``pph_recorder``."""
-    sys.exit(run(args))
+    """Entry point of ``pph_recorder``: exit 0, 2 (bad parameter), 130/143 (SIGINT/SIGTERM)."""
+    args = cli.node_command_line(NODE_NAME, (NODE_NAME,), args)
+    cli.exit_now(run(args))
 
 
 if __name__ == "__main__":

@@ -24,22 +24,21 @@ of a sample's computation.
 
 from __future__ import annotations
 
-import sys
 import time
 from collections.abc import Callable, Sequence
 
 import rclpy
 from rclpy._rclpy_pybind11 import RCLError
-from rclpy.exceptions import InvalidHandle, ParameterException
+from rclpy.exceptions import InvalidHandle
 from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedExecutor
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
 from rclpy.subscription import Subscription
 
+from hexapod_vibration.parameter_specs import EXECUTOR, EXECUTORS
 from hexapod_vibration.ros.parameters import declare_string
 
-EXECUTORS = ("waitset", "single_threaded", "events")
-DEFAULT_EXECUTOR = "waitset"
+DEFAULT_EXECUTOR = EXECUTOR.default
 SERVICE_PERIOD_S = 0.05
 """Longest time (s, wall) between two services of the non-loop callbacks by ``waitset``.
 
@@ -51,11 +50,12 @@ IDLE_SPIN_S = 0.01
 
 
 def declare_executor_parameter(node: Node) -> str:
-    """Declare the node's read-only ``executor`` parameter; returns its value."""
-    return declare_string(node, "executor", DEFAULT_EXECUTOR, "how the node is served: "
-                          "waitset (loop topics from a persistent wait set, the rest by a "
-                          "SingleThreadedExecutor), single_threaded or events (rclpy's "
-                          "executors for everything)", EXECUTORS, read_only=True)
+    """Declare the read-only ``executor`` parameter (``parameter_specs.EXECUTOR``) alone.
+
+    For a node not declared from a ``NodeSpec`` yet; a spec'd node has it in its spec.
+    """
+    return declare_string(node, EXECUTOR.name, EXECUTOR.default, EXECUTOR.description,
+                          EXECUTOR.choices, read_only=True)
 
 
 def make_executor(name: str) -> Executor:
@@ -157,38 +157,9 @@ def spin_loop(node: Node, spinner: LoopSpinner) -> None:
 def run_node(name: str, factory: Callable[[], Node],
              loop: Callable[[Node, LoopSpinner], None] = spin_loop,
              args: list[str] | None = None,
-             companions: Sequence[Callable[[], Node]] = ()) -> None:
-    """Init rclpy, build the node, run ``loop`` (default: serve it), shut down cleanly.
+             companions: Sequence[Callable[[], Node]] = (),
+             nodes: Sequence[str] | None = None) -> None:
+    """Run a node executable to its exit code: see :mod:`hexapod_vibration.ros.node_runner`."""
+    from hexapod_vibration.ros.node_runner import run_node as run
 
-    The node's 1 kHz subscriptions are those it lists in ``loop_subscriptions`` (empty if
-    it has no such attribute); its ``executor`` parameter chooses how they are served.
-    ``companions`` are more nodes composed into the same process and thread (built after
-    the main node, served by the same executor; their loop subscriptions are taken before
-    the main node's, so a message they publish in a callback reaches it in the same spin).
-    Ctrl-C / SIGTERM end the process quietly with the bag-friendly clean shutdown; a bad
-    parameter (ValueError) or a missing file ends it with exit code 2 and the reason.
-    """
-    rclpy.init(args=args)
-    nodes: list[Node] = []
-    try:
-        nodes.append(factory())
-        nodes.extend(make() for make in companions)
-        executor_name = nodes[0].get_parameter("executor").value
-        executor = make_executor(executor_name)
-        for node in nodes:
-            executor.add_node(node)
-        subscriptions = [sub for node in nodes[1:] + nodes[:1]
-                         for sub in getattr(node, "loop_subscriptions", ())]
-        loop(nodes[0], LoopSpinner(executor, subscriptions, fast=executor_name == "waitset"))
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except RCLError:
-        if rclpy.ok():        # a real error, not the context closed by a signal
-            raise
-    except (ValueError, FileNotFoundError, ParameterException) as exc:
-        print(f"{name}: {exc}", file=sys.stderr, flush=True)
-        raise SystemExit(2) from None
-    finally:
-        for node in reversed(nodes):
-            node.destroy_node()
-        rclpy.try_shutdown()
+    run(name, factory, loop, args=args, companions=companions, nodes=nodes)

@@ -1,15 +1,30 @@
-"""Helpers to declare ROS parameters with descriptors, and to answer set-parameter requests.
+"""A node's parameters from its declaration (``parameter_specs``): descriptors, checks, callbacks.
 
-Every parameter of the package is declared with a ``ParameterDescriptor`` carrying its
-description (including its unit), its range when it has one, and whether it is read-only,
-so that ``ros2 param describe`` documents it and the middleware enforces the range before
-the node's own ``on_set_parameters`` callback sees the value.
+:class:`NodeParameters` turns a :class:`~hexapod_vibration.parameter_specs.NodeSpec` into
+rclpy parameters, in the way of generate_parameter_library:
+
+- each parameter is declared with a ``ParameterDescriptor`` made from its spec
+  (:func:`descriptor_for`): description with the unit, the true range (a closed range as
+  ``floating_point_range``/``integer_range``, which rclpy enforces; open bounds, element
+  ranges, lengths and choices in ``additional_constraints``), read-only;
+- the start-up values are validated exactly as a run-time change is (the spec's checks,
+  parameter by parameter and together, then the node's own check), and refused with a
+  one-line reason (``ValueError``) before the node does anything;
+- parameters given to the node that it does not declare are reported (a warning naming
+  them);
+- at run time the on-set callback only validates; the post-set callback (rclpy's
+  ``add_post_set_parameters_callback``, as in ros2/demos) applies. A pre-set callback gives
+  an empty array the declared array type: ``ros2 param set ... "[]"`` and ``ros2 param
+  load`` of a dumped ``[]`` send a typeless empty list, which rclpy reads as a bool array.
+
+The helpers below the class (``declare_float`` ...) are the older one-call declarations,
+still used by the notch controller until it moves to its spec.
 """
 
 from __future__ import annotations
 
 import copy
-from collections.abc import Sequence
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 from rcl_interfaces.msg import (
@@ -19,9 +34,177 @@ from rcl_interfaces.msg import (
     ParameterType,
     SetParametersResult,
 )
-from rclpy.exceptions import ParameterUninitializedException
+from rclpy.exceptions import (
+    InvalidParameterTypeException,
+    InvalidParameterValueException,
+    ParameterException,
+    ParameterUninitializedException,
+)
 from rclpy.node import Node
 from rclpy.parameter import Parameter
+
+from hexapod_vibration.parameter_specs import RCLPY_PARAMETERS, NodeSpec, ParameterSpec
+
+NodeCheck = Callable[[Mapping[str, Any], frozenset], str]
+"""A node's own check of its parameters (values after the change, names changed): reason or ''."""
+Apply = Callable[[dict[str, Any]], None]
+"""Applies accepted changes ``{name: value}`` (post-set)."""
+
+_TYPES = {
+    "bool": Parameter.Type.BOOL, "int": Parameter.Type.INTEGER,
+    "double": Parameter.Type.DOUBLE, "string": Parameter.Type.STRING,
+    "double[]": Parameter.Type.DOUBLE_ARRAY, "string[]": Parameter.Type.STRING_ARRAY,
+}
+_ARRAY_TYPES = frozenset({
+    Parameter.Type.BYTE_ARRAY, Parameter.Type.BOOL_ARRAY, Parameter.Type.INTEGER_ARRAY,
+    Parameter.Type.DOUBLE_ARRAY, Parameter.Type.STRING_ARRAY,
+})
+
+
+def descriptor_for(spec: ParameterSpec) -> ParameterDescriptor:
+    """The ``ParameterDescriptor`` of a parameter spec, stating its true range.
+
+    A scalar range with closed ends becomes ``floating_point_range``/``integer_range``
+    (``ros2 param describe`` shows it as Min/Max, rclpy enforces it); everything the ROS
+    ranges cannot say exactly (an open end, element ranges, lengths, choices, joint
+    constraints) is written out in ``additional_constraints``.
+    """
+    description = f"{spec.description} ({spec.unit})" if spec.unit else spec.description
+    descriptor = ParameterDescriptor(
+        type=_TYPES[spec.type].value, description=description, read_only=spec.read_only,
+        additional_constraints=spec.range_text())
+    closed = not (spec.low_open or spec.high_open)
+    bounded = spec.low is not None or spec.high is not None
+    if spec.type == "double" and bounded and closed:
+        descriptor.floating_point_range = _float_range(spec.low, spec.high)
+    elif spec.type == "int" and bounded and closed:
+        low = -(2**63) if spec.low is None else int(spec.low)
+        high = 2**63 - 1 if spec.high is None else int(spec.high)
+        descriptor.integer_range = [IntegerRange(from_value=low, to_value=high, step=0)]
+    return descriptor
+
+
+def _plain(value: Any) -> Any:
+    """A parameter value as plain Python (arrays as lists)."""
+    if isinstance(value, (str, bytes, bool, int, float)) or value is None:
+        return value
+    return list(value)
+
+
+class NodeParameters:
+    """The declared parameters of one node (see the module docstring)."""
+
+    def __init__(self, node: Node, spec: NodeSpec) -> None:
+        """Declare every parameter of ``spec`` on ``node`` (start-up values: overrides).
+
+        Raises:
+            ValueError: a start-up value is refused (wrong type, out of range, ...); the
+                message is one line naming the parameter.
+        """
+        self.node = node
+        self.spec = spec
+        self._check: NodeCheck | None = None
+        self._apply: Apply | None = None
+        for parameter in spec.parameters:
+            self._declare(parameter)
+        reason = spec.check(self.values())
+        if reason:
+            raise ValueError(reason)    # exactly the reason a run-time change would get
+        self.unknown = self._report_unknown()
+
+    def _declare(self, spec: ParameterSpec) -> None:
+        descriptor = descriptor_for(spec)
+        try:
+            if spec.is_array:
+                _declare_array(self.node, spec.name, list(spec.default), descriptor,
+                               _TYPES[spec.type])
+            else:
+                self.node.declare_parameter(spec.name, spec.default, descriptor)
+        except InvalidParameterValueException as exc:   # the reason a run-time set gets
+            reason = str(exc.args[0]).split("Reason: ", 1)[-1].removesuffix(f": {spec.name}")
+            raise ValueError(_naming(spec.name, reason)) from None
+        except InvalidParameterTypeException:
+            given = self.node._parameter_overrides[spec.name].type_
+            reason = (f"Wrong parameter type, expected '{Parameter.Type(descriptor.type)}' "
+                      f"got '{given}'")                 # rclpy's run-time wording
+            raise ValueError(_naming(spec.name, reason)) from None
+        except ParameterException as exc:
+            raise ValueError(_naming(spec.name, _one_line(exc))) from None
+
+    def _report_unknown(self) -> list[str]:
+        """Warn about parameters given to the node (CLI, params file) that it does not have."""
+        unknown = sorted(name for name in self.node._parameter_overrides
+                         if name not in self.spec.by_name and name not in RCLPY_PARAMETERS
+                         and not name.startswith("qos_overrides."))
+        if unknown:
+            self.node.get_logger().warn(
+                f"unknown parameter(s) ignored: {', '.join(unknown)} (this node has: "
+                f"{', '.join(self.spec.names)})")
+        return unknown
+
+    def values(self) -> dict[str, Any]:
+        """Every parameter of the spec at its current value (arrays as lists)."""
+        return {name: _plain(parameter_value(self.node, name)) for name in self.spec.names}
+
+    def __getitem__(self, name: str) -> Any:
+        """Current value of one parameter."""
+        return _plain(parameter_value(self.node, name))
+
+    def serve(self, check: NodeCheck | None = None, apply: Apply | None = None) -> None:
+        """Validate the start-up values with ``check`` too, then serve run-time changes.
+
+        Raises:
+            ValueError: the node's own check refuses the start-up values.
+        """
+        self._check = check
+        self._apply = apply
+        reason = check(self.values(), frozenset(self.spec.names)) if check else ""
+        if reason:
+            raise ValueError(reason)
+        self.node.add_pre_set_parameters_callback(self._typed_empty_arrays)
+        self.node.add_on_set_parameters_callback(self._validate)
+        self.node.add_post_set_parameters_callback(self._applied)
+
+    def validate(self, changes: Mapping[str, Any]) -> str:
+        """Why ``changes`` would be refused, or ``''``: exactly the start-up validation."""
+        values = {**self.values(), **{k: _plain(v) for k, v in changes.items()}}
+        reason = self.spec.check(values, list(changes))
+        if not reason and self._check is not None:
+            reason = self._check(values, frozenset(changes))
+        return reason
+
+    def _typed_empty_arrays(self, params: list[Parameter]) -> list[Parameter]:
+        typed = []
+        for param in params:
+            spec = self.spec.by_name.get(param.name)
+            if (spec is not None and spec.is_array and param.type_ in _ARRAY_TYPES
+                    and len(param.value) == 0):
+                param = Parameter(param.name, _TYPES[spec.type], [])
+            typed.append(param)
+        return typed
+
+    def _validate(self, params: list[Parameter]) -> SetParametersResult:
+        reason = self.validate({q.name: q.value for q in params if q.name in self.spec.by_name})
+        return reject(reason) if reason else accept()
+
+    def _applied(self, params: list[Parameter]) -> None:
+        changes = {q.name: _plain(q.value) for q in params if q.name in self.spec.by_name}
+        if not changes or self._apply is None:
+            return
+        try:
+            self._apply(changes)
+        except Exception as exc:   # validated: a failure here is a bug, never fatal
+            self.node.get_logger().error(f"applying {sorted(changes)} failed: {exc!r}")
+
+
+def _one_line(exc: BaseException) -> str:
+    return " ".join(str(exc).split())
+
+
+def _naming(name: str, reason: str) -> str:
+    """``reason`` in one line, prefixed with the parameter's name unless it names it."""
+    reason = " ".join(reason.split())
+    return reason if name in reason else f"parameter {name}: {reason}"
 
 
 def descriptor(description: str, read_only: bool = False) -> ParameterDescriptor:

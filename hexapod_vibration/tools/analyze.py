@@ -10,40 +10,35 @@ from __future__ import annotations
 
 import argparse
 import sys
-from pathlib import Path
 
-from hexapod_vibration.analysis.bag_io import BagError
-from hexapod_vibration.analysis.report import DEFAULT_WINDOW_S, analyze_bag, format_table
-from hexapod_vibration.core.model.config import load_model_config
+from hexapod_vibration import cli
 from hexapod_vibration.paths import config_path
+from hexapod_vibration.tools import outputs
 
-
-def _positive_float(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
-    if not 0.0 < value < 500.0 or value != value:
-        raise argparse.ArgumentTypeError(f"must be in (0, 500) Hz, got {text}")
-    return value
+DEFAULT_WINDOW_S = 10.0
+"""Same as ``analysis.report.DEFAULT_WINDOW_S`` (tested); here so ``--help`` stays cheap."""
 
 
 def build_parser() -> argparse.ArgumentParser:
-    """Command-line interface of ``analyze``."""
-    parser = argparse.ArgumentParser(prog="analyze", description=__doc__.split("\n")[0])
-    parser.add_argument("bag", type=Path, help="rosbag2 directory (MCAP or sqlite3)")
-    parser.add_argument("--out", type=Path, required=True, help="output directory")
-    parser.add_argument("--tones", type=_positive_float, nargs="+", metavar="HZ",
-                        help="tones to report (default: the notch controller's tones found "
-                             "in the bag, else the 3 strongest peaks)")
-    parser.add_argument("--control-on", type=float, metavar="S", default=None,
-                        help="sim time (s) control went on (default: from the bag)")
-    parser.add_argument("--window", type=float, default=DEFAULT_WINDOW_S, metavar="S",
+    """Command-line interface of ``analyze`` (every value checked before any work)."""
+    parser = cli.ArgumentParser(prog="analyze", description=__doc__.split("\n")[0])
+    parser.add_argument("bag", type=cli.existing_dir, help="rosbag2 directory (MCAP or sqlite3)")
+    parser.add_argument("--out", type=cli.output_dir, required=True,
+                        help="output directory (its files are replaced only once all are "
+                             "written)")
+    parser.add_argument("--tones", type=cli.number(0.0, 500.0, "Hz", True, True), nargs="+",
+                        metavar="HZ", help="tones to report (default: the notch controller's "
+                        "tones found in the bag, else the 3 strongest peaks)")
+    parser.add_argument("--control-on", type=cli.number(0.0, cli.MAX_RUN_S, "s"), metavar="S",
+                        default=None, help="sim time (s) control went on (default: from the bag)")
+    parser.add_argument("--window", type=cli.number(0.0, 3600.0, "s", low_open=True),
+                        default=DEFAULT_WINDOW_S, metavar="S",
                         help="spectrum window length (s), at least 10 s recommended")
-    parser.add_argument("--harmonics-of", type=float, default=0.0, metavar="HZ",
-                        help="also report harmonic distortion of this fundamental")
+    parser.add_argument("--harmonics-of", type=cli.number(0.0, 500.0, "Hz", high_open=True),
+                        default=0.0, metavar="HZ",
+                        help="also report harmonic distortion of this fundamental (0: off)")
     parser.add_argument("--scenario", default=None, help="name written into report.json")
-    parser.add_argument("--model", type=Path, default=None,
+    parser.add_argument("--model", type=cli.existing_file, default=None,
                         help="physical model YAML for the Jacobian (default: packaged)")
     parser.add_argument("--no-plots", action="store_true", help="skip the PNG figures")
     return parser
@@ -52,17 +47,21 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     """Entry point; returns the exit code (2 on bad input, with the reason on stderr)."""
     args = build_parser().parse_args(argv)
-    if args.window <= 0.0:
-        print("analyze: --window must be > 0 s", file=sys.stderr)
-        return 2
+    from hexapod_vibration.analysis.bag_io import BagError
+    from hexapod_vibration.analysis.report import analyze_bag, format_table
+    from hexapod_vibration.core.model.config import load_model_config
+
     try:
         model = load_model_config(args.model or config_path("pph_model.yaml"))
-        result = analyze_bag(args.bag, args.out, model, args.tones,
-                             args.scenario or args.bag.resolve().name, args.window,
-                             args.control_on, args.harmonics_of, plots=not args.no_plots)
+        with outputs.staged(args.out) as staging:     # every file complete, or none
+            result = analyze_bag(args.bag, staging, model, args.tones,
+                                 args.scenario or args.bag.resolve().name, args.window,
+                                 args.control_on, args.harmonics_of, plots=not args.no_plots)
     except (BagError, ValueError, FileNotFoundError) as exc:
-        print(f"analyze: {exc}", file=sys.stderr)
-        return 2
+        return cli.fail("analyze", exc)
+    except KeyboardInterrupt as exc:
+        print("analyze: interrupted; nothing written", file=sys.stderr, flush=True)
+        return cli.interrupted_exit_code(exc)
     print(format_table(result.report))
     for note in result.details["notes"]:
         print(f"note: {note}")

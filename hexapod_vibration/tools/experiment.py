@@ -24,23 +24,19 @@ from __future__ import annotations
 
 import argparse
 import math
-import os
-import signal
-import subprocess
 import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-import numpy as np
-import yaml
-
-from hexapod_vibration.analysis.bag_io import BagError
-from hexapod_vibration.analysis.report import analyze_bag, format_table
-from hexapod_vibration.core.model.config import load_model_config
-from hexapod_vibration.core.sim.scenario import Scenario, load_scenario
+from hexapod_vibration import cli
 from hexapod_vibration.paths import available_scenarios, config_path, scenario_path
+from hexapod_vibration.tools import outputs
+from hexapod_vibration.tools.processes import Child, spawn_module, stop_all
+
+if TYPE_CHECKING:       # imported where used: ``experiment --help`` stays cheap
+    from hexapod_vibration.core.sim.scenario import Scenario
 
 PAPER_REDUCTION_DB = {
     "single_tone_harmonic": {40.0: 66.4, 80.0: 40.2, 120.0: -10.0},
@@ -68,18 +64,17 @@ def node_parameters(scenario: Scenario, mode: str) -> dict[str, dict[str, Any]]:
         "test_sine_frequency_hz": scenario.test_sine.frequency_hz or 40.0,
         "test_sine_amplitude_n": scenario.test_sine.amplitude_n,
         "lockstep_controllers": ["notch", "pointing"] if has_notch else ["pointing"],
-        "hold_at_time_s": 0.0 if mode == "lockstep" else -1.0,
     }
     if sh.phases_rad:
         driver["shaker_phases_rad"] = list(sh.phases_rad)
-    pose = scenario.target_pose
+    pose = [math.degrees(a) for a in scenario.target_pose[3:]]
     params = {
         "pph_driver": driver,
         "pointing_controller": {
-            "target_translation_m": [float(x) for x in pose[:3]],
-            "target_tilt_x_deg": float(np.rad2deg(pose[3])),
-            "target_tilt_y_deg": float(np.rad2deg(pose[4])),
-            "target_twist_deg": float(np.rad2deg(pose[5])),
+            "target_translation_m": [float(x) for x in scenario.target_pose[:3]],
+            "target_tilt_x_deg": pose[0],
+            "target_tilt_y_deg": pose[1],
+            "target_twist_deg": pose[2],
         },
     }
     if has_notch:
@@ -91,46 +86,38 @@ def node_parameters(scenario: Scenario, mode: str) -> dict[str, dict[str, Any]]:
     return {node: {"ros__parameters": values} for node, values in params.items()}
 
 
+PARAMS_FILE_HEADER = """\
+# Parameters of the nodes of this experiment ({scenario}, {mode}), written by `experiment`.
+# The same run with the launch file (from this folder):
+#   ros2 launch hexapod_vibration pph.launch.py params_file:=$PWD/params.yaml \\
+#       clock_mode:={mode} record:=true bag_path:=$PWD/bag_launch
+#   ros2 param set /notch_controller enabled true     # at sim time {control_on_s:g} s
+# The runner did the same, plus breakpoints it gave on the driver's command line
+# (lockstep: -p hold_at_time_s:=0.0, moved to {control_on_s:g} s, then {duration_s:g} s),
+# so that its control-on switch landed on sample {control_on_sample} exactly.
+"""
+
+
+def params_file_text(scenario: Scenario, mode: str) -> str:
+    """``params.yaml``: the nodes' parameters of a scenario, reusable with the launch file."""
+    import yaml
+
+    header = PARAMS_FILE_HEADER.format(
+        scenario=scenario.name, mode=mode, control_on_s=scenario.control_on_s,
+        duration_s=scenario.duration_s, control_on_sample=round(scenario.control_on_s * 1e3))
+    return header + yaml.safe_dump(node_parameters(scenario, mode), sort_keys=False)
+
+
 # ---------------------------------------------------------------------------- processes
-@dataclass
-class Child:
-    """One node process of the experiment."""
-
-    name: str
-    process: subprocess.Popen
-    log: Path
-
-    def alive(self) -> bool:
-        """True while the process runs."""
-        return self.process.poll() is None
-
-    def tail(self, lines: int = 15) -> str:
-        """Last lines of its log."""
-        text = self.log.read_text(errors="replace") if self.log.exists() else ""
-        return "\n".join(text.splitlines()[-lines:])
-
-
 def start_child(name: str, module: str, ros_args: list[str], log_dir: Path) -> Child:
-    """Start ``python -m module --ros-args ...`` with output to ``log_dir/name.log``."""
-    log = log_dir / f"{name}.log"
-    stream = open(log, "w", encoding="utf-8")  # noqa: SIM115 (closed with the process)
-    env = dict(os.environ, PYTHONUNBUFFERED="1")
-    process = subprocess.Popen([sys.executable, "-m", module, "--ros-args", *ros_args],
-                               stdout=stream, stderr=subprocess.STDOUT, env=env,
-                               start_new_session=True)
-    return Child(name, process, log)
+    """``python -m module --ros-args ...`` (output in ``log_dir/name.log``), dying with us."""
+    return spawn_module(name, module, ["--ros-args", *ros_args], log_dir)
 
 
 def stop_children(children: list[Child]) -> None:
-    """SIGINT every process (driver first, recorder last), then wait; kill if stuck."""
-    for child in children:
-        if child.alive():
-            child.process.send_signal(signal.SIGINT)
-        try:
-            child.process.wait(timeout=STOP_TIMEOUT_S)
-        except subprocess.TimeoutExpired:
-            child.process.kill()
-            child.process.wait()
+    """SIGINT each process in turn (the given order), wait; SIGKILL its group if stuck."""
+    with cli.deferred():
+        stop_all(children, STOP_TIMEOUT_S)
 
 
 # ---------------------------------------------------------------------------- supervisor
@@ -147,12 +134,15 @@ class Supervisor:
         import rclpy
         from diagnostic_msgs.msg import DiagnosticArray
         from rclpy.parameter_client import AsyncParameterClient
+        from rclpy.signals import SignalHandlerOptions
         from rosgraph_msgs.msg import Clock
 
         from hexapod_vibration.ros.qos import CLOCK_QOS, DIAGNOSTICS_QOS
 
         self._rclpy = rclpy
-        rclpy.init(args=[])
+        # No rclpy signal handlers: they would shut this context down from another thread
+        # in the middle of a call (tracebacks); cli.StopSignal unwinds instead.
+        rclpy.init(args=[], signal_handler_options=SignalHandlerOptions.NO)
         self.node = rclpy.create_node("experiment")
         self.sim_time_s = -1.0
         self.driver: dict[str, str] = {}
@@ -246,8 +236,7 @@ class ExperimentRun:
             raise ExperimentError(f"{self.bag} exists: choose another --out or remove it")
         options.out.mkdir(parents=True, exist_ok=True)
         self.params_file = options.out / "params.yaml"
-        self.params_file.write_text(yaml.safe_dump(node_parameters(options.scenario,
-                                                                   options.mode)))
+        outputs.write_text(self.params_file, params_file_text(options.scenario, options.mode))
         self.children: list[Child] = []
         self.sup: Supervisor | None = None
         sc = options.scenario
@@ -266,7 +255,7 @@ class ExperimentRun:
             "-p", f"bag_path:={self.bag}", "-p", f"storage:={self.o.storage}"], logs))
         if self.o.composed:
             self.children.append(start_child("pph_graph", "hexapod_vibration.nodes.pph_graph",
-                                             common, logs))
+                                             common + self._breakpoint("pph_driver:"), logs))
         else:
             if self.has_notch:
                 self.children.append(start_child(
@@ -274,8 +263,12 @@ class ExperimentRun:
             self.children.append(start_child(
                 "pointing_controller", "hexapod_vibration.nodes.pointing_controller", common, logs))
             self.children.append(start_child("pph_driver", "hexapod_vibration.nodes.pph_driver",
-                                             common, logs))
+                                             common + self._breakpoint(), logs))
         self.sup = Supervisor()
+
+    def _breakpoint(self, prefix: str = "") -> list[str]:
+        """Lockstep: the driver starts held before sample 0 (after the params file: wins)."""
+        return ["-p", f"{prefix}hold_at_time_s:=0.0"] if self.o.mode == "lockstep" else []
 
     def _check(self) -> None:
         for child in self.children:
@@ -349,23 +342,29 @@ def run_scenario(options: RunOptions) -> dict[str, Any]:
         run.run()
     finally:
         run.stop()
+    from hexapod_vibration.analysis.report import analyze_bag
+    from hexapod_vibration.core.model.config import load_model_config
+
     sc = options.scenario
     model = load_model_config(config_path("pph_model.yaml"))
-    result = analyze_bag(run.bag, options.out, model, list(sc.report_tones_hz) or None,
-                         sc.name, sc.window_s, harmonics_of_hz=sc.report_harmonics_of_hz)
+    with outputs.staged(options.out) as staging:     # every file complete, or none
+        result = analyze_bag(run.bag, staging, model, list(sc.report_tones_hz) or None,
+                             sc.name, sc.window_s, harmonics_of_hz=sc.report_harmonics_of_hz)
     return result.report
 
 
 # ---------------------------------------------------------------------------- CLI
 def build_parser() -> argparse.ArgumentParser:
-    """Command-line interface of ``experiment``."""
-    parser = argparse.ArgumentParser(prog="experiment", description=__doc__.split("\n")[0])
+    """Command-line interface of ``experiment`` (every value checked before any work)."""
+    parser = cli.ArgumentParser(prog="experiment", description=__doc__.split("\n")[0])
     parser.add_argument("--scenario", help=f"scenario name ({', '.join(available_scenarios())})"
                         " or a scenario YAML path")
-    parser.add_argument("--out", type=Path, required=True, help="output directory")
-    parser.add_argument("--duration", type=float, metavar="S", help="override the duration (s)")
-    parser.add_argument("--control-on", type=float, metavar="S",
-                        help="override the control-on time (s)")
+    parser.add_argument("--out", type=cli.output_dir, required=True,
+                        help="output directory (created; must not hold a bag already)")
+    parser.add_argument("--duration", type=cli.duration_s, metavar="S",
+                        help=f"override the duration (s, in (0, {cli.MAX_RUN_S:g}])")
+    parser.add_argument("--control-on", type=cli.duration_s, metavar="S",
+                        help="override the control-on time (s, in (0, duration])")
     mode = parser.add_mutually_exclusive_group()
     mode.add_argument("--lockstep", dest="mode", action="store_const", const="lockstep",
                       help="deterministic, as fast as the graph allows (default)")
@@ -383,18 +382,39 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _scenario(name: str, duration: float | None, control_on: float | None) -> Scenario:
+    from hexapod_vibration.core.sim.scenario import load_scenario
+
     path = Path(name) if name.endswith((".yaml", ".yml")) else scenario_path(name)
-    scenario = load_scenario(path).with_timeline(duration, control_on)
+    if not path.is_file():
+        raise FileNotFoundError(f"argument --scenario: {path} does not exist")
+    scenario = load_scenario(path)
     if duration is not None or control_on is not None:
-        _check_timeline(scenario)
-    return scenario
+        _check_timeline(scenario, duration, control_on)
+    return scenario.with_timeline(duration, control_on)
 
 
-def _check_timeline(sc: Scenario) -> None:
-    if not math.isfinite(sc.duration_s) or sc.duration_s <= 0:
-        raise ValueError(f"--duration must be > 0 s, got {sc.duration_s}")
-    if not 0.0 < sc.control_on_s <= sc.duration_s:
-        raise ValueError(f"--control-on must be in (0, duration], got {sc.control_on_s}")
+def _check_timeline(sc: Scenario, duration: float | None, control_on: float | None) -> None:
+    duration = sc.duration_s if duration is None else duration
+    control_on = sc.control_on_s if control_on is None else control_on
+    if not 0.0 < control_on <= duration:
+        raise ValueError(f"argument --control-on: must be in (0, duration = {duration:g}] s, "
+                         f"got {control_on:g}")
+    if duration < sc.window_s:
+        raise ValueError(f"argument --duration: must be at least the scenario's window_s "
+                         f"({sc.window_s:g} s), got {duration:g}")
+
+
+def check_arguments(args: argparse.Namespace) -> list[Scenario]:
+    """Every scenario of the command line, checked; ValueError/FileNotFoundError if not."""
+    names = DEMO_SCENARIOS if args.demo else ([args.scenario] if args.scenario else [])
+    if not names:
+        raise ValueError("give --scenario NAME or --demo")
+    scenarios = [_scenario(n, args.duration, args.control_on) for n in names]
+    for sc in scenarios:
+        bag = (args.out / sc.name if args.demo else args.out) / "bag"
+        if bag.exists():
+            raise ValueError(f"argument --out: {bag} exists: choose another --out or remove it")
+    return scenarios
 
 
 def side_by_side(left: str, right: str, gap: int = 4) -> str:
@@ -408,17 +428,23 @@ def side_by_side(left: str, right: str, gap: int = 4) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Entry point; exit 0 on success, 2 on bad input, 1 if the run failed, 130 on Ctrl-C."""
+    """Entry point: 0 success, 2 bad input, 1 the run failed, 130/143 on SIGINT/SIGTERM."""
+    cli.install_stop_handlers()
     args = build_parser().parse_args(argv)
-    names = DEMO_SCENARIOS if args.demo else ([args.scenario] if args.scenario else [])
-    if not names:
-        print("experiment: give --scenario NAME or --demo", file=sys.stderr)
-        return 2
     try:
-        scenarios = [_scenario(n, args.duration, args.control_on) for n in names]
+        scenarios = check_arguments(args)
     except (ValueError, FileNotFoundError) as exc:
-        print(f"experiment: {exc}", file=sys.stderr)
-        return 2
+        return cli.fail("experiment", exc)
+    try:
+        return _run_all(args, scenarios)
+    except KeyboardInterrupt as exc:        # between two runs, or while printing
+        return cli.interrupted_exit_code(exc)
+
+
+def _run_all(args: argparse.Namespace, scenarios: list[Scenario]) -> int:
+    from hexapod_vibration.analysis.bag_io import BagError
+    from hexapod_vibration.analysis.report import format_table
+
     tables = []
     for sc in scenarios:
         out = args.out / sc.name if args.demo else args.out
@@ -427,10 +453,10 @@ def main(argv: list[str] | None = None) -> int:
         try:
             report = run_scenario(RunOptions(sc, out, args.mode, args.storage,
                                              composed=args.composed))
-        except KeyboardInterrupt:
+        except KeyboardInterrupt as exc:
             print(f"\nexperiment: interrupted; processes stopped, bag in {out / 'bag'}",
-                  file=sys.stderr)
-            return 130
+                  file=sys.stderr, flush=True)
+            return cli.interrupted_exit_code(exc)
         except (ExperimentError, BagError) as exc:
             print(f"experiment: {exc}", file=sys.stderr)
             return 2 if isinstance(exc, ExperimentError) and "exists" in str(exc) else 1

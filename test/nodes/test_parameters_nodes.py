@@ -31,8 +31,8 @@ ROOT = Path(__file__).resolve().parents[2]
 PARAMS_FILE = ROOT / 'config' / 'pph.yaml'
 NODES = ('pph_driver', 'notch_controller', 'pointing_controller')
 RCLPY_OWN = {'use_sim_time', 'start_type_description_service'}
-EMPTY_DEFAULTS = {'pph_driver': {'shaker_phases_rad': []}}
-"""Parameters at an empty-array default: a params file cannot hold them (see pph.yaml)."""
+EMPTY_DEFAULTS: dict = {}
+"""Parameters a params file cannot hold: none (an empty array arrives unset, read as [])."""
 
 
 def _check_rejected(client: ParameterClient, name: str, bad_values, *words: str) -> None:
@@ -208,9 +208,12 @@ def test_driver_parameters(ros_context, node_processes):
     off = tone_amplitude(*accel.window(mark + 2000, mark + 3000), 40.0)
     assert np.all(on > 0.05) and db(np.linalg.norm(on) / np.linalg.norm(off)) > 20.0, (on, off)
 
-    # Shaker arrays: lengths must match, elements within bounds and finite.
-    _check_rejected(client, 'shaker_frequencies_hz', [[40.0, 80.0]], 'same length')
-    _check_rejected(client, 'shaker_phases_rad', [[0.1, 0.2]], 'phases')
+    # Shaker arrays: paired by index (issue 15: each can be set alone, in any order; a value
+    # without its partner waits, inert), elements within bounds and finite, checked together.
+    _check_accepted(client, 'shaker_frequencies_hz', [40.0, 80.0])   # 80 Hz: no amplitude
+    _check_accepted(client, 'shaker_phases_rad', [0.1, 0.2])
+    _check_accepted(client, 'shaker_frequencies_hz', [40.0])
+    _check_accepted(client, 'shaker_phases_rad', [])
     result = client.set_atomically(shaker_frequencies_hz=[40.0, 80.0],
                                    shaker_amplitudes_n=[80.0, 10.0])
     assert result.successful, result.reason

@@ -1,0 +1,91 @@
+"""``run_node``: the ``main()`` of every node executable, from rclpy.init to the exit code.
+
+1. The command line is checked first (``cli.node_command_line``: ``--help``, stray
+   arguments, ``--params-file``), and SIGINT/SIGTERM raise ``cli.StopSignal`` from then on
+   (rclpy's own signal handlers are not installed: they shut the context down from another
+   thread, in the middle of whatever the node is doing, which is what made Ctrl-C print
+   ``RCLError: context is not valid`` tracebacks).
+2. The node(s) are built, a bad parameter or file ends the process with exit code 2 and
+   the reason in one line, before the loop starts.
+3. The loop runs until a signal; then the nodes are destroyed and rclpy is shut down in
+   order, and the process ends with ``128 + signal`` (130, 143) at once (``cli.exit_now``:
+   no interpreter teardown).
+"""
+
+from __future__ import annotations
+
+import gc
+import sys
+from collections.abc import Callable, Sequence
+
+from hexapod_vibration import cli
+
+
+def run_node(name: str, factory: Callable[[], object],
+             loop: Callable | None = None,
+             args: list[str] | None = None,
+             companions: Sequence[Callable[[], object]] = (),
+             nodes: Sequence[str] | None = None) -> None:
+    """Init rclpy, build the node(s), run ``loop`` (default: serve them), exit the process.
+
+    The node's 1 kHz subscriptions are those it lists in ``loop_subscriptions``; its
+    ``executor`` parameter chooses how they are served (``ros/executors.py``).
+    ``companions`` are more nodes composed into the same process and thread.
+    ``nodes``: the node names whose parameters ``--help`` lists (default: ``name``).
+    Never returns: exits 0, 2 (bad parameter, file or argument), or 128 + signal.
+    """
+    cli.install_stop_handlers()
+    args = cli.node_command_line(name, nodes or (name,), args)
+    code = cli.EXIT_OK
+    try:
+        code = _run(name, factory, loop, args, companions)
+    except cli.StopSignal as stop:           # during the imports or rclpy.init
+        code = stop.exit_code
+    cli.exit_now(code)
+
+
+def _run(name: str, factory, loop, args, companions) -> int:
+    import rclpy
+    from rclpy._rclpy_pybind11 import RCLError
+    from rclpy.exceptions import InvalidHandle, ParameterException
+    from rclpy.executors import ExternalShutdownException
+    from rclpy.signals import SignalHandlerOptions
+
+    from hexapod_vibration.ros.executors import LoopSpinner, make_executor, spin_loop
+
+    cli.exit_if_stopped()
+    try:
+        rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    except RCLError as exc:
+        return cli.fail(name, f"bad ROS arguments: {exc}")
+    built: list = []
+    code = cli.EXIT_OK
+    try:
+        built.append(factory())
+        built.extend(make() for make in companions)
+        gc.freeze()        # start-up objects: never scanned again by the collector
+        executor_name = built[0].get_parameter("executor").value
+        executor = make_executor(executor_name)
+        for node in built:
+            executor.add_node(node)
+        subscriptions = [sub for node in built[1:] + built[:1]
+                         for sub in getattr(node, "loop_subscriptions", ())]
+        spinner = LoopSpinner(executor, subscriptions, fast=executor_name == "waitset")
+        (loop or spin_loop)(built[0], spinner)
+    except cli.StopSignal as stop:
+        code = stop.exit_code
+    except (ExternalShutdownException, RCLError, InvalidHandle):
+        if cli.stop_requested() is None and rclpy.ok():
+            raise                                  # a real error, not a shutdown
+        code = cli.interrupted_exit_code()
+    except (ValueError, FileNotFoundError, ParameterException) as exc:
+        print(f"{name}: error: {' '.join(str(exc).split())}", file=sys.stderr, flush=True)
+        code = cli.EXIT_USAGE
+    finally:
+        with cli.deferred():
+            for node in reversed(built):
+                node.destroy_node()
+            rclpy.try_shutdown()
+    if code == cli.EXIT_OK and cli.stop_requested() is not None:
+        code = cli.interrupted_exit_code()
+    return code
