@@ -20,16 +20,12 @@ from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 from std_srvs.srv import Trigger
 
 from hexapod_vibration.contract import SAMPLE_RATE_HZ, sample_label
-from hexapod_vibration.core.control import adaptation
-from hexapod_vibration.core.control.notch_supervisor import (
-    MAX_TONES,
-    NotchConfig,
-    NotchSupervisor,
-)
-from hexapod_vibration.ros import parameters as p
+from hexapod_vibration.core.control.notch_supervisor import NotchConfig, NotchSupervisor
+from hexapod_vibration.parameter_specs import NOTCH_CONTROLLER
 from hexapod_vibration.ros.diagnostics import diagnostic_array
-from hexapod_vibration.ros.executors import declare_executor_parameter, run_node
+from hexapod_vibration.ros.executors import run_node
 from hexapod_vibration.ros.messages import StrutArrayPublisher, receive_strut_array
+from hexapod_vibration.ros.parameters import NodeParameters
 from hexapod_vibration.ros.qos import DIAGNOSTICS_QOS, LOOP_PUBLISHER_QOS, LOOP_QOS
 
 WEIGHTS_EVERY_SAMPLES = 10
@@ -44,10 +40,11 @@ class NotchControllerNode(Node):
     def __init__(self) -> None:
         """Declare parameters, build the supervisor, wire topics and the identify service."""
         super().__init__("notch_controller")
-        self._declare_parameters()
+        self.params = NodeParameters(self, NOTCH_CONTROLLER)
         self.fs = SAMPLE_RATE_HZ
-        values = {name: p.parameter_value(self, name) for name in SETTINGS}
-        self.supervisor = NotchSupervisor(NotchConfig().replaced(values), self.fs)
+        values = self.params.values()
+        self.supervisor = NotchSupervisor(
+            NotchConfig().replaced({k: v for k, v in values.items() if k in SETTINGS}), self.fs)
         self.invalid = 0
         pub_qos = LOOP_PUBLISHER_QOS
         self._pub_cmd = StrutArrayPublisher(self.create_publisher(
@@ -57,60 +54,23 @@ class NotchControllerNode(Node):
         self.loop_subscriptions = [self.create_subscription(
             Float64MultiArray, "/pph/accel", self._on_accel, LOOP_QOS)]
         self.create_service(Trigger, "~/identify", self._on_identify)
-        self.add_on_set_parameters_callback(self._on_set_parameters)
-        self.add_post_set_parameters_callback(self._after_set_parameters)
+        self.params.serve(check=self._check_parameters, apply=self._apply_parameters)
         config = self.supervisor.config
         self.get_logger().info(f"notch controller up: tones {list(config.tone_frequencies_hz)}"
                                f" Hz, mu {config.mu:g}, {config.adaptation}")
 
     # ------------------------------------------------------------------ parameters
-    def _declare_parameters(self) -> None:
-        p.declare_float(self, "mu", 0.002, "normalised adaptation rate (1/sample): the "
-                        "weights converge as (1 - mu)^n; bounded by the identified stability "
-                        "limit (eq. 18 with the loop delay)", 0.0, 1.0)
-        p.declare_float_array(self, "tone_frequencies_hz", [40.0, 80.0],
-                              f"tones to cancel (Hz), each in (0, 500), at most {MAX_TONES}",
-                              0.0, SAMPLE_RATE_HZ / 2)
-        p.declare_bool(self, "enabled", True, "control output on (ramped, bumpless); while "
-                       "off the weights are frozen and kept")
-        p.declare_string(self, "adaptation", "decentralized", "adaptation coefficient: "
-                         "decentralized = six SISO loops, each normalised by its own strut's "
-                         "identified gain and phase (the paper); centralized = -2 G^-1 (6x6); "
-                         "raw = the paper as printed (P = I, mu unnormalised)",
-                         adaptation.COEFFICIENT_MODES)
-        p.declare_bool(self, "auto_identify", True, "identify the plant at start-up and "
-                       "whenever the tones change")
-        p.declare_float(self, "identify_delay_s", 1.0, "wait after the first sample before "
-                        "the start-up identification (s of samples)", 0.0, 60.0)
-        p.declare_float(self, "identification_amplitude_n", 2.0, "test-tone amplitude per "
-                        "tone during identification (N peak)", 0.01, 20.0)
-        p.declare_float(self, "identification_settle_s", 0.1, "discarded settling time per "
-                        "identification segment (s)", 0.0, 5.0, read_only=True)
-        p.declare_float(self, "identification_measure_s", 0.3, "fitted time per "
-                        "identification segment (s)", 0.05, 10.0, read_only=True)
-        p.declare_float(self, "dc_cutoff_hz", 0.5, "DC-blocker corner (Hz)", 0.01, 10.0,
-                        read_only=True)
-        p.declare_float(self, "loop_delay_samples", 2.0, "loop delay used in the stability "
-                        "bound (samples): 1 for the ZOH + anti-aliasing group delay", 0.0, 20.0,
-                        read_only=True)
-        p.declare_float(self, "ramp_s", 0.05, "enable/disable fade time (s)", 0.0, 5.0)
-        declare_executor_parameter(self)
-
-    @staticmethod
-    def _settings(params: list[Parameter]) -> dict:
-        return {q.name: q.value for q in params if q.name in SETTINGS}
-
-    def _on_set_parameters(self, params: list[Parameter]):
-        """Validate only: the supervisor checks the set as a whole and changes nothing."""
+    def _check_parameters(self, values: dict, changed: frozenset) -> str:
+        """Validate only: the supervisor checks the changed settings as a whole."""
         try:
-            self.supervisor.check(self._settings(params))
+            self.supervisor.check({k: values[k] for k in changed if k in SETTINGS})
         except ValueError as exc:
-            return p.reject(str(exc))
-        return p.accept()
+            return str(exc)
+        return ""
 
-    def _after_set_parameters(self, params: list[Parameter]) -> None:
-        """Apply a set that passed validation."""
-        self.supervisor.apply(self._settings(params))
+    def _apply_parameters(self, changes: dict) -> None:
+        """Apply a set that passed validation (post-set)."""
+        self.supervisor.apply({k: v for k, v in changes.items() if k in SETTINGS})
         self._report()
 
     def _on_identify(self, _request, response):

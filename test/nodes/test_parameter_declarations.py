@@ -25,6 +25,12 @@ STARTUP_REFUSALS = {
         {'shaker_frequencies_hz': '[498.0]', 'shaker_drift_hz': '2.0'},   # together
         {'command_timeout_samples': '0'},
     ],
+    'notch_controller': [
+        {'tone_frequencies_hz': '[0.0]'},                                   # open bound
+        {'tone_frequencies_hz': '[40.0, 40.0]'},
+        {'mu': '0.7'},                              # beyond the normalised bound 0.618
+        {'adaptation': 'fancy'},
+    ],
     'pointing_controller': [
         {'target_translation_m': '[0.0, 0.0]'},
         {'target_tilt_x_deg': '2.0', 'target_tilt_y_deg': '2.0'},           # norm > 2.5
@@ -39,7 +45,7 @@ def _python(text: str):
 def test_descriptors_are_the_specs(ros_context, node_processes, tmp_path):
     args = {'pph_driver': ['--ros-args', '-p', 'lockstep_controllers:=[]'],
             'pph_recorder': ['--ros-args', '-p', f'bag_path:={tmp_path / "bag"}']}
-    names = ('pph_driver', 'pointing_controller', 'pph_recorder')
+    names = ('pph_driver', 'notch_controller', 'pointing_controller', 'pph_recorder')
     for name in names:
         node_processes.start(name, *args.get(name, []))
     node = ros_context.create_node('describer')
@@ -72,9 +78,10 @@ def test_start_up_refuses_what_run_time_refuses(ros_context, node_processes):
             lines = process.stderr_path.read_text().strip().splitlines()
             errors = [line for line in lines if line.startswith(f'{name}: error: ')]
             assert len(errors) == 1 and 'Traceback' not in process.output(), process.output()
-            startup_reasons[(name, tuple(case))] = errors[0][len(f'{name}: error: '):]
+            startup_reasons[(name, tuple(case.items()))] = errors[0][len(f'{name}: error: '):]
     running = {'pph_driver': node_processes.start('pph_driver', '--ros-args', '-p',
                                                   'lockstep_controllers:=[]'),
+               'notch_controller': node_processes.start('notch_controller'),
                'pointing_controller': node_processes.start('pointing_controller')}
     node = ros_context.create_node('setter')
     for name, cases in STARTUP_REFUSALS.items():
@@ -86,7 +93,7 @@ def test_start_up_refuses_what_run_time_refuses(ros_context, node_processes):
             key, value = items[-1]
             result = client.set(key, _python(value))
             assert not result.successful, (name, case)
-            assert result.reason == startup_reasons[(name, tuple(case))], (name, case)
+            assert result.reason == startup_reasons[(name, tuple(case.items()))], (name, case)
             for key, _ in items[:-1]:                # back to the defaults
                 default = NODE_SPECS[name][key].default
                 assert client.set(key, default).successful, (name, key)
