@@ -16,6 +16,7 @@ setup(
         (SHARE, ['package.xml']),
         (f'{SHARE}/config', sorted(glob('config/*.yaml'))),
         (f'{SHARE}/config/scenarios', sorted(glob('config/scenarios/*.yaml'))),
+        (f'{SHARE}/config/sweeps', sorted(glob('config/sweeps/*.yaml'))),
         (f'{SHARE}/launch', sorted(glob('launch/*.launch.py'))),
     ],
     install_requires=['setuptools'],
@@ -35,6 +36,7 @@ setup(
             'experiment = hexapod_vibration.tools.experiment:main',
             'analyze = hexapod_vibration.tools.analyze:main',
             'hexapod_bench = hexapod_vibration.bench.core_bench:main',
+            'sweep = hexapod_vibration.tools.sweep:main',
         ],
     },
 )
