@@ -5,11 +5,13 @@ combination of the axes that are not on the map (e.g. ``notch.adaptation``), two
 per row:
 
 - attenuation (dB): the smallest reduction of the lines the notch aims at;
-- largest rise elsewhere (dB): red where control made a band or a line worse, the +1 dB
-  of "never worse than off" marked.
+- largest rise elsewhere (dB, ``max_rise_vs_off_db``: against the same run without
+  control, same window and noise): red where control made a band or a line worse, the
+  +1 dB of "never worse than off" marked.
 
-Every cell shows its value; a thick black frame marks a point whose loop diverged (wound
-up past the actuator rating), a grey hatched cell a point that failed or was refused (its
+Every cell shows its value; a thick black frame marks a point whose loop diverged
+(:mod:`hexapod_vibration.sweep.point`: past the actuator rating, or a rise of more than
+20 dB), a grey hatched cell a point that failed or was refused (its
 error is in the table). When the map's y axis is ``notch.mu``, the predicted bounds of mu
 of each column are drawn over it: eq. 18 averaged (identified G), the exact LTI bound
 (linear plant's model) and, once it exists, the predicted-sensitivity limit. A bound beyond
@@ -47,7 +49,8 @@ BOUND_STYLES = {                 # column -> (legend, line style, colour)
 }
 OUTLINE = [effects.withStroke(linewidth=3.6, foreground="white")]
 PANELS = (("attenuation_db", "attenuation of the targeted lines (dB)", "viridis"),
-          ("max_rise_db", "largest rise elsewhere (dB; scale line: +1 dB)", "RdBu_r"))
+          ("max_rise_vs_off_db", "largest rise elsewhere vs control off (dB; scale line: +1)",
+           "RdBu_r"))
 
 
 def write_maps(grid: Grid, rows: list[dict[str, Any]], out_dir: Path) -> list[Path]:
@@ -129,7 +132,7 @@ def _values(cells: list[list[dict]], column: str) -> np.ndarray:
 def _panel(ax: Any, cells: list[list[dict]], x: Axis, y: Axis, column: str, cmap: str) -> None:
     data = _values(cells, column)
     finite = data[np.isfinite(data)]
-    if column == "max_rise_db":
+    if column == "max_rise_vs_off_db":
         top = min(max(float(finite.max()) if finite.size else 1.0, 2.0 * NEVER_WORSE_DB),
                   RISE_SCALE_MAX_DB)
         low = max(min(float(finite.min()) if finite.size else -1.0, -NEVER_WORSE_DB),
@@ -140,13 +143,13 @@ def _panel(ax: Any, cells: list[list[dict]], x: Axis, y: Axis, column: str, cmap
                                 vmax=float(finite.max()) if finite.size else 1.0)
     mesh = ax.pcolormesh(np.ma.masked_invalid(data), cmap=cmap, norm=norm, shading="flat")
     extend = "neither"
-    if finite.size and column == "max_rise_db":
+    if finite.size and column == "max_rise_vs_off_db":
         extend = {(False, False): "neither", (True, False): "min", (False, True): "max",
                   (True, True): "both"}[(bool(finite.min() < norm.vmin),
                                          bool(finite.max() > norm.vmax))]
     bar = plt.colorbar(mesh, ax=ax, pad=0.01, extend=extend)
     bar.ax.tick_params(labelsize=7)
-    if column == "max_rise_db":
+    if column == "max_rise_vs_off_db":
         bar.ax.axhline(NEVER_WORSE_DB, color="black", linewidth=1.5)
     annotate = len(x.values) <= ANNOTATE_MAX_CELLS and len(y.values) <= ANNOTATE_MAX_CELLS
     for j, line in enumerate(cells):
@@ -175,7 +178,8 @@ def _cell(ax: Any, i: int, j: int, row: dict, value: float, mesh: Any, annotate:
     if annotate and math.isfinite(value):
         rgba = mesh.cmap(mesh.norm(value))
         light = 0.299 * rgba[0] + 0.587 * rgba[1] + 0.114 * rgba[2] > 0.55
-        ax.text(i + 0.5, j + 0.5, f"{value:.0f}", ha="center", va="center", fontsize=7,
+        text = f"{value:.1f}" if abs(value) < 9.95 else f"{value:.0f}"
+        ax.text(i + 0.5, j + 0.5, text, ha="center", va="center", fontsize=7,
                 color="black" if light else "white", zorder=5, path_effects=[
                     effects.withStroke(linewidth=2.0, foreground="white" if light else "black")])
 
@@ -242,7 +246,7 @@ def _legend_handles(rows: list[dict], y: Axis) -> list[Any]:
                 handles.append(Line2D([], [], linestyle=style, color=colour, linewidth=2.2,
                                       label=label, path_effects=OUTLINE))
     handles.append(patches.Patch(facecolor="none", edgecolor="black", linewidth=2.0,
-                                 label="diverged (command past the actuator rating)"))
+                                 label="diverged (past the actuator rating, or a rise > 20 dB)"))
     handles.append(patches.Patch(facecolor="0.85", edgecolor="0.5", hatch="///",
                                  label="refused or failed (see the table's error)"))
     return handles
