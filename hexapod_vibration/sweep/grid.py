@@ -122,8 +122,8 @@ def set_path(mapping: dict, path: str, value: Any) -> None:
             raise GridError(f"{path!r}: {parent_path} is not a list")
         get_path(mapping, path)
         if isinstance(parent, tuple):        # tuples of dataclasses.asdict: make mutable
-            parent = list(parent)
-            set_path(mapping, parent_path, parent)
+            set_path(mapping, parent_path, list(parent))
+            parent = get_path(mapping, parent_path)
         _check_type(path, parent[last], value)
         parent[last] = value
     else:
@@ -267,8 +267,8 @@ def grid_from_dict(raw: Any, source: Path) -> Grid:
     base = _base_mapping(grid, raw.get("model_file"), source)
     for set_path_, value in _mapping(raw.get("set") or {}, "set").items():
         set_path(base, set_path_, value)
-    _check_plot(grid)
     grid.points = _build_points(grid, base)
+    _check_plot(grid)
     return grid
 
 

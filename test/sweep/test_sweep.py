@@ -1,5 +1,6 @@
 """The sweep tool: grids, Dask against serial, failures, resume, bad grids (issue 16)."""
 
+import copy
 import dataclasses
 import json
 import subprocess
@@ -176,6 +177,11 @@ def test_every_scenario_field_is_addressable_by_its_path():
         assert grids.get_path(mapping, path) == value
         grids.set_path(mapping, path, value)
         assert grids.get_path(mapping, path) == value
+    # an element of a tuple (as dataclasses.asdict gives it) is set in the mapping itself
+    mapping = copy.deepcopy(base)
+    grids.set_path(mapping, "target_pose[5]", 0.25)
+    grids.set_path(mapping, "shaker.frequencies_hz[1]", 81.0)
+    assert mapping["target_pose"][5] == 0.25 and mapping["shaker"]["frequencies_hz"][1] == 81.0
 
 
 def test_model_paths_and_seeds(tmp_path):
