@@ -1,7 +1,8 @@
 """Sweep throughput for ``hexapod_bench``: points per second with 1 and 2 Dask workers.
 
 A fixed grid of short points (the Table 1 loop with one 40 Hz tone, 5.4 s simulated, each
-with its own seed, so every point does the same work: the loop and its exact bound) runs
+with its own seed, so every point does the same work: the loop, its reference run without
+control and its exact bound) runs
 on a fresh ``LocalCluster`` per worker count. The clock runs from submitting the points to
 the last result, after one warm-up point per worker (imports, first plant build). The
 load average before and after is recorded, and the mean time each point took inside its
@@ -84,7 +85,8 @@ def summary_lines(results: dict[str, Any]) -> list[str]:
                       for w, r in t["points_per_s"].items())
     return ["", "## Sweep throughput (Dask LocalCluster, core loop points)", "",
             f"{t['points']} points of {t['simulated_s_per_point']:g} s simulated each "
-            f"(loop, metrics and exact bound): points/s {rates}; 2/1 ratio "
+            f"(loop, reference run without control, metrics, exact bound): points/s {rates}; "
+            "2/1 ratio "
             f"{t['ratio_2_over_1']:.2f} on {t['cores_usable']} usable cores; mean time in a "
             f"task {', '.join(f'{w}: {v:.2f} s' for w, v in t['mean_point_s'].items())}; "
             "load average "
