@@ -16,6 +16,7 @@ setup(
         (SHARE, ['package.xml']),
         (f'{SHARE}/config', sorted(glob('config/*.yaml'))),
         (f'{SHARE}/config/scenarios', sorted(glob('config/scenarios/*.yaml'))),
+        (f'{SHARE}/config/sweeps', sorted(glob('config/sweeps/*.yaml'))),
         (f'{SHARE}/launch', sorted(glob('launch/*.launch.py'))),
     ],
     install_requires=['setuptools'],
@@ -38,6 +39,7 @@ setup(
             'analyze = hexapod_vibration.executables:analyze',
             'soak = hexapod_vibration.executables:soak',
             'hexapod_bench = hexapod_vibration.executables:hexapod_bench',
+            'sweep = hexapod_vibration.executables:sweep',
         ],
     },
 )

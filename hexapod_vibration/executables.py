@@ -85,6 +85,11 @@ def soak(argv: Sequence[str] | None = None) -> None:
     _tool("hexapod_vibration.tools.soak", argv)
 
 
+def sweep(argv: Sequence[str] | None = None) -> None:
+    """``sweep``: a grid of core closed-loop runs on Dask."""
+    _tool("hexapod_vibration.tools.sweep", argv)
+
+
 def hexapod_bench(argv: Sequence[str] | None = None) -> None:
     """``hexapod_bench``: the benchmarks."""
     _tool("hexapod_vibration.bench.cli", argv)

@@ -48,7 +48,7 @@ def run_script(name: str, *args: str, env=None, cwd=None) -> tuple[subprocess.Co
 
 
 def test_setup_declares_every_executable():
-    assert set(NODES) | {'experiment', 'analyze', 'hexapod_bench', 'soak'} <= set(
+    assert set(NODES) | {'experiment', 'analyze', 'hexapod_bench', 'soak', 'sweep'} <= set(
         console_scripts())
 
 

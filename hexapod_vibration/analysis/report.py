@@ -192,7 +192,7 @@ def analyze_signals(signals: BagSignals, geometry: CubicHexapodGeometry,
         if note:
             notes.append(f"{name}: {note}")
         levels[name] = tone_levels(z[rows], tones)
-    rows_out = _tone_rows(tones, controlled, levels)
+    rows_out = tone_rows(tones, controlled, levels)
     on_row = int(np.searchsorted(index, on)) if on is not None else -1
     report = {
         "scenario": scenario,
@@ -206,7 +206,8 @@ def analyze_signals(signals: BagSignals, geometry: CubicHexapodGeometry,
     return Analysis(report, details, z, {k: v[0] for k, v in windows.items()})
 
 
-def _tone_rows(tones: list[float], controlled: list[float], levels: dict) -> list[dict]:
+def tone_rows(tones: list[float], controlled: list[float], levels: dict) -> list[dict]:
+    """report.json's ``tones`` rows from :func:`tone_levels` of each window (by name)."""
     rows = []
     for k, f in enumerate(tones):
         unc = levels["uncontrolled"][0][k]

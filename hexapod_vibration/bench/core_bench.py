@@ -9,10 +9,11 @@ The FxLMS is timed in the configuration whose attenuation the same run checks ag
 notch's (``equal_attenuation``), and ``targets`` states whether the open issue's targets
 (notch 6x8 under 20 us per sample; FxLMS / notch 6x8 at least 10x) are met.
 
-Usage: ``hexapod_bench --out DIR [--quick] [--skip-ros]``. Writes ``DIR/results.json`` and
-``DIR/summary.md`` and prints the summary. Without ``--skip-ros`` the ROS loop benchmark
-(``hexapod_vibration.bench.ros_bench.ros_loop_benchmark``) adds its keys (``realtime``,
-``lockstep_speedup``).
+Usage: ``hexapod_bench --out DIR [--quick] [--skip-ros] [--skip-sweep]``. Writes
+``DIR/results.json`` and ``DIR/summary.md`` and prints the summary. Without ``--skip-ros``
+the ROS loop benchmark (``hexapod_vibration.bench.ros_bench.ros_loop_benchmark``) adds its
+keys (``realtime``, ``lockstep_speedup``); without ``--skip-sweep`` the sweep throughput
+(``hexapod_vibration.sweep.throughput``, needs dask) adds ``sweep_throughput``.
 
 Timing is timeit-style: ``repeat`` runs of ``number`` calls of ``step(error, out)`` each
 (garbage collector off), the result is the median over the runs of the mean time per call,
@@ -820,6 +821,9 @@ def summary_markdown(results: dict[str, Any]) -> str:
     if 'targets' in results:
         lines += _summary_targets(results)
     lines += _summary_scaling(results) + _summary_table1(results)
+    if 'sweep_throughput' in results:
+        from hexapod_vibration.sweep.throughput import summary_lines
+        lines += summary_lines(results)
     if 'loops' in results:
         lines += _summary_ros(results)
     return '\n'.join(lines) + '\n'
@@ -883,6 +887,9 @@ def run(args: Any) -> int:
                   '--skip-ros', file=sys.stderr)
             return 2
     results = run_core_benchmarks(args.quick)
+    if not args.skip_sweep:
+        from hexapod_vibration.sweep.throughput import sweep_throughput
+        results.update(sweep_throughput(args.quick))
     if ros_loop_benchmark is not None:
         write_outputs(results, args.out)          # keep the core numbers if ROS fails
         results.update(ros_loop_benchmark(args.out, args.quick))

@@ -232,6 +232,58 @@ def noise_floor_db(x: np.ndarray, fs: float, freq_hz: float,
     return float(to_db_re_g(np.sqrt(max(floor_p[0], TINY_RMS ** 2))))
 
 
+def third_octave_bands_hz(low_hz: float, high_hz: float) -> np.ndarray:
+    """One-third-octave bands (base 10, IEC 61260) whose centres lie in [low_hz, high_hz].
+
+    Centres ``10^(k/10)`` Hz (nominal 6.3, 8, 10, 12.5, ... Hz), edges a factor
+    ``10^(+-1/20)`` from the centre.
+
+    Returns:
+        (B, 3) array of ``[centre, lower edge, upper edge]`` (Hz).
+    """
+    if not 0.0 < low_hz <= high_hz:
+        raise ValueError(f'need 0 < low_hz <= high_hz, got {low_hz}, {high_hz}')
+    k = np.arange(np.ceil(10.0 * np.log10(low_hz) - 1e-9),
+                  np.floor(10.0 * np.log10(high_hz) + 1e-9) + 1)
+    centre = 10.0 ** (k / 10.0)
+    return np.stack([centre, centre * 10.0 ** -0.05, centre * 10.0 ** 0.05], axis=1)
+
+
+def band_levels_db(x: np.ndarray, fs: float, bands_hz: np.ndarray,
+                   exclude_hz: Sequence[float] | np.ndarray = (),
+                   segment_s: float = DEFAULT_SEGMENT_S, window: str = DEFAULT_WINDOW
+                   ) -> np.ndarray:
+    """Level (dB re 1 g) of the continuous spectrum in each band, tone lines left out.
+
+    The band's power is the mean PSD over its bins (lower edge included, upper excluded)
+    outside the main lobes of ``exclude_hz``, times the band's width: the RMS the band's
+    broadband content would have without those lines. NaN for a band with no bin left.
+
+    Args:
+        x: signal (m/s^2), 1-D.
+        fs: sample rate (Hz).
+        bands_hz: (B, 2) ``[lower, upper]`` edges or (B, 3) ``[centre, lower, upper]`` (Hz).
+        exclude_hz: tone lines whose main lobes are left out (Hz), each in (0, fs/2).
+        segment_s: Welch segment (s).
+        window: scipy window name.
+    """
+    bands = np.asarray(bands_hz, dtype=float)
+    edges = bands[:, -2:]
+    lines = _Lines(x, fs, segment_s, window)
+    keep = np.ones(lines.f.size, dtype=bool)
+    keep[0] = False
+    for k in (lines.bin_of(exclude_hz) if len(exclude_hz) else []):
+        keep[lines.lobe(int(k))] = False
+    power = np.full(edges.shape[0], np.nan)
+    for b, (lo, hi) in enumerate(edges):
+        sel = keep & (lines.f >= lo) & (lines.f < hi)
+        if np.any(sel):
+            power[b] = np.mean(lines.psd[sel]) * (hi - lo)
+    with np.errstate(invalid='ignore'):
+        db = 20.0 * np.log10(np.maximum(np.sqrt(power), TINY_RMS) / G0)
+    return np.where(np.isfinite(power), db, np.nan)
+
+
 def harmonic_distortion(x: np.ndarray, fs: float, fundamental_hz: float,
                         n_harmonics: int = 5, segment_s: float = DEFAULT_SEGMENT_S,
                         window: str = DEFAULT_WINDOW) -> dict:

@@ -144,3 +144,18 @@ def test_step_returns_an_array_of_its_own():
     again = make_pointing_controller(MODEL, SENSING, FS)
     again.set_target(TARGETS[3000], STROKE_M)
     assert np.array_equal(np.array(kept), np.array([again.step(g) for g in gaps]))
+
+
+def test_linear_state_space_is_the_step_law_without_windup():
+    """PointingController.linear_state_space reproduces step() sample for sample."""
+    cfg = load_model_config(config_path("pph_model.yaml"))
+    sensing = EddySensorArray(cfg.eddy, float(cfg.geometry.top_joints_m[0, 2])).sensing_matrix
+    law = make_pointing_controller(cfg, sensing, 1000.0)
+    a, b, c, d = law.linear_state_space()
+    gaps = 1e-6 * np.random.default_rng(3).normal(size=(400, 6))
+    x = np.zeros(a.shape[0])
+    x[:6] = gaps[0]                     # the first sample has a zero rate
+    for g in gaps:
+        expected = law.step(g)
+        np.testing.assert_allclose(c @ x + d @ g, expected, rtol=1e-9, atol=1e-12)
+        x = a @ x + b @ g

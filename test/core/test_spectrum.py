@@ -150,3 +150,20 @@ def test_bad_tone_frequency_raises():
         sp.tone_rms(x, FS, [600.0])
     with pytest.raises(ValueError):
         sp.tone_rms(x, FS, [0.0])
+
+
+def test_band_levels_of_white_noise_and_a_tone_left_out():
+    """A band's level is its share of white noise; an excluded tone does not count."""
+    fs, n = 1000.0, 300_000            # 300 s: each band within ~0.2 dB (1 sigma)
+    rng = np.random.default_rng(7)
+    sigma = 0.01
+    noise = sigma * rng.normal(size=n)
+    tone = 0.5 * np.sin(2 * np.pi * 40.0 * np.arange(n) / fs)
+    bands = sp.third_octave_bands_hz(10.0, 200.0)
+    assert np.allclose(bands[:4, 0], [10.0, 12.589, 15.849, 19.953], atol=1e-3)
+    expected = sp.to_db_re_g(sigma * np.sqrt((bands[:, 2] - bands[:, 1]) / (fs / 2)))
+    without = sp.band_levels_db(noise, fs, bands)
+    with_tone = sp.band_levels_db(noise + tone, fs, bands, exclude_hz=[40.0])
+    assert np.max(np.abs(without - expected)) < 0.8
+    assert np.max(np.abs(with_tone - without)) < 0.3      # the 40 Hz line is left out
+    assert sp.band_levels_db(noise + tone, fs, bands)[6] > without[6] + 20.0

@@ -23,6 +23,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from scipy import signal
 
 from hexapod_vibration.core.control.filters import SosFilterBank
 from hexapod_vibration.core.model.geometry import CubicHexapodGeometry
@@ -156,6 +157,30 @@ class PointingController:
             [-dt * f_i @ pose, zero, dt * f_i, f_i],
             [-(f_p + dt * f_i) @ pose, rate_force, f_p + dt * f_i, f_i],
             [-f_p @ pose, rate_force, f_p, f_i]])
+
+    def linear_state_space(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The law as a discrete LTI system (A, B, C, D): gap deviations (m) -> forces (N).
+
+        One step per sample, about a constant target, without the anti-windup (which acts
+        only beyond ``force_limit_n``): ``x_{n+1} = A x_n + B g_n``, ``f_n = C x_n + D g_n``,
+        state ``[previous gaps (6), integral (6), output low-pass states]``. The same law
+        matrix and low-pass as :meth:`step` (tested against it).
+        """
+        law = self._law
+        blk = [[law[6 * r:6 * r + 6, 6 * c:6 * c + 6] for c in range(4)] for r in range(4)]
+        (c_gap, c_step, _, c_int), (f_gap, f_step, _, f_int) = blk[0], blk[2]
+        lp_a, lp_b, lp_c, lp_d = signal.tf2ss(*signal.sos2tf(self._lowpass.sos))
+        eye = np.eye(6)
+        n_lp = lp_a.shape[0] * 6
+        law_a = np.block([[np.zeros((6, 6)), np.zeros((6, 6))], [-c_step, c_int]])
+        law_b = np.vstack([eye, c_gap + c_step])
+        law_c, law_d = np.hstack([-f_step, f_int]), f_gap + f_step
+        a_lp, b_lp = np.kron(eye, lp_a), np.kron(eye, lp_b)
+        c_lp, d_lp = np.kron(eye, lp_c), lp_d[0, 0] * eye
+        a = np.block([[law_a, np.zeros((12, n_lp))], [b_lp @ law_c, a_lp]])
+        b = np.vstack([law_b, b_lp @ law_d])
+        c = np.hstack([d_lp @ law_c, c_lp])
+        return a, b, c, d_lp @ law_d
 
     def reset(self) -> None:
         """Zero the integral, the rate estimate and the output filter."""

@@ -99,6 +99,11 @@ class AccelerometerBank:
         np.add(x_now, x_in, out=self._x)
         return np.add(out_now, out_in, out=out_now)[0]
 
+    @property
+    def antialias_ba(self) -> tuple[np.ndarray, np.ndarray]:
+        """(b, a) of the anti-aliasing filter at the internal rate."""
+        return self._ba
+
     def antialias_response(self, frequencies_hz: np.ndarray) -> np.ndarray:
         """Complex frequency response of the anti-aliasing filter."""
         _, h = signal.freqz(*self._ba, worN=np.asarray(frequencies_hz), fs=self.internal_rate_hz)

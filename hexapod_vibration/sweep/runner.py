@@ -1,0 +1,154 @@
+"""Run a grid's pending points, serially or on a Dask cluster, and write the outputs.
+
+Dask (``dask.distributed``) does all the distribution: :func:`local_client` starts a
+``LocalCluster`` of single-threaded worker processes on this machine (every usable core by
+default); :func:`remote_client` connects to an existing scheduler (``dask scheduler`` and
+``dask worker`` started by the user) and changes nothing on it. Each point is one task
+(:func:`~hexapod_vibration.sweep.point.run_point`); results are written as they arrive, in
+any order, so the table does not depend on which worker ran what.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import sys
+import time
+import uuid
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from hexapod_vibration.sweep import results
+from hexapod_vibration.sweep.grid import Grid, PointSpec
+from hexapod_vibration.sweep.point import failed_row, run_point
+
+CONNECT_TIMEOUT_S = 10.0
+
+
+@dataclass
+class SweepSummary:
+    """What a sweep did: points run now, skipped (already done), failed; outputs."""
+
+    total: int
+    computed: int
+    skipped: int
+    failed: int
+    wall_s: float
+    table: Path | None = None
+    figures: list[Path] = field(default_factory=list)
+
+    def line(self) -> str:
+        """One line for the console."""
+        return (f"{self.total} points: {self.computed} run now, {self.skipped} already done, "
+                f"{self.failed} failed in all; {self.wall_s:.1f} s")
+
+
+def usable_cores() -> int:
+    """Cores this process may run on."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:
+        return os.cpu_count() or 1
+
+
+def local_client(workers: int | None = None) -> Any:
+    """A Dask client on a new LocalCluster: ``workers`` processes of one thread each."""
+    from dask.distributed import Client, LocalCluster
+
+    n = workers or usable_cores()
+    cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
+                           dashboard_address=None, silence_logs=logging.ERROR)
+    return Client(cluster)
+
+
+def remote_client(address: str) -> Any:
+    """A Dask client on the scheduler at ``address`` (e.g. ``tcp://host:8786``)."""
+    from dask.distributed import Client
+
+    return Client(address, timeout=CONNECT_TIMEOUT_S)
+
+
+def close_client(client: Any) -> None:
+    """Close a client and, if it started one, its local cluster."""
+    cluster = getattr(client, "cluster", None)
+    client.close()
+    if cluster is not None:
+        cluster.close()
+
+
+def _serial(points: list[PointSpec]) -> Iterator[tuple[PointSpec, dict[str, Any]]]:
+    for spec in points:
+        yield spec, run_point(spec)
+
+
+def run_on_dask(client: Any, points: list[PointSpec]
+                ) -> Iterator[tuple[PointSpec, dict[str, Any]]]:
+    """Run the points on the client's cluster; (spec, row) pairs as they finish."""
+    from dask.distributed import as_completed
+
+    token = uuid.uuid4().hex[:8]
+    futures = {}
+    for spec in points:
+        future = client.submit(run_point, spec, key=f"sweep-point-{spec.point_id}-{token}",
+                               pure=False)
+        futures[future.key] = (future, spec)
+    try:
+        for future in as_completed([f for f, _ in futures.values()]):
+            spec = futures[future.key][1]
+            try:
+                row = future.result()
+            except Exception as exc:  # noqa: BLE001 - e.g. a worker that died: recorded
+                row = failed_row(spec, exc)
+            future.release()
+            yield spec, row
+    finally:
+        for future, _ in futures.values():
+            future.cancel()
+
+
+def _progress(total: int, enabled: bool) -> Any:
+    from tqdm import tqdm
+
+    return tqdm(total=total, unit="point", desc="sweep", dynamic_ncols=True,
+                disable=None if enabled else True, file=sys.stderr)
+
+
+def run_sweep(grid: Grid, out_dir: Path, client: Any = None, retry_failed: bool = False,
+              progress: bool = True, plots: bool = True,
+              on_point: Callable[[PointSpec, dict[str, Any]], None] | None = None
+              ) -> SweepSummary:
+    """Run the grid's pending points (serially when ``client`` is None) and write outputs.
+
+    Writes ``out_dir/points/*.json`` as points finish, then ``out_dir/results.parquet``
+    and, if ``plots``, the maps. Points already done are skipped. Interrupted (Ctrl-C),
+    the points finished so far stay written.
+    """
+    start = time.perf_counter()
+    out_dir.mkdir(parents=True, exist_ok=True)
+    (out_dir / "grid.yaml").write_text(grid.source.read_text(encoding="utf-8"),
+                                       encoding="utf-8")
+    pending = results.pending_points(grid, out_dir, retry_failed)
+    stream = _serial(pending) if client is None else run_on_dask(client, pending)
+    bar = _progress(len(pending), progress)
+    try:
+        for spec, row in stream:
+            results.write_point(out_dir, spec, row)
+            if on_point is not None:
+                on_point(spec, row)
+            bar.update(1)
+    finally:
+        bar.close()
+    rows = results.collect_rows(grid, out_dir)
+    summary = SweepSummary(total=len(grid.points), computed=len(pending),
+                           skipped=len(grid.points) - len(pending),
+                           failed=sum(r["status"] != "ok" for r in rows),
+                           wall_s=time.perf_counter() - start)
+    summary.table = results.write_table(rows, out_dir / results.TABLE_NAME)
+    if plots:
+        from hexapod_vibration.sweep import maps
+
+        summary.figures = maps.write_maps(grid, rows, out_dir)
+    summary.wall_s = time.perf_counter() - start
+    return summary
