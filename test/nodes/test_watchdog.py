@@ -56,17 +56,21 @@ def test_killed_notch_controller_is_dropped_within_the_timeout(ros_context, node
     assert adapting, logs()
     notch.process.kill()        # SIGKILL: no goodbye on the graph
     assert notch.wait(HANG_GUARD_S) is not None
-    wait_until(ros_context, lambda: False, 1.0)     # take in what it sent before it died
+
+    # The driver runs on and its status reports the stale stream, with the sample of the
+    # last notch command it got: take in every command the controller sent before it
+    # died, up to that one (progress, not a pause: this process may lag the loop).
+    def reported() -> bool:
+        return diagnostics.int_value(DRIVER, 'notch_stale_events') >= 1
+    assert wait_until(ros_context, reported, HANG_GUARD_S), (diagnostics.values(DRIVER), logs())
+    driver_last = diagnostics.int_value(DRIVER, 'notch_last_sample')
+    assert wait_until(ros_context, lambda: notch_cmd.last_index >= driver_last, HANG_GUARD_S)
     last = notch_cmd.last_index
     assert abs(notch_cmd.by_index[last]).max() > 0.1
 
-    # The driver runs on: sample indices keep increasing well past the kill, and its next
-    # status reports the stale stream.
-    def reported() -> bool:
-        return (diagnostics.int_value(DRIVER, 'sample') > last
-                and diagnostics.int_value(DRIVER, 'notch_stale_events') >= 1)
-    ok = wait_until(ros_context,
-        lambda: force.last_index > last + 1000 and reported(), HANG_GUARD_S)
+    # Sample indices keep increasing well past the kill.
+    ok = wait_until(ros_context, lambda: force.last_index > last + 1000
+                    and diagnostics.int_value(DRIVER, 'sample') > last, HANG_GUARD_S)
     assert ok, (diagnostics.values(DRIVER), logs())
     assert driver.running(), driver.output()
     status = diagnostics.latest[DRIVER]
