@@ -53,6 +53,10 @@ again (controllers answer a repeated sample with the same command): a command lo
 transit (e.g. pushed out of a full queue by a flood) costs 50 ms, not the timeout."""
 HANDSHAKE_LOG_S = 5.0
 """Period (s, wall) of the handshake's "waiting for ..." log."""
+REALTIME_HANDSHAKE_S = 5.0
+"""Realtime: longest wait (s, wall) for the expected controllers to answer sample 0 before
+the clock starts (discovery of a restarted driver takes up to about a second here; a
+controller that is not there is not waited for longer)."""
 
 
 class PPHDriver(Node):
@@ -298,16 +302,18 @@ def wait_while_held(node: PPHDriver, spinner: LoopSpinner) -> None:
         spinner.spin_once(timeout_sec=0.01)
 
 
-def wait_for_controllers(node: PPHDriver, spinner: LoopSpinner) -> None:
+def wait_for_controllers(node: PPHDriver, spinner: LoopSpinner,
+                         limit_s: float = float("inf")) -> None:
     """Offer sample 0 again and again until every expected controller answered it.
 
     Discovery does not tell when a subscription can receive: offering the first sample
     again (controllers answer a repeated sample with the same command) is a handshake that
     loses nothing. A controller following an older run adopts this one within a few offers.
+    Lockstep waits as long as it takes; realtime at most ``limit_s`` (s, wall).
     """
     node.publish_sample()
-    last_log = time.perf_counter()
-    while rclpy.ok():
+    start = last_log = time.perf_counter()
+    while rclpy.ok() and time.perf_counter() - start < limit_s:
         deadline = time.perf_counter() + OFFER_AGAIN_S
         while (remaining := deadline - time.perf_counter()) > 0.0:
             spinner.spin_once(timeout_sec=remaining)
@@ -365,10 +371,16 @@ def run_lockstep(node: PPHDriver, spinner: LoopSpinner) -> None:
 
 
 def run_realtime(node: PPHDriver, spinner: LoopSpinner) -> None:
-    """Pace the loop at the sample rate on the wall clock, as hardware would."""
+    """Pace the loop at the sample rate on the wall clock, as hardware would.
+
+    The clock starts once the expected controllers answered sample 0 (at most
+    ``REALTIME_HANDSHAKE_S``), so a restarted driver is answered from its first samples.
+    """
     period = 1.0 / node.fs
-    start = time.perf_counter()
-    node.refresh_connections()
+    wait_for_controllers(node, spinner, REALTIME_HANDSHAKE_S)
+    start = time.perf_counter() - period      # sample 0's period was the handshake's
+    if rclpy.ok():
+        node.apply_and_step()      # sample 0 is out (and answered, unless the wait ran out)
     while rclpy.ok():
         node.publish_sample()
         deadline = start + (node.sample + 1) * period

@@ -121,6 +121,21 @@ def test_lockstep_waits_for_fresh_connected_expected_streams_only():
     assert arbiter.stats.missed == TIMEOUT         # samples 1..5 unanswered
 
 
+def test_a_late_answer_makes_a_dropped_stream_waited_again():
+    """A restarted controller first answers samples the loop has passed (its queue)."""
+    arbiter = _arbiter(expected=("notch",))
+    for _ in range(60):
+        _step(arbiter)
+    assert arbiter.waited(TIMEOUT) == []
+    assert arbiter.offer("notch", _force(1.0), 10, RUN, 0.0) is None   # 50 samples late
+    assert not arbiter.fresh("notch", TIMEOUT)
+    assert arbiter.waited(TIMEOUT) == ["notch"] and not arbiter.ready(TIMEOUT)
+    forces, _ = _step(arbiter)
+    assert forces["notch"] is NO_FORCE_N                 # too old to apply: watchdog
+    assert arbiter.offer("notch", _force(2.0), 61, RUN, 0.0) is None
+    assert arbiter.ready(TIMEOUT)
+
+
 def test_handshake_waits_for_every_expected_stream():
     arbiter = _arbiter()
     assert arbiter.unanswered() == ["notch", "pointing"]

@@ -10,7 +10,9 @@ command of each stream that is:
   or before the stream's last accepted command (a duplicate, or a late one out of order);
 - **pairing** (lockstep): the driver advances once every *waited* stream answered the
   current sample; a stream is waited for while it is expected (``lockstep_controllers``),
-  connected (a publisher on the graph, or a recent command) and fresh;
+  connected (a publisher on the graph, or a recent command) and alive (a command accepted
+  within the last ``timeout_samples`` samples, even one for an older sample: a restarted
+  controller working through its queue is waited for again at once);
 - **watchdog**: a stream whose last accepted command is more than ``timeout_samples``
   samples old contributes zero force (stale) until it commands again; until then its last
   command is held (zero-order hold);
@@ -69,6 +71,8 @@ class CommandStream:
     force_n: np.ndarray = field(default_factory=lambda: np.zeros(STRUT_COUNT))
     sample: int = -1
     """Sample index of the last accepted command (-1: none yet)."""
+    accepted_at: int = -1
+    """The driver's current sample when that command was accepted."""
     received_s: float = 0.0
     refused: Counter = field(default_factory=Counter)
     late: int = 0
@@ -144,6 +148,7 @@ class CommandArbiter:
             return reason
         stream.force_n = np.array(values, dtype=float)
         stream.sample = index
+        stream.accepted_at = self.sample
         stream.received_s = now_s
         published = self._published_s[index % PUBLISH_HISTORY]
         if (name == self.latency_stream and self.sample - index < PUBLISH_HISTORY
@@ -183,18 +188,24 @@ class CommandArbiter:
         not be listed yet, and it must be waited for all the same.
         """
         for name, stream in self.streams.items():
-            stream.connected = (self.fresh(name, timeout_samples)
+            stream.connected = (self.alive(name, timeout_samples)
                                 or publishers.get(name, 0) > 0)
 
-    def waited(self, timeout_samples: int) -> list[str]:
-        """Expected streams that are connected and not dropped by the watchdog.
+    def alive(self, name: str, timeout_samples: int) -> bool:
+        """A command of the stream was accepted within the last ``timeout_samples`` samples."""
+        stream = self.streams[name]
+        return stream.accepted_at >= 0 and self.sample - stream.accepted_at <= timeout_samples
 
-        A controller that missed more than ``timeout_samples`` samples (its process died,
+    def waited(self, timeout_samples: int) -> list[str]:
+        """Expected streams that are connected and alive.
+
+        A controller silent for more than ``timeout_samples`` samples (its process died,
         which discovery may notice only many seconds later) is not waited for any more,
-        so the loop runs on without it; it is waited for again once it answers.
+        so the loop runs on without it; it is waited for again once it answers, even a
+        sample the loop has passed (a restarted controller catching up with its queue).
         """
         return [n for n in self.expected
-                if self.streams[n].connected and self.fresh(n, timeout_samples)]
+                if self.streams[n].connected and self.alive(n, timeout_samples)]
 
     def ready(self, timeout_samples: int) -> bool:
         """Lockstep: every waited stream answered the current sample."""
