@@ -40,7 +40,12 @@ from hexapod_vibration.ros.messages import (
     create_loop_subscription,
     receive_strut_sample,
 )
-from hexapod_vibration.ros.qos import CLOCK_QOS, DIAGNOSTICS_QOS, LOOP_PUBLISHER_QOS
+from hexapod_vibration.ros.qos import (
+    CLOCK_QOS,
+    COMMAND_QOS,
+    DIAGNOSTICS_QOS,
+    LOOP_PUBLISHER_QOS,
+)
 from hexapod_vibration.ros.rclpy_internals import clock_cdr, serialized_publish
 
 STREAMS = ("notch", "pointing")
@@ -88,7 +93,8 @@ class PPHDriver(Node):
         self._pub_clock = serialized_publish(self.create_publisher(Clock, "/clock", CLOCK_QOS))
         self._pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", DIAGNOSTICS_QOS)
         self.loop_subscriptions = [
-            create_loop_subscription(self, topic, lambda msg, n=name: self._on_command(n, msg))
+            create_loop_subscription(self, topic, lambda msg, n=name: self._on_command(n, msg),
+                                     COMMAND_QOS)
             for name, topic in self.topics.items()]
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self._sample_pending = self.plant.step(np.zeros(6))
@@ -332,20 +338,27 @@ def wait_for_commands(node: PPHDriver, spinner: LoopSpinner) -> None:
     """Lockstep: serve callbacks until every waited controller answered the current sample.
 
     The sample is offered again every ``OFFER_AGAIN_S`` while a command is missing; after
-    ``lockstep_timeout_s`` the wait gives up (counted) and the loop advances without it.
+    ``lockstep_timeout_s`` and as many offers as fit in it, the wait gives up (counted) and
+    the loop advances without it. Counting offers too keeps a driver that got no CPU for a
+    while (a loaded machine, a flood) from timing out before its controllers had the chances
+    the timeout promises.
     """
     now = time.perf_counter()
-    deadline, offer_at = now + node.lockstep_timeout_s, now + OFFER_AGAIN_S
+    timeout_s = node.lockstep_timeout_s
+    deadline, offer_at = now + timeout_s, now + OFFER_AGAIN_S
+    offers_due, offers = int(timeout_s / OFFER_AGAIN_S), 0
     spun = False
     while not node.commands_ready():
         now = time.perf_counter()
-        if now >= deadline:
+        if now >= deadline and offers >= offers_due:
             node.timed_out()
             break
         if now >= offer_at:
             node.offer_again()
+            offers += 1
             offer_at = now + OFFER_AGAIN_S
-        spinner.spin_once(timeout_sec=min(deadline, offer_at) - now)
+        until = offer_at if now >= deadline else min(deadline, offer_at)
+        spinner.spin_once(timeout_sec=max(until - now, 0.0))
         spun = True
     if not spun:    # nothing to wait for: still serve parameters and other streams
         spinner.spin_once(timeout_sec=0.0)

@@ -33,6 +33,7 @@ from typing import Any
 
 import numpy as np
 from rclpy.node import Node
+from rclpy.qos import QoSProfile
 from rclpy.subscription import Subscription
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
@@ -180,15 +181,15 @@ class StrutArrayPublisher:
         return raw
 
 
-def create_loop_subscription(node: Node, topic: str,
-                             callback: Callable[[bytes], None]) -> Subscription:
-    """A raw (bytes) 1 kHz loop subscription of ``node`` with :data:`LOOP_QOS`.
+def create_loop_subscription(node: Node, topic: str, callback: Callable[[bytes], None],
+                             qos: QoSProfile = LOOP_QOS) -> Subscription:
+    """A raw (bytes) 1 kHz loop subscription of ``node`` (QoS :data:`LOOP_QOS` by default).
 
     Raw on every executor, so no received loop message goes through rclpy's deserializer
     (which raises on malformed bytes and misreads impossible layouts, see
     :mod:`hexapod_vibration.ros.rclpy_internals`): the callback decodes the bytes.
     """
-    return node.create_subscription(Float64MultiArray, topic, callback, LOOP_QOS, raw=True)
+    return node.create_subscription(Float64MultiArray, topic, callback, qos, raw=True)
 
 
 def receive_strut_sample(msg: Float64MultiArray | bytes, logger: Any, topic: str

@@ -17,6 +17,8 @@ from hexapod_vibration.core.model.config import load_model_config
 from hexapod_vibration.core.model.plant import saturate_commands
 from hexapod_vibration.paths import config_path
 from hexapod_vibration.ros.messages import make_strut_array
+from hexapod_vibration.ros.qos import LOOP_QOS
+from hexapod_vibration.ros.rclpy_internals import decode_strut_cdr, encode_strut_cdr
 
 TIMEOUT_SAMPLES = 5          # the driver's command_timeout_samples default (documented)
 DRIVER = 'pph_driver: loop'
@@ -177,3 +179,30 @@ def test_invalid_notch_commands_are_counted_and_never_applied(ros_context, node_
     assert driver.running() and pointing.running()
     for process in (driver, pointing):
         assert process.stop() == 0, process.output()
+
+
+def test_only_the_first_command_of_a_sample_is_applied(ros_context, node_processes):
+    """Issue 14: the driver took a second command for a sample it had and applied it."""
+    driver = node_processes.start('pph_driver', '--ros-args', '-p', 'lockstep_controllers:=[notch]')
+    node = ros_context.create_node('duplicating_notch')
+    force = StrutTopic(node, '/pph/actuator_force')
+    publisher = node.create_publisher(Float64MultiArray, '/pph/notch_command',
+                                      QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE))
+
+    def first(index: int) -> np.ndarray:
+        return np.full(6, float(index % 7 + 1))
+
+    def answer_twice(raw: bytes) -> None:
+        """Answer each sample with its command, then at once with a different one."""
+        _, index, run = decode_strut_cdr(raw)
+        publisher.publish(encode_strut_cdr(first(index), index, run))
+        publisher.publish(encode_strut_cdr(-first(index), index, run))
+
+    node.create_subscription(Float64MultiArray, '/pph/accel', answer_twice, LOOP_QOS, raw=True)
+    assert wait_until(ros_context, lambda: force.last_index > 1000, HANG_GUARD_S), driver.output()
+    observed = sorted(force.by_index)
+    assert len(observed) > 500
+    for n in observed:
+        np.testing.assert_array_equal(force.by_index[n],
+                                      saturate_commands(first(n), np.zeros(6), STRUT), str(n))
+    assert driver.stop() == 0, driver.output()
