@@ -121,3 +121,27 @@ def test_parameters_are_checked():
         SampleSequence(max_jump_samples=0)
     with pytest.raises(ValueError):
         SampleSequence(confirmations=0)
+
+
+def test_a_bogus_sequence_that_took_over_is_taken_back_by_the_real_stream():
+    """Three consistent bogus messages (a paused loop) take over; the real stream takes back.
+
+    They look like a restart, by design; the real stream wins within three messages.
+    """
+    seq = SampleSequence()
+    _feed(seq, [(n, A) for n in range(100)])
+    bogus = _feed(seq, [(10**9, A)] * CONFIRMATIONS)
+    assert bogus[-1].act and seq.last == 10**9
+    real = _feed(seq, [(n, A) for n in range(100, 110)])
+    assert [v.admission for v in real[:CONFIRMATIONS - 1]] == [Admission.LATE] * 2
+    assert real[CONFIRMATIONS - 1].admission is Admission.NEW_RUN       # re-synchronised
+    assert all(v.admission is Admission.ACCEPTED for v in real[CONFIRMATIONS:])
+    assert seq.last == 109
+
+
+def test_a_publisher_without_runs_that_starts_again_is_followed():
+    seq = SampleSequence()
+    _feed(seq, [(n, None) for n in range(5000)])
+    verdicts = _feed(seq, [(n, None) for n in range(5)])
+    assert [v.act for v in verdicts] == [False, False, True, True, True]
+    assert verdicts[2].admission is Admission.NEW_RUN and seq.last == 4

@@ -13,6 +13,7 @@ the driver applied the pointing command alone at every sample.
 
 from __future__ import annotations
 
+import itertools
 import struct
 
 import numpy as np
@@ -44,15 +45,20 @@ def _malformed(raw: bytes) -> dict[str, bytes]:
             'big_endian_header': b'\x00\x00' + raw[2:], 'huge_dims': bytes(huge_dims)}
 
 
-def _hostile_eddy(index: int) -> list[bytes]:
-    """Malformed, beyond the gaps' range, absurd or foreign indices (none is applicable)."""
+def _hostile_eddy(index: int, round_: int) -> list[bytes]:
+    """Malformed, beyond the gaps' range, absurd or foreign indices (none is applicable).
+
+    The absurd index and the stray run differ from one round to the next: three consistent
+    ones in a row would look like a restarted driver and be followed (by design).
+    """
     good = encode_strut_cdr(np.full(6, 1e-5), index)
+    absurd = 999_999_999 + (round_ % 2) * 10**7
     return [*_malformed(good).values(),
             encode_strut_cdr(np.full(6, 1e300), index),            # finite, impossible
             encode_strut_cdr(np.full(6, 1.0), index),              # 1 m gaps
             _unindexed(np.full(6, 1e300)),                         # old: taken as next
-            encode_strut_cdr(np.full(6, 1e-5), 999_999_999),       # absurd but valid index
-            encode_strut_cdr(np.full(6, 1e-5), index + 1, STRAY_RUN),  # another run
+            encode_strut_cdr(np.full(6, 1e-5), absurd),            # absurd but valid index
+            encode_strut_cdr(np.full(6, 1e-5), index + 1, STRAY_RUN + round_),  # stray run
             _label(np.full(6, 1e-5), 'sample:99999999999999999999')]
 
 
@@ -124,9 +130,11 @@ def test_hostile_messages_are_counted_and_change_nothing(ros_context, node_proce
                 and diagnostics.int_value(DRIVER_STATUS, 'sample') == sample
                 and all(last(t) >= sample - 1 for t in (eddy, pointing_cmd, force)))
 
+    rounds = itertools.count()
+
     def send_hostile() -> None:
         index = last(force)
-        for raw in _hostile_eddy(index):
+        for raw in _hostile_eddy(index, next(rounds)):
             to_pointing.publish(raw)
         for raw in _hostile_commands(index, run() or 1):
             to_driver.publish(raw)

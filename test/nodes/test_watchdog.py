@@ -31,8 +31,10 @@ def _notch_part(force: StrutTopic, pointing: StrutTopic, n: int) -> np.ndarray:
 
 
 def test_killed_notch_controller_is_dropped_within_the_timeout(ros_context, node_processes):
-    # Each of the last TIMEOUT_SAMPLES samples waits lockstep_timeout_s for the dead one.
-    driver = node_processes.start('pph_driver', '--ros-args', '-p', 'lockstep_timeout_s:=0.2')
+    # Each of the last TIMEOUT_SAMPLES samples waits lockstep_timeout_s for the dead one;
+    # long enough (20 offers) that the live pointing controller is never timed out on a
+    # loaded machine, which would hold its previous command and look like the notch's here.
+    driver = node_processes.start('pph_driver', '--ros-args', '-p', 'lockstep_timeout_s:=1.0')
     notch = node_processes.start(
         'notch_controller', '--ros-args', '-p', 'tone_frequencies_hz:=[40.0]',
         '-p', 'mu:=0.01', '-p', 'identify_delay_s:=0.2')

@@ -8,14 +8,15 @@ and the driver's run identity (``contract``: ``layout.dim[1]``, ``layout.dim[2]`
   it is accepted; the indices skipped are reported as a gap (missing samples).
 - The same index again is a repeat (the lockstep driver offers a sample again when it has
   not got every command for it): the controller re-sends its answer, it does not step.
-- A lower index is late: dropped.
-- Anything else (another run, or an index beyond last + max_jump) starts a candidate
-  sequence. It is adopted only after ``confirmations`` consecutive messages that continue it
-  (same run, index not decreasing and within max_jump of the previous one); an accepted
-  sample of the current run in between cancels it. So one bogus message (an absurd index,
-  a stray run) changes nothing, while a restarted driver (a new run from sample 0, offered
-  again every 50 ms in lockstep, one per millisecond in realtime) is followed within a few
-  messages.
+- Anything else (another run, an index beyond last + max_jump, or a lower one: late)
+  is dropped, and starts or continues a candidate sequence. That is adopted only after
+  ``confirmations`` consecutive messages that continue it (same run, index not decreasing
+  and within max_jump of the previous one); an accepted sample of the current run in
+  between cancels it. So one bogus message (an absurd index, a stray run) changes nothing,
+  a restarted driver (a new run from sample 0, offered again every 50 ms in lockstep) is
+  followed within a few messages, and so is a publisher without runs that starts again
+  from 0. Whatever took over (even a bogus sequence sent three times in a row while the
+  loop was paused), the real stream takes it back in the same few messages.
 
 The first message ever received is adopted at once (a controller started into a running
 loop answers immediately).
@@ -37,7 +38,8 @@ class Admission(Enum):
     """What to do with a received sample."""
 
     ACCEPTED = 'accepted'          # next sample of the current run: act on it
-    NEW_RUN = 'new_run'            # first sample of a newly adopted run: reset, then act
+    NEW_RUN = 'new_run'            # first sample of a newly adopted run (or of the same run
+                                   # started again from a lower index): reset, then act
     REPEAT = 'repeat'              # the last sample again: re-send the answer, do not act
     LATE = 'late'                  # older than the last one: drop
     UNCONFIRMED = 'unconfirmed'    # another run or an implausible jump, not yet confirmed
@@ -92,8 +94,6 @@ class SampleSequence:
                 return Verdict(Admission.ACCEPTED, index, gap)
             if index == self.last:
                 return Verdict(Admission.REPEAT, index)
-            if index < self.last:
-                return Verdict(Admission.LATE, index)
         elif index is None:
             return Verdict(Admission.UNCONFIRMED, -1)
         return self._candidate_step(index, run)
@@ -108,8 +108,9 @@ class SampleSequence:
             self._candidate_count = 1
         self._candidate = (run, index)
         if self._candidate_count < self.confirmations:
-            return Verdict(Admission.UNCONFIRMED, index)
-        if run == self.run:                       # a confirmed jump within the run
+            late = run == self.run and index < self.last
+            return Verdict(Admission.LATE if late else Admission.UNCONFIRMED, index)
+        if run == self.run and index > self.last:     # a confirmed jump within the run
             self._candidate = None
             gap, self.last = index - self.last - 1, index
             return Verdict(Admission.ACCEPTED, index, gap)
