@@ -1,11 +1,28 @@
-"""ROS-free description of the ``/pph/*`` array layout, shared by messages.py and bag_io.py.
+"""The loop's contract without ROS: rates, sizes, array labels, status names.
 
-``layout.dim[0] = ("strut", 6, 6)``; the driver and controllers add
-``layout.dim[1] = ("sample:<n>", 1, 1)`` carrying the loop's sample index ``n`` in band.
-This module has no ROS import so that bag analysis runs without rclpy.
+Every ``/pph/*`` message is a ``std_msgs/Float64MultiArray`` of six values in strut order
+1..6 with ``layout.dim[0] = ("strut", 6, 6)``. The driver and the controllers add
+``layout.dim[1] = ("sample:<n>", 1, 1)`` carrying the loop's sample index ``n`` in band, and
+``layout.dim[2] = ("run:<id>", 1, 1)`` carrying the identity of the driver's run (a random
+number drawn at the driver's start): the array keeps its six values (shape (6, 1, 1)).
+A controller copies both from the sample it answers, so commands pair with samples exactly
+and a restarted driver (a new run starting again at sample 0) is told apart from old or
+bogus indices (docs/architecture.md, "Runs and restarts").
+
+This module has no ROS import so that bag analysis and the pure core use it without rclpy.
 """
 
 from __future__ import annotations
+
+import secrets
+from enum import StrEnum
+from typing import TYPE_CHECKING, NamedTuple
+
+if TYPE_CHECKING:
+    import numpy as np
+
+SAMPLE_RATE_HZ = 1000.0
+"""Rate of the loop (Hz): one sample of every ``/pph/*`` topic per millisecond of sim time."""
 
 STRUT_COUNT = 6
 """Number of struts, hence of values in every ``/pph/*`` message."""
@@ -19,9 +36,54 @@ STRUT_LABEL = 'strut'
 SAMPLE_LABEL_PREFIX = 'sample:'
 """Prefix of the label of ``layout.dim[1]``, followed by the decimal sample index."""
 
+RUN_LABEL_PREFIX = 'run:'
+"""Prefix of the label of ``layout.dim[2]``, followed by the decimal run identity."""
+
+MAX_SAMPLE_INDEX = 2**31 * 1000 - 1
+"""Largest valid sample index: its sim time (n ms) still fits ``/clock``'s int32 seconds."""
+
+MAX_RUN_ID = 2**63 - 1
+"""Run identities are drawn in [1, MAX_RUN_ID]."""
+
+DRIVER_STATUS = 'pph_driver: loop'
+"""``/diagnostics`` status name of the driver's loop."""
+
+NOTCH_STATUS = 'notch_controller'
+"""``/diagnostics`` status name of the notch controller."""
+
+POINTING_STATUS = 'pointing_controller'
+"""``/diagnostics`` status name of the pointing controller."""
+
+
+class NotchState(StrEnum):
+    """The notch controller's ``state`` on ``/diagnostics``."""
+
+    IDENTIFYING = 'identifying'
+    ADAPTING = 'adapting'
+    ENABLED = 'enabled'
+    DISABLED = 'disabled'
+    REFUSED = 'refused'
+    """Control kept off: the identification gave no usable coefficients or no stable mu."""
+
+
+class StrutSample(NamedTuple):
+    """One received ``/pph/*`` message: six values, and its sample index and run if sent."""
+
+    values: np.ndarray
+    """Six values in strut order 1..6 (SI units of the topic), read-only float64."""
+    index: int | None
+    """Sample index from ``layout.dim[1]``, None if the publisher sent none."""
+    run: int | None
+    """Run identity from ``layout.dim[2]``, None if the publisher sent none."""
+
+
+def sample_sim_time(sample: int, sample_rate_hz: float = SAMPLE_RATE_HZ) -> tuple[int, int]:
+    """Sim time of loop sample ``sample`` (n / fs s; 0 before sample 0) as (s, ns)."""
+    return divmod(int(round(max(sample, 0) * 1e9 / sample_rate_hz)), 1_000_000_000)
+
 
 class InvalidStrutMessage(ValueError):
-    """A ``/pph/*`` message that cannot be used: wrong length, non-finite or bad label."""
+    """A ``/pph/*`` message that cannot be used: wrong length, non-finite, bad label or bytes."""
 
 
 def sample_label(sample_index: int) -> str:
@@ -35,20 +97,73 @@ def sample_label(sample_index: int) -> str:
     return f'{SAMPLE_LABEL_PREFIX}{int(sample_index)}'
 
 
-def parse_sample_label(label: str) -> int:
-    """Parse ``sample:<n>`` (n: ASCII decimal digits) into ``n``.
+def run_label(run_id: int) -> str:
+    """Label ``run:<id>`` of ``layout.dim[2]`` for run identity ``id`` in [1, MAX_RUN_ID].
 
     Raises:
-        InvalidStrutMessage: Any other label.
+        ValueError: ``run_id`` is out of range.
+    """
+    if not 1 <= run_id <= MAX_RUN_ID:
+        raise ValueError(f'run id must be in [1, {MAX_RUN_ID}], got {run_id}')
+    return f'{RUN_LABEL_PREFIX}{int(run_id)}'
+
+
+def new_run_id() -> int:
+    """A fresh run identity in [1, MAX_RUN_ID] (random: never the same twice in practice)."""
+    return 1 + secrets.randbelow(MAX_RUN_ID)
+
+
+def _decimal(label: str, prefix: str, maximum: int, what: str) -> int:
+    """``n`` of ``<prefix><n>`` (n: ASCII digits, at most ``maximum``)."""
+    digits = label[len(prefix):]
+    if not (digits.isascii() and digits.isdigit()):
+        raise InvalidStrutMessage(
+            f'garbled {what} label {label!r}: expected {prefix!r} followed by '
+            'a non-negative decimal integer'
+        )
+    if len(digits) > len(str(maximum)) or int(digits) > maximum:
+        raise InvalidStrutMessage(f'{what} label {label!r} is out of range (max {maximum})')
+    return int(digits)
+
+
+def parse_sample_label(label: str) -> int:
+    """Parse ``sample:<n>`` (n: ASCII decimal digits, n <= MAX_SAMPLE_INDEX) into ``n``.
+
+    Raises:
+        InvalidStrutMessage: Any other label, or an index beyond MAX_SAMPLE_INDEX.
     """
     if not label.startswith(SAMPLE_LABEL_PREFIX):
         raise InvalidStrutMessage(
             f'layout.dim[1] label {label!r} is not {SAMPLE_LABEL_PREFIX!r}<sample index>'
         )
-    digits = label[len(SAMPLE_LABEL_PREFIX) :]
-    if not (digits.isascii() and digits.isdigit()):
-        raise InvalidStrutMessage(
-            f'garbled sample label {label!r}: expected {SAMPLE_LABEL_PREFIX!r} followed by '
-            'a non-negative decimal integer'
-        )
-    return int(digits)
+    return _decimal(label, SAMPLE_LABEL_PREFIX, MAX_SAMPLE_INDEX, 'sample')
+
+
+def parse_run_label(label: str) -> int | None:
+    """The run identity of a ``layout.dim[2]`` label ``run:<id>``; None for another label.
+
+    Raises:
+        InvalidStrutMessage: ``run:`` followed by anything but an id in [1, MAX_RUN_ID].
+    """
+    if not label.startswith(RUN_LABEL_PREFIX):
+        return None
+    run = _decimal(label, RUN_LABEL_PREFIX, MAX_RUN_ID, 'run')
+    if run < 1:
+        raise InvalidStrutMessage(f'run label {label!r}: the run id must be >= 1')
+    return run
+
+
+def parse_layout_labels(labels: list[str]) -> tuple[int | None, int | None]:
+    """(sample index, run id) from the labels of ``layout.dim``; None for each one absent.
+
+    ``dim[0]``'s label is not checked (a publisher may send six values without a layout);
+    ``dim[1]`` must be a sample label if present; ``dim[2]`` is the run if labelled so.
+
+    Raises:
+        InvalidStrutMessage: A garbled or out-of-range sample or run label.
+    """
+    if len(labels) < 2:
+        return None, None
+    index = parse_sample_label(labels[1])
+    run = parse_run_label(labels[2]) if len(labels) > 2 else None
+    return index, run

@@ -20,16 +20,20 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter, parameter_value_to_python
 from rclpy.parameter_client import AsyncParameterClient
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.serialization import deserialize_message
 from rosgraph_msgs.msg import Clock
 from std_msgs.msg import Float64MultiArray
 
-from hexapod_vibration.ros.messages import parse_strut_array
+from hexapod_vibration.contract import SAMPLE_RATE_HZ, InvalidStrutMessage
 from hexapod_vibration.ros.qos import DIAGNOSTICS_QOS
+from hexapod_vibration.ros.rclpy_internals import decode_strut_cdr, take_serialized_batch
 
 HANG_GUARD_S = 90.0
 """Longest wait for anything (s): a guard against hangs, never a timing requirement."""
 
-FS_HZ = 1000.0
+FS_HZ = SAMPLE_RATE_HZ
+TAKE_BATCH = 1000
+"""Messages taken from one subscription per callback."""
 
 RECORD_QOS = QoSProfile(
     reliability=ReliabilityPolicy.RELIABLE,
@@ -44,28 +48,45 @@ STRUT_TOPICS = ('/pph/accel', '/pph/eddy', '/pph/notch_command', '/pph/pointing_
 
 
 class StrutTopic:
-    """Everything received on one ``/pph/*`` topic, by sample index."""
+    """Everything received on one ``/pph/*`` topic, by sample index (and by run).
+
+    The subscription is raw and each callback takes every message already queued (as the
+    recorder does): one executor dispatch per message would fall far behind the loop on a
+    loaded machine.
+    """
 
     def __init__(self, node: Node, topic: str):
         self.topic = topic
         self.by_index: dict[int, np.ndarray] = {}
+        self.by_run: dict[int | None, dict[int, np.ndarray]] = {}
         self.last_index = -1
         """Highest sample index received, -1 before any."""
         self.first_message: Float64MultiArray | None = None
         self.messages = 0
         self.unindexed = 0
+        self.invalid = 0
         self.subscription = node.create_subscription(
-            Float64MultiArray, topic, self._on_message, RECORD_QOS)
+            Float64MultiArray, topic, self._on_message, RECORD_QOS, raw=True)
 
-    def _on_message(self, msg: Float64MultiArray) -> None:
-        values, index = parse_strut_array(msg)
+    def _on_message(self, raw: bytes) -> None:
+        self._record(raw)
+        for more in take_serialized_batch(self.subscription, TAKE_BATCH):
+            self._record(more)
+
+    def _record(self, raw: bytes) -> None:
+        try:
+            values, index, run = decode_strut_cdr(raw)
+        except InvalidStrutMessage:     # e.g. what a test itself sends to a node
+            self.invalid += 1
+            return
         self.messages += 1
         if self.first_message is None:
-            self.first_message = msg
+            self.first_message = deserialize_message(raw, Float64MultiArray)
         if index is None:
             self.unindexed += 1
             return
         self.by_index[index] = np.array(values)
+        self.by_run.setdefault(run, {})[index] = self.by_index[index]
         self.last_index = max(self.last_index, index)
 
     def window(self, start: int, stop: int) -> tuple[np.ndarray, np.ndarray]:
@@ -110,6 +131,10 @@ class Diagnostics:
         """Key/values of the latest status called ``name`` ({} before any)."""
         status = self.latest.get(name)
         return {} if status is None else {kv.key: kv.value for kv in status.values}
+
+    def history_values(self, name: str) -> list[dict[str, str]]:
+        """Key/values of every status called ``name`` received, oldest first."""
+        return [{kv.key: kv.value for kv in st.values} for st in self.history if st.name == name]
 
     def value(self, name: str, key: str, default: str = '') -> str:
         return self.values(name).get(key, default)

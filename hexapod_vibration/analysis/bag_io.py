@@ -30,6 +30,7 @@ from rosbags.typesys import Stores, get_typestore
 from rosbags.typesys.store import Typestore
 
 from hexapod_vibration.contract import (
+    SAMPLE_RATE_HZ,
     STRUT_COUNT,
     STRUT_LABEL,
     InvalidStrutMessage,
@@ -52,13 +53,15 @@ CLOCK_TOPIC = '/clock'
 CLOCK_MSGTYPE = 'rosgraph_msgs/msg/Clock'
 PARAMETER_EVENTS_TOPIC = '/parameter_events'
 PARAMETER_EVENT_MSGTYPE = 'rcl_interfaces/msg/ParameterEvent'
-SAMPLE_RATE_HZ = 1000.0
 
 TYPESTORE_NAME = Stores.ROS2_JAZZY
 """rosbags typestore matching ROS 2 Jazzy's message definitions and type hashes."""
 
 BAG_VERSION = 9
 """rosbag2 metadata version written (the one ROS 2 Jazzy writes)."""
+
+STORAGE_PLUGINS = {'mcap': StoragePlugin.MCAP, 'sqlite3': StoragePlugin.SQLITE3}
+"""rosbag2 storage plugins by their ``ros2 bag`` name (the recorder's ``storage``)."""
 
 IndexSource = Literal['in-band', 'timestamp']
 
@@ -467,7 +470,7 @@ def write_strut_bag(
     Raises:
         BagError: ``path`` exists already or cannot be written.
     """
-    plugin = {'mcap': StoragePlugin.MCAP, 'sqlite3': StoragePlugin.SQLITE3}[storage]
+    plugin = STORAGE_PLUGINS[storage]
     store = typestore()
     try:
         with Writer(path, version=BAG_VERSION, storage_plugin=plugin) as writer:

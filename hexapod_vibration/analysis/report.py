@@ -23,15 +23,16 @@ from typing import Any
 import numpy as np
 
 from hexapod_vibration.analysis import bag_io
+from hexapod_vibration.contract import DRIVER_STATUS, NOTCH_STATUS, SAMPLE_RATE_HZ, NotchState
 from hexapod_vibration.core import spectrum
 from hexapod_vibration.core.model.config import ModelConfig
 from hexapod_vibration.core.model.geometry import CubicHexapodGeometry
+from hexapod_vibration.json_values import json_float, jsonable
+from hexapod_vibration.json_values import write_json as write_json_values
 
-FS = 1000.0
+FS = SAMPLE_RATE_HZ
 DEFAULT_WINDOW_S = 10.0
 ENVELOPE_WINDOW_S = 0.5
-DRIVER_STATUS = "pph_driver: loop"
-NOTCH_STATUS = "notch_controller"
 LOOP_KEYS = ("latency_ms_p50", "latency_ms_p99")
 
 
@@ -86,7 +87,7 @@ def _find_control_switch(signals: BagSignals, control_on_s: float | None) -> Non
         return
     for status in signals.notch_statuses:
         since = int(status.get("enabled_since_sample", "-1"))
-        if since >= 0 and status.get("state") in ("adapting", "enabled"):
+        if since >= 0 and status.get("state") in (NotchState.ADAPTING, NotchState.ENABLED):
             signals.control_on_sample, signals.control_source = since, "notch diagnostics"
             return
     events = [(t, v) for t, v in bag_io.read_parameter_events(signals.path) if v is True]
@@ -285,31 +286,23 @@ def _details(signals: BagSignals, levels: dict, tones: list[float], notes: list[
     }
     if harmonics_of_hz > 0.0:
         rows = windows["uncontrolled"][0]
-        details["harmonic_distortion"] = _jsonable(
-            spectrum.harmonic_distortion(z[rows], FS, harmonics_of_hz, n_harmonics=5))
+        details["harmonic_distortion"] = jsonable(
+            spectrum.harmonic_distortion(z[rows], FS, harmonics_of_hz, n_harmonics=5),
+            REPORT_DIGITS)
     return details
 
 
+REPORT_DIGITS = 6
+"""Decimals of the numbers in report.json and details.json."""
+
+
 def _json_float(value: float) -> float | None:
-    value = float(value)
-    return None if not math.isfinite(value) else round(value, 6)
-
-
-def _jsonable(value: Any) -> Any:
-    if isinstance(value, dict):
-        return {str(k): _jsonable(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple, np.ndarray)):
-        return [_jsonable(v) for v in value]
-    if isinstance(value, (np.floating, float)):
-        return _json_float(value)
-    if isinstance(value, np.integer):
-        return int(value)
-    return value
+    return json_float(value, REPORT_DIGITS)
 
 
 def write_json(path: Path, data: dict[str, Any]) -> None:
-    """Write ``data`` as indented JSON (NaN written as null)."""
-    path.write_text(json.dumps(_jsonable(data), indent=2) + "\n", encoding="utf-8")
+    """Write ``data`` as indented JSON (NaN written as null), numbers to 6 decimals."""
+    write_json_values(path, data, REPORT_DIGITS)
 
 
 def format_table(report: dict[str, Any], paper_reduction_db: dict[float, float] | None = None

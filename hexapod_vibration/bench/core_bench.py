@@ -26,7 +26,6 @@ from __future__ import annotations
 import dataclasses
 import functools
 import gc
-import json
 import os
 import platform
 import sys
@@ -45,16 +44,18 @@ from hexapod_vibration.baseline.fxlms import (
     FxlmsCoreLoop,
     multiply_adds_per_sample,
 )
+from hexapod_vibration.contract import SAMPLE_RATE_HZ, STRUT_COUNT
 from hexapod_vibration.core import spectrum
 from hexapod_vibration.core.control.notch import AdaptiveNotchCanceller
 from hexapod_vibration.core.model.config import load_model_config
 from hexapod_vibration.core.sim.closed_loop import CoreLoop
 from hexapod_vibration.core.sim.scenario import Scenario, load_scenario
+from hexapod_vibration.json_values import write_json
 from hexapod_vibration.paths import config_path, scenario_path
 from hexapod_vibration.tools import outputs
 
-FS_HZ = 1000.0
-STRUTS = 6
+FS_HZ = SAMPLE_RATE_HZ
+STRUTS = STRUT_COUNT
 NOTCH_TONES = (1, 2, 4, 8, 16)
 SCALING_CHANNELS = (1, 2, 3, 6, 12)
 SCALING_CHANNEL_TONES = 8
@@ -853,22 +854,10 @@ def _summary_ros(results: dict[str, Any]) -> list[str]:
             'the driver. Period: between publications of consecutive samples.']
 
 
-def _jsonable(obj: Any) -> Any:
-    if isinstance(obj, dict):
-        return {str(k): _jsonable(v) for k, v in obj.items()}
-    if isinstance(obj, list | tuple):
-        return [_jsonable(v) for v in obj]
-    if isinstance(obj, np.generic):
-        return _jsonable(obj.item())
-    if isinstance(obj, float) and not np.isfinite(obj):
-        return None
-    return obj
-
-
 def write_outputs(results: dict[str, Any], out_dir: Path) -> str:
     """Write ``results.json`` and ``summary.md`` into ``out_dir``; return the summary."""
     out_dir.mkdir(parents=True, exist_ok=True)
-    outputs.write_text(out_dir / 'results.json', json.dumps(_jsonable(results), indent=2) + '\n')
+    write_json(out_dir / 'results.json', results)
     summary = summary_markdown(results)
     outputs.write_text(out_dir / 'summary.md', summary)
     return summary

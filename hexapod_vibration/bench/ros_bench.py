@@ -27,13 +27,13 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from hexapod_vibration.contract import SAMPLE_RATE_HZ
 from hexapod_vibration.core.sim.scenario import load_scenario
 from hexapod_vibration.paths import scenario_path
 from hexapod_vibration.tools.experiment import ExperimentError, Supervisor, node_parameters
 from hexapod_vibration.tools.processes import Child, spawn_module, stop_all
 
 STALL_S = 20.0
-SAMPLE_RATE_HZ = 1000.0
 DESCRIPTIONS = {
     "composed": "pph_graph: driver and controllers in one process and thread",
     "processes": "pph_driver, notch_controller, pointing_controller as three processes",
@@ -174,9 +174,17 @@ def measure_configuration(out: Path, config: LoopConfiguration, quick: bool
                 "timeouts": lockstep.get("timeouts")}}
 
 
+LOG_DIR = "logs"
+"""Sub-folder of the output folder for the nodes' logs and parameter files (bench/logs is
+not tracked: only bench/results.json and bench/summary.md are)."""
+
+
 def ros_loop_benchmark(out_dir: Path, quick: bool) -> dict[str, Any]:
-    """Realtime and lockstep measurements of the ROS graph; keys for results.json."""
-    out = Path(out_dir)
+    """Realtime and lockstep measurements of the ROS graph; keys for results.json.
+
+    The nodes' logs and parameter files go to ``out_dir/logs``.
+    """
+    out = Path(out_dir) / LOG_DIR
     out.mkdir(parents=True, exist_ok=True)
     if "ROS_DOMAIN_ID" not in os.environ:
         os.environ["ROS_DOMAIN_ID"] = str(random.randint(120, 200))

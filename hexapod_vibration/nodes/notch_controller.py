@@ -19,14 +19,21 @@ from rclpy.parameter import Parameter
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 from std_srvs.srv import Trigger
 
-from hexapod_vibration.contract import SAMPLE_RATE_HZ, sample_label
+from hexapod_vibration.contract import NOTCH_STATUS, SAMPLE_RATE_HZ, STRUT_COUNT, sample_label
 from hexapod_vibration.core.control.notch_supervisor import NotchConfig, NotchSupervisor
+from hexapod_vibration.core.loop.signal_ranges import SignalRanges
+from hexapod_vibration.core.model.config import load_model_config
 from hexapod_vibration.parameter_specs import NOTCH_CONTROLLER
+from hexapod_vibration.paths import config_path
 from hexapod_vibration.ros.diagnostics import diagnostic_array
 from hexapod_vibration.ros.executors import run_node
-from hexapod_vibration.ros.messages import StrutArrayPublisher, receive_strut_array
+from hexapod_vibration.ros.messages import (
+    ControllerLoopPort,
+    StrutArrayPublisher,
+    create_loop_subscription,
+)
 from hexapod_vibration.ros.parameters import NodeParameters
-from hexapod_vibration.ros.qos import DIAGNOSTICS_QOS, LOOP_PUBLISHER_QOS, LOOP_QOS
+from hexapod_vibration.ros.qos import DIAGNOSTICS_QOS, LOOP_PUBLISHER_QOS
 
 WEIGHTS_EVERY_SAMPLES = 10
 """Samples between two /pph/notch_weights messages (100 Hz)."""
@@ -45,14 +52,15 @@ class NotchControllerNode(Node):
         values = self.params.values()
         self.supervisor = NotchSupervisor(
             NotchConfig().replaced({k: v for k, v in values.items() if k in SETTINGS}), self.fs)
-        self.invalid = 0
-        pub_qos = LOOP_PUBLISHER_QOS
-        self._pub_cmd = StrutArrayPublisher(self.create_publisher(
-            Float64MultiArray, "/pph/notch_command", pub_qos))
-        self._pub_w = self.create_publisher(Float64MultiArray, "/pph/notch_weights", pub_qos)
+        accel_range = SignalRanges.from_model(load_model_config(config_path(
+            "pph_model.yaml"))).accel_m_s2      # the accelerometers' +-2 g
+        self.port = ControllerLoopPort("/pph/accel", accel_range, StrutArrayPublisher(
+            self.create_publisher(Float64MultiArray, "/pph/notch_command", LOOP_PUBLISHER_QOS)),
+            self.get_logger())
+        self._pub_w = self.create_publisher(Float64MultiArray, "/pph/notch_weights",
+                                            LOOP_PUBLISHER_QOS)
         self._pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", DIAGNOSTICS_QOS)
-        self.loop_subscriptions = [self.create_subscription(
-            Float64MultiArray, "/pph/accel", self._on_accel, LOOP_QOS)]
+        self.loop_subscriptions = [create_loop_subscription(self, "/pph/accel", self._on_accel)]
         self.create_service(Trigger, "~/identify", self._on_identify)
         self.params.serve(check=self._check_parameters, apply=self._apply_parameters)
         config = self.supervisor.config
@@ -84,16 +92,16 @@ class NotchControllerNode(Node):
 
     # ------------------------------------------------------------------ loop
     def _on_accel(self, msg: Float64MultiArray | bytes) -> None:
-        parsed = receive_strut_array(msg, self.get_logger(), "/pph/accel")
-        if parsed is None:
-            self.invalid += 1
+        sample = self.port.receive(msg)       # decoded, in range, in sequence, or None
+        if sample is None:
             return
-        accel, index = parsed
-        command = self.supervisor.step(index, accel)
+        if sample.new_run:
+            self.supervisor.reset_run(sample.index)
+        command = self.supervisor.step(sample.index, sample.values)
         if command is None:
             return
-        index = self.supervisor.last_sample
-        self._pub_cmd.publish(command, index)
+        self.port.answer(command, sample)
+        index = sample.index
         if index % WEIGHTS_EVERY_SAMPLES == 0:
             self._publish_weights(index)
         if index % int(self.fs) == 0:
@@ -122,18 +130,19 @@ class NotchControllerNode(Node):
         w = self.supervisor.canceller.weights
         tones = w.shape[0]
         msg = Float64MultiArray()
-        msg.layout.dim = [MultiArrayDimension(label="tone", size=tones, stride=tones * 12),
-                          MultiArrayDimension(label="strut", size=6, stride=12),
+        msg.layout.dim = [MultiArrayDimension(label="tone", size=tones,
+                                              stride=tones * 2 * STRUT_COUNT),
+                          MultiArrayDimension(label="strut", size=STRUT_COUNT,
+                                              stride=2 * STRUT_COUNT),
                           MultiArrayDimension(label="a_b", size=2, stride=2),
                           MultiArrayDimension(label=sample_label(index), size=1, stride=1)]
         msg.data = np.stack([w.real, -w.imag], axis=-1).ravel().tolist()
         self._pub_w.publish(msg)
 
     def publish_diagnostics(self) -> None:
-        """Controller state on /diagnostics."""
-        status = self.supervisor.status()
-        status["invalid"] = self.invalid
-        self._pub_diag.publish(diagnostic_array("notch_controller", bool(self.invalid),
+        """Controller state on /diagnostics: the supervisor's and the loop port's counters."""
+        status = {**self.supervisor.status(), **self.port.diagnostics()}
+        self._pub_diag.publish(diagnostic_array(NOTCH_STATUS, bool(status["invalid"]),
                                                 status["state"], status,
                                                 self.supervisor.last_sample))
 

@@ -2,8 +2,11 @@
 
 Subscribes to ``/pph/eddy`` (six gap changes, m), recovers the top plate's pose relative
 to the bottom plate, holds the commanded pose with integral action at a bandwidth of a few
-Hz and publishes ``/pph/pointing_command`` (N, same sample index); its state and the
-count of rejected ``/pph/eddy`` messages go to ``/diagnostics`` once per simulated second.
+Hz and publishes ``/pph/pointing_command`` (N, same sample index and run); its state and
+the counts of refused ``/pph/eddy`` messages (malformed, beyond the gaps' physical range,
+out of sequence) go to ``/diagnostics`` once per simulated second. The loop port
+(:class:`~hexapod_vibration.ros.messages.ControllerLoopPort`) decides which samples to act
+on; a new run of the driver (a restart) resets the law's integral and filters.
 The set-point (tilt, twist, translation) and the loop's bandwidth are parameters, validated
 against the platform's range (tilt within 2.5 deg, twist within 10 deg, stroke within 95 %).
 """
@@ -17,7 +20,9 @@ from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.node import Node
 from std_msgs.msg import Float64MultiArray
 
+from hexapod_vibration.contract import POINTING_STATUS, STRUT_COUNT
 from hexapod_vibration.core.control.pointing import PointingGains, validate_target_pose
+from hexapod_vibration.core.loop.signal_ranges import SignalRanges
 from hexapod_vibration.core.model.config import load_model_config
 from hexapod_vibration.core.model.sensors import EddySensorArray
 from hexapod_vibration.core.sim.closed_loop import make_pointing_controller
@@ -25,9 +30,13 @@ from hexapod_vibration.parameter_specs import POINTING_CONTROLLER
 from hexapod_vibration.paths import config_path
 from hexapod_vibration.ros.diagnostics import diagnostic_array
 from hexapod_vibration.ros.executors import run_node
-from hexapod_vibration.ros.messages import StrutArrayPublisher, receive_strut_array
+from hexapod_vibration.ros.messages import (
+    ControllerLoopPort,
+    StrutArrayPublisher,
+    create_loop_subscription,
+)
 from hexapod_vibration.ros.parameters import NodeParameters
-from hexapod_vibration.ros.qos import DIAGNOSTICS_QOS, LOOP_PUBLISHER_QOS, LOOP_QOS
+from hexapod_vibration.ros.qos import DIAGNOSTICS_QOS, LOOP_PUBLISHER_QOS
 
 TARGET_PARAMS = ("target_tilt_x_deg", "target_tilt_y_deg", "target_twist_deg",
                  "target_translation_m")
@@ -52,13 +61,13 @@ class PointingControllerNode(Node):
         self.law.set_gains(self._gains(values))
         self.law.set_target(self._target(values), model.strut.stroke_limit_m)
         self.enabled = bool(values["enabled"])
-        self.invalid = 0
-        self.last_sample = -1
-        self._pub = StrutArrayPublisher(self.create_publisher(
-            Float64MultiArray, "/pph/pointing_command", LOOP_PUBLISHER_QOS))
+        self.port = ControllerLoopPort(
+            "/pph/eddy", SignalRanges.from_model(model).eddy_m,
+            StrutArrayPublisher(self.create_publisher(
+                Float64MultiArray, "/pph/pointing_command", LOOP_PUBLISHER_QOS)),
+            self.get_logger())
         self._pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", DIAGNOSTICS_QOS)
-        self.loop_subscriptions = [self.create_subscription(
-            Float64MultiArray, "/pph/eddy", self._on_eddy, LOOP_QOS)]
+        self.loop_subscriptions = [create_loop_subscription(self, "/pph/eddy", self._on_eddy)]
         self.get_logger().info(f"pointing controller up: target {np.round(self.law.target, 6)}"
                                f", bandwidth {self.law.gains.bandwidth_hz} Hz")
 
@@ -95,28 +104,25 @@ class PointingControllerNode(Node):
             self.law.reset()
 
     def _on_eddy(self, msg: Float64MultiArray | bytes) -> None:
-        parsed = receive_strut_array(msg, self.get_logger(), "/pph/eddy")
-        if parsed is None:
-            self.invalid += 1
+        sample = self.port.receive(msg)
+        if sample is None:
             return
-        gaps, index = parsed
-        index = self.last_sample + 1 if index is None else index
-        if index <= self.last_sample:
-            return
-        self.last_sample = index
-        force = self.law.step(gaps) if self.enabled else np.zeros(6)
-        self._pub.publish(force, index)
-        if index % DIAGNOSTICS_EVERY_SAMPLES == 0:
+        if sample.new_run:
+            self.law.reset()
+        force = self.law.step(sample.values) if self.enabled else np.zeros(STRUT_COUNT)
+        self.port.answer(force, sample)
+        if sample.index % DIAGNOSTICS_EVERY_SAMPLES == 0:
             self.publish_diagnostics()
 
     def publish_diagnostics(self) -> None:
-        """State and the count of rejected /pph/eddy messages on /diagnostics."""
-        values = {"enabled": str(self.enabled).lower(), "last_sample": self.last_sample,
-                  "invalid": self.invalid,
+        """State and the counts of refused /pph/eddy messages on /diagnostics."""
+        counters = self.port.diagnostics()
+        values = {"enabled": str(self.enabled).lower(), "last_sample": self.port.last_sample,
+                  "run": self.port.sequence.run, **counters,
                   "target_pose_m_rad": np.round(self.law.target, 9).tolist()}
         message = "enabled" if self.enabled else "disabled"
-        self._pub_diag.publish(diagnostic_array("pointing_controller", bool(self.invalid),
-                                                message, values, self.last_sample))
+        self._pub_diag.publish(diagnostic_array(POINTING_STATUS, bool(counters["invalid"]),
+                                                message, values, self.port.last_sample))
 
 
 def main(args: list[str] | None = None) -> None:

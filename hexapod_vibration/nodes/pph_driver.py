@@ -1,19 +1,21 @@
 """``pph_driver``: the simulated Precision Pointing Hexapod as a ROS 2 node.
 
 Every sample n (1 kHz) it publishes ``/clock`` (n ms of sim time), ``/pph/accel`` and
-``/pph/eddy`` (in-band sample index n), waits for the commands of sample n (lockstep) or
-until the sample's wall-clock deadline (realtime), sums ``/pph/notch_command`` and
-``/pph/pointing_command``, saturates them, publishes ``/pph/actuator_force`` (what is
-applied over [n, n+1)) and advances the plant by one sample. A command stream whose last
-valid command is older than ``command_timeout_samples`` is dropped to zero force (watchdog).
-Health and loop statistics go to ``/diagnostics`` once per simulated second.
+``/pph/eddy`` (in-band sample index n and the run's identity), waits for the commands of
+sample n (lockstep; the sensors are offered again every ``OFFER_AGAIN_S`` while one is
+missing) or until the sample's wall-clock deadline (realtime), sums ``/pph/notch_command``
+and ``/pph/pointing_command``, saturates them, publishes ``/pph/actuator_force`` (what is
+applied over [n, n+1)) and advances the plant by one sample. Which command of each stream
+applies (the first valid one per sample; zero force once a stream is older than
+``command_timeout_samples``) is decided by the pure
+:class:`~hexapod_vibration.core.loop.command_arbiter.CommandArbiter`; this node moves
+messages and parameters. Health and loop statistics go to ``/diagnostics`` once per
+simulated second.
 """
 
 from __future__ import annotations
 
 import time
-from collections import deque
-from dataclasses import dataclass, field
 
 import numpy as np
 import rclpy
@@ -22,6 +24,9 @@ from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
 from std_msgs.msg import Float64MultiArray
 
+from hexapod_vibration.contract import DRIVER_STATUS, new_run_id
+from hexapod_vibration.core.loop.command_arbiter import CommandArbiter
+from hexapod_vibration.core.loop.signal_ranges import SignalRanges
 from hexapod_vibration.core.model.config import load_model_config
 from hexapod_vibration.core.model.plant import PPHPlant, actuator_test_sine, saturate_commands
 from hexapod_vibration.core.model.shaker import Shaker, tones_from_arrays
@@ -32,53 +37,39 @@ from hexapod_vibration.parameter_specs import (
     shaker_unpaired,
 )
 from hexapod_vibration.paths import config_path
-from hexapod_vibration.ros.diagnostics import clock_cdr, diagnostic_array
+from hexapod_vibration.ros.diagnostics import diagnostic_array
 from hexapod_vibration.ros.executors import LoopSpinner, run_node
-from hexapod_vibration.ros.messages import StrutArrayPublisher, receive_strut_array
+from hexapod_vibration.ros.messages import (
+    StrutArrayPublisher,
+    create_loop_subscription,
+    receive_strut_sample,
+)
 from hexapod_vibration.ros.parameters import NodeParameters
-from hexapod_vibration.ros.qos import CLOCK_QOS, DIAGNOSTICS_QOS, LOOP_PUBLISHER_QOS, LOOP_QOS
+from hexapod_vibration.ros.qos import (
+    CLOCK_QOS,
+    COMMAND_QOS,
+    DIAGNOSTICS_QOS,
+    LOOP_PUBLISHER_QOS,
+)
+from hexapod_vibration.ros.rclpy_internals import clock_cdr, serialized_publish
 
 STREAMS = LOCKSTEP_STREAMS
-NO_FORCE_N = np.zeros(6)    # read-only: what a stale stream contributes
-NO_FORCE_N.flags.writeable = False
-PUBLISH_HISTORY = 1024      # samples whose publication time is kept for the latency
-STATS_WINDOW = 60000
-"""Latencies and periods kept for the percentiles on /diagnostics (the last minute at 1 kHz)."""
 SHAKER_PARAMS = ("shaker_frequencies_hz", "shaker_amplitudes_n", "shaker_phases_rad",
                  "shaker_drift_hz", "shaker_drift_period_s", "shaker_noise_rms_n")
-
-
-@dataclass
-class CommandStream:
-    """Latest valid command of one controller and its bookkeeping."""
-
-    topic: str
-    force_n: np.ndarray = field(default_factory=lambda: np.zeros(6))
-    sample: int = -1
-    received_wall_s: float = 0.0
-    invalid: int = 0
-    late: int = 0
-    stale: bool = True
-    stale_events: int = 0
-    connected: bool = False
-
-
-@dataclass
-class LoopStats:
-    """Measured loop statistics (wall clock), reported on /diagnostics."""
-
-    samples: int = 0
-    timeouts: int = 0
-    missed: int = 0
-    late_commands: int = 0
-    start_wall_s: float = 0.0
-    latencies_ms: deque = field(default_factory=lambda: deque(maxlen=STATS_WINDOW))
-    periods_ms: deque = field(default_factory=lambda: deque(maxlen=STATS_WINDOW))
-    last_publish_wall_s: float = 0.0
+OFFER_AGAIN_S = 0.05
+"""Lockstep: wall time (s) after which a sample whose commands are missing is published
+again (controllers answer a repeated sample with the same command): a command lost in
+transit (e.g. pushed out of a full queue by a flood) costs 50 ms, not the timeout."""
+HANDSHAKE_LOG_S = 5.0
+"""Period (s, wall) of the handshake's "waiting for ..." log."""
+REALTIME_HANDSHAKE_S = 5.0
+"""Realtime: longest wait (s, wall) for the expected controllers to answer sample 0 before
+the clock starts (discovery of a restarted driver takes up to about a second here; a
+controller that is not there is not waited for longer)."""
 
 
 class PPHDriver(Node):
-    """Simulated hexapod: plant stepping, sensor publishing, command watchdog."""
+    """Simulated hexapod: plant stepping, sensor publishing, commands through the arbiter."""
 
     def __init__(self) -> None:
         """Declare parameters, build the plant, create publishers and subscriptions."""
@@ -90,10 +81,11 @@ class PPHDriver(Node):
         seed = self.params["seed"]
         self.plant = PPHPlant(self.model, shaker=self._make_shaker(seed), seed=seed)
         self.fs = self.model.simulation.sample_rate_hz
-        self.sample = 0
-        self._publish_wall_s = np.zeros(PUBLISH_HISTORY)
-        self.stats = LoopStats()
-        self.streams = {s: CommandStream(f"/pph/{s}_command") for s in STREAMS}
+        self.run_id = new_run_id()
+        self.arbiter = CommandArbiter(STREAMS, self._expected, self.run_id,
+                                      SignalRanges.from_model(self.model).command_n,
+                                      latency_stream="notch")
+        self.topics = {name: f"/pph/{name}_command" for name in STREAMS}
         pub_qos = LOOP_PUBLISHER_QOS
         self._pub_accel = StrutArrayPublisher(self.create_publisher(
             Float64MultiArray, "/pph/accel", pub_qos))
@@ -101,17 +93,19 @@ class PPHDriver(Node):
             Float64MultiArray, "/pph/eddy", pub_qos))
         self._pub_force = StrutArrayPublisher(self.create_publisher(
             Float64MultiArray, "/pph/actuator_force", pub_qos))
-        self._pub_clock = self.create_publisher(Clock, "/clock", CLOCK_QOS)
+        self._pub_clock = serialized_publish(self.create_publisher(Clock, "/clock", CLOCK_QOS))
         self._pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", DIAGNOSTICS_QOS)
         self.loop_subscriptions = [
-            self.create_subscription(Float64MultiArray, stream.topic,
-                                     lambda msg, n=name: self._on_command(n, msg), LOOP_QOS)
-            for name, stream in self.streams.items()]
+            create_loop_subscription(self, topic, lambda msg, n=name: self._on_command(n, msg),
+                                     COMMAND_QOS)
+            for name, topic in self.topics.items()]
         self._serve_parameters()
         self._sample_pending = self.plant.step(np.zeros(6))
+        self._offer: tuple[bytes, ...] = ()
         self.get_logger().info(
             f"PPH driver up: {self.mode}, {'nonlinear' if self.model is model else 'linear'}"
-            f" plant, {self.fs:.0f} Hz, watchdog {self._timeout_samples} samples")
+            f" plant, {self.fs:.0f} Hz, watchdog {self._timeout_samples} samples, "
+            f"run {self.run_id}")
 
     # ------------------------------------------------------------------ parameters
     def _declare_parameters(self) -> None:
@@ -155,129 +149,103 @@ class PPHDriver(Node):
         self.plant.shaker.set_tones(self._shaker_tones(values))
         self.plant.shaker.noise_rms_n = float(values["shaker_noise_rms_n"])
 
-    # ------------------------------------------------------------------ commands
-    def _on_command(self, name: str, msg: Float64MultiArray | bytes) -> None:
-        stream = self.streams[name]
-        parsed = receive_strut_array(msg, self.get_logger(), stream.topic)
-        if parsed is None:
-            stream.invalid += 1
-            return
-        values, index = parsed
-        index = self.sample if index is None else index
-        if index > self.sample or index < stream.sample:
-            stream.invalid += 1       # from the future or out of order: never applied
-            return
-        stream.force_n = np.array(values)
-        stream.sample = index
-        stream.received_wall_s = time.perf_counter()
-        published = self._publish_wall_s[index % PUBLISH_HISTORY]
-        if name == "notch" and self.sample - index < PUBLISH_HISTORY and published > 0.0:
-            # accel(index) publication to notch_command(index) reception, late ones included
-            self.stats.latencies_ms.append((stream.received_wall_s - published) * 1e3)
+    # ------------------------------------------------------------------ state for the loop
+    @property
+    def sample(self) -> int:
+        """The current sample (published or about to be, its commands awaited)."""
+        return self.arbiter.sample
 
-    def _fresh(self, stream: CommandStream) -> bool:
-        """The stream's last valid command is at most ``command_timeout_samples`` old."""
-        return stream.sample >= 0 and self.sample - stream.sample <= self._timeout_samples
-
-    def _refresh_connections(self) -> None:
-        """A stream is connected if the graph shows a publisher or it commanded recently.
-
-        The graph (count_publishers) can lag behind the data: a controller that answered
-        the handshake may not be listed yet, and it must be waited for all the same.
-        """
-        for stream in self.streams.values():
-            stream.connected = self._fresh(stream) or self.count_publishers(stream.topic) > 0
-
-    def _waited_streams(self) -> list[CommandStream]:
-        """Expected controllers that are connected and not dropped by the watchdog.
-
-        A controller that missed more than ``command_timeout_samples`` samples (e.g. its
-        process died, which discovery may notice only many seconds later) is not waited for
-        any more, so the loop runs on without it; it is waited for again once it answers.
-        """
-        return [s for s in (self.streams[n] for n in self._expected)
-                if s.connected and self._fresh(s)]
-
-    def _commands_ready(self) -> bool:
-        return all(s.sample == self.sample for s in self._waited_streams())
-
-    def _count_missed(self) -> None:
-        """Lockstep: count the sample if a connected expected controller did not answer it."""
-        if any(self.streams[n].connected and self.streams[n].sample != self.sample
-               for n in self._expected):
-            self.stats.missed += 1
-
-    def _active_force(self, name: str) -> np.ndarray:
-        """The stream's force, or zero if its last valid command is too old (watchdog)."""
-        stream = self.streams[name]
-        stale = not self._fresh(stream)
-        if stale and not stream.stale and stream.sample >= 0:
-            stream.stale_events += 1
-            self.get_logger().warn(f"{stream.topic}: no command for {self._timeout_samples} "
-                                   f"samples, force set to zero")
-        stream.stale = stale
-        return NO_FORCE_N if stale else stream.force_n
-
-    # ------------------------------------------------------------------ loop
-    def publish_sample(self) -> None:
-        """Publish /clock and the sensors of the current sample."""
-        n, sensors = self.sample, self._sample_pending
-        self._pub_clock.publish(clock_cdr(n, self.fs))
-        self._pub_accel.publish(sensors.accel_m_s2, n)
-        self._pub_eddy.publish(sensors.eddy_m, n)
-        now = time.perf_counter()
-        self._publish_wall_s[n % PUBLISH_HISTORY] = now
-        if self.stats.last_publish_wall_s:
-            self.stats.periods_ms.append((now - self.stats.last_publish_wall_s) * 1e3)
-        self.stats.last_publish_wall_s = now
-
-    def apply_and_step(self) -> None:
-        """Sum, saturate, publish the applied force and advance the plant one sample."""
-        notch = self._active_force("notch")
-        if self._test_sine_amplitude_n > 0.0:
-            notch = notch + actuator_test_sine(self.sample, self._test_sine_frequency_hz,
-                                               self._test_sine_amplitude_n, self.fs)
-        applied = saturate_commands(notch, self._active_force("pointing"), self.model.strut)
-        self._pub_force.publish(applied, self.sample)
-        self._sample_pending = self.plant.step(applied)
-        self.sample += 1
-        self.stats.samples += 1
-        if self.sample % int(self.fs) == 0:
-            self.publish_diagnostics()
+    @property
+    def lockstep_timeout_s(self) -> float:
+        """Longest wait (s, wall) for the commands of one sample in lockstep."""
+        return self._lockstep_timeout_s
 
     def held(self) -> bool:
         """True while the lockstep breakpoint ``hold_at_time_s`` stops the loop here."""
         hold = self._hold_at_time_s
         return self.mode == "lockstep" and hold >= 0.0 and self.sample >= round(hold * self.fs)
 
+    def commands_ready(self) -> bool:
+        """Lockstep: every waited controller answered the current sample."""
+        return self.arbiter.ready(self._timeout_samples)
+
+    def unanswered(self) -> list[str]:
+        """Expected controllers that did not answer the current sample (handshake)."""
+        return self.arbiter.unanswered()
+
+    # ------------------------------------------------------------------ commands
+    def _on_command(self, name: str, msg: Float64MultiArray | bytes) -> None:
+        topic = self.topics[name]
+        sample = receive_strut_sample(msg, self.get_logger(), topic)
+        if sample is None:
+            self.arbiter.refuse(name)
+            return
+        refusal = self.arbiter.offer(name, sample.values, sample.index, sample.run,
+                                     time.perf_counter())
+        if refusal is not None and refusal.invalid:
+            self.get_logger().warn(f"{topic}: refused command for sample {sample.index} "
+                                   f"({refusal}) at sample {self.sample}",
+                                   throttle_duration_sec=1.0)
+
+    def refresh_connections(self) -> None:
+        """Update which command streams are connected (graph, or a recent command)."""
+        self.arbiter.refresh_connections(
+            {name: self.count_publishers(topic) for name, topic in self.topics.items()},
+            self._timeout_samples)
+
+    # ------------------------------------------------------------------ loop steps
+    def publish_sample(self) -> None:
+        """Publish /clock and the sensors of the current sample."""
+        n, sensors, run = self.sample, self._sample_pending, self.run_id
+        self._offer = (clock_cdr(n, self.fs), self._pub_accel.encode(sensors.accel_m_s2, n, run),
+                       self._pub_eddy.encode(sensors.eddy_m, n, run))
+        self.offer_again(repeated=False)
+        self.arbiter.published(time.perf_counter())
+
+    def offer_again(self, repeated: bool = True) -> None:
+        """Publish the current sample's /clock and sensors (again: the same bytes)."""
+        clock, accel, eddy = self._offer
+        self._pub_clock(clock)
+        self._pub_accel.publish_bytes(accel)
+        self._pub_eddy.publish_bytes(eddy)
+        if repeated:
+            self.arbiter.offered_again()
+
+    def timed_out(self) -> None:
+        """Lockstep gave up waiting for the current sample's commands."""
+        self.arbiter.timed_out()
+        self.refresh_connections()
+
+    def restart_stats(self) -> None:
+        """Start the loop statistics afresh (at the start of the loop, after the handshake)."""
+        self.arbiter.restart_stats(time.perf_counter())
+
+    def apply_and_step(self) -> None:
+        """Sum, saturate, publish the applied force and advance the plant one sample."""
+        forces, newly_stale = self.arbiter.close_sample(self.mode == "lockstep",
+                                                        self._timeout_samples)
+        for name in newly_stale:
+            self.get_logger().warn(f"{self.topics[name]}: no command for "
+                                   f"{self._timeout_samples} samples, force set to zero")
+        notch = forces["notch"]
+        if self._test_sine_amplitude_n > 0.0:
+            notch = notch + actuator_test_sine(self.sample, self._test_sine_frequency_hz,
+                                               self._test_sine_amplitude_n, self.fs)
+        applied = saturate_commands(notch, forces["pointing"], self.model.strut)
+        self._pub_force.publish(applied, self.sample, self.run_id)
+        self._sample_pending = self.plant.step(applied)
+        self.arbiter.advance()
+        if self.sample % int(self.fs) == 0:
+            self.publish_diagnostics()
+
     def publish_diagnostics(self, held: bool = False) -> None:
         """Loop health and statistics on /diagnostics (``held``: at the breakpoint)."""
-        st = self.stats
-        wall = max(time.perf_counter() - st.start_wall_s, 1e-9)
-        lat = np.array(st.latencies_ms) if st.latencies_ms else np.array([np.nan])
-        per = np.array(st.periods_ms) if st.periods_ms else np.array([np.nan])
-        # Stale: connected, or sent commands before (a controller that went away).
-        stale = [n for n, s in self.streams.items()
-                 if s.stale and (s.connected or s.sample >= 0)]
-        values = {
-            "mode": self.mode, "sample": self.sample, "samples": st.samples, "held": held,
-            "rate_hz": st.samples / wall, "timeouts": st.timeouts,
-            "late_commands": st.late_commands,
-            "missed_samples": st.missed if self.mode == "lockstep" else st.late_commands,
-            "latency_ms_p50": np.percentile(lat, 50), "latency_ms_p99": np.percentile(lat, 99),
-            "latency_ms_max": np.max(lat), "period_ms_p50": np.percentile(per, 50),
-            "period_ms_p99": np.percentile(per, 99), "period_ms_max": np.max(per),
-            "fallback_samples": self.plant.fallback_samples,
-            "accel_clipped_samples": self.plant.accelerometers.clipped_samples,
-        }
-        for name, s in self.streams.items():
-            values.update({f"{name}_invalid": s.invalid, f"{name}_stale_events": s.stale_events,
-                           f"{name}_late": s.late,
-                           f"{name}_connected": s.connected})
-        invalid = any(s.invalid for s in self.streams.values())
-        warn = bool(stale or st.timeouts or st.missed or invalid)
-        message = f"stale: {', '.join(stale)}" if stale else "ok"
-        self._pub_diag.publish(diagnostic_array("pph_driver: loop", warn, message, values,
+        values, warn, message = self.arbiter.report(time.perf_counter(),
+                                                    self.mode == "lockstep")
+        values.update({"mode": self.mode, "held": held,
+                       "fallback_samples": self.plant.fallback_samples,
+                       "accel_clipped_samples": self.plant.accelerometers.clipped_samples})
+        self._pub_diag.publish(diagnostic_array(DRIVER_STATUS, warn, message, values,
                                                 self.sample))
 
 
@@ -298,26 +266,60 @@ def wait_while_held(node: PPHDriver, spinner: LoopSpinner) -> None:
         spinner.spin_once(timeout_sec=0.01)
 
 
-def wait_for_controllers(node: PPHDriver, spinner: LoopSpinner) -> None:
+def wait_for_controllers(node: PPHDriver, spinner: LoopSpinner,
+                         limit_s: float = float("inf")) -> None:
     """Offer sample 0 again and again until every expected controller answered it.
 
-    Discovery does not tell when a subscription can receive: re-publishing the first
-    sample (controllers ignore duplicates) is a handshake that loses nothing.
+    Discovery does not tell when a subscription can receive: offering the first sample
+    again (controllers answer a repeated sample with the same command) is a handshake that
+    loses nothing. A controller following an older run adopts this one within a few offers.
+    Lockstep waits as long as it takes; realtime at most ``limit_s`` (s, wall).
     """
-    last_log = time.perf_counter()
-    while rclpy.ok():
-        node.publish_sample()
-        deadline = time.perf_counter() + 0.05
-        while time.perf_counter() < deadline:
-            spinner.spin_once(timeout_sec=max(deadline - time.perf_counter(), 0.0))
-        missing = [n for n in node._expected if node.streams[n].sample != 0]
+    node.publish_sample()
+    start = last_log = time.perf_counter()
+    while rclpy.ok() and time.perf_counter() - start < limit_s:
+        deadline = time.perf_counter() + OFFER_AGAIN_S
+        while (remaining := deadline - time.perf_counter()) > 0.0:
+            spinner.spin_once(timeout_sec=remaining)
+        missing = node.unanswered()
         if not missing:
             break
-        if time.perf_counter() - last_log > 5.0:
+        if time.perf_counter() - last_log > HANDSHAKE_LOG_S:
             node.get_logger().info(f"waiting for {', '.join(missing)} to answer sample 0")
             last_log = time.perf_counter()
-    node.stats = LoopStats(start_wall_s=time.perf_counter())
-    node._refresh_connections()
+        node.offer_again()
+    node.restart_stats()
+    node.refresh_connections()
+
+
+def wait_for_commands(node: PPHDriver, spinner: LoopSpinner) -> None:
+    """Lockstep: serve callbacks until every waited controller answered the current sample.
+
+    The sample is offered again every ``OFFER_AGAIN_S`` while a command is missing; after
+    ``lockstep_timeout_s`` and as many offers as fit in it, the wait gives up (counted) and
+    the loop advances without it. Counting offers too keeps a driver that got no CPU for a
+    while (a loaded machine, a flood) from timing out before its controllers had the chances
+    the timeout promises.
+    """
+    now = time.perf_counter()
+    timeout_s = node.lockstep_timeout_s
+    deadline, offer_at = now + timeout_s, now + OFFER_AGAIN_S
+    offers_due, offers = int(timeout_s / OFFER_AGAIN_S), 0
+    spun = False
+    while not node.commands_ready():
+        now = time.perf_counter()
+        if now >= deadline and offers >= offers_due:
+            node.timed_out()
+            break
+        if now >= offer_at:
+            node.offer_again()
+            offers += 1
+            offer_at = now + OFFER_AGAIN_S
+        until = offer_at if now >= deadline else min(deadline, offer_at)
+        spinner.spin_once(timeout_sec=max(until - now, 0.0))
+        spun = True
+    if not spun:    # nothing to wait for: still serve parameters and other streams
+        spinner.spin_once(timeout_sec=0.0)
 
 
 def run_lockstep(node: PPHDriver, spinner: LoopSpinner) -> None:
@@ -333,48 +335,37 @@ def run_lockstep(node: PPHDriver, spinner: LoopSpinner) -> None:
     while rclpy.ok():
         wait_while_held(node, spinner)
         node.publish_sample()
-        deadline = time.perf_counter() + node._lockstep_timeout_s
-        spun = False
-        while not node._commands_ready():
-            remaining = deadline - time.perf_counter()
-            if remaining <= 0.0:
-                node.stats.timeouts += 1
-                node._refresh_connections()
-                break
-            spinner.spin_once(timeout_sec=remaining)
-            spun = True
-        if not spun:    # nothing to wait for: still serve parameters and other streams
-            spinner.spin_once(timeout_sec=0.0)
+        wait_for_commands(node, spinner)
         if node.sample % 200 == 0:
-            node._refresh_connections()
-        node._count_missed()
+            node.refresh_connections()
         node.apply_and_step()
 
 
 def run_realtime(node: PPHDriver, spinner: LoopSpinner) -> None:
-    """Pace the loop at the sample rate on the wall clock, as hardware would."""
+    """Pace the loop at the sample rate on the wall clock, as hardware would.
+
+    The clock starts once the expected controllers answered sample 0 (at most
+    ``REALTIME_HANDSHAKE_S``), so a restarted driver is answered from its first samples.
+    """
     period = 1.0 / node.fs
-    start = time.perf_counter()
-    node._refresh_connections()
+    wait_for_controllers(node, spinner, REALTIME_HANDSHAKE_S)
+    start = time.perf_counter() - period      # sample 0's period was the handshake's
+    if rclpy.ok():
+        node.apply_and_step()      # sample 0 is out (and answered, unless the wait ran out)
     while rclpy.ok():
         node.publish_sample()
         deadline = start + (node.sample + 1) * period
         spinner.spin_once(timeout_sec=0.0)   # after an overrun: what is here is not late
         while (remaining := deadline - time.perf_counter()) > 0.0:
             spinner.spin_once(timeout_sec=remaining)
-        late = [s for s in node.streams.values() if s.connected and s.sample < node.sample]
-        for stream in late:
-            stream.late += 1
-        if late:
-            node.stats.late_commands += 1
         if node.sample % 200 == 0:
-            node._refresh_connections()
+            node.refresh_connections()
         node.apply_and_step()
 
 
 def run_driver(node: PPHDriver, spinner: LoopSpinner) -> None:
     """Run the loop of the driver's ``clock_mode`` until shutdown, then report once more."""
-    node.stats.start_wall_s = time.perf_counter()
+    node.restart_stats()
     try:
         (run_lockstep if node.mode == "lockstep" else run_realtime)(node, spinner)
     finally:

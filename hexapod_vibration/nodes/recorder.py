@@ -49,7 +49,12 @@ from rosgraph_msgs.msg import Clock as ClockMessage
 from std_msgs.msg import Float64MultiArray
 
 from hexapod_vibration import cli
-from hexapod_vibration.analysis.bag_io import BAG_VERSION, STRUT_TOPICS, typestore
+from hexapod_vibration.analysis.bag_io import (
+    BAG_VERSION,
+    STORAGE_PLUGINS,
+    STRUT_TOPICS,
+    typestore,
+)
 from hexapod_vibration.parameter_specs import PPH_RECORDER
 from hexapod_vibration.ros.parameters import NodeParameters
 from hexapod_vibration.ros.qos import (
@@ -58,9 +63,9 @@ from hexapod_vibration.ros.qos import (
     RECORDER_CLOCK_QOS,
     RECORDER_QOS,
 )
+from hexapod_vibration.ros.rclpy_internals import parameter_overrides, take_serialized_batch
 
 NODE_NAME = 'pph_recorder'
-STORAGES = {'mcap': StoragePlugin.MCAP, 'sqlite3': StoragePlugin.SQLITE3}
 STATUS_PERIOD_S = 1.0
 """Period (s, wall time) of the recorder's status on ``/diagnostics``."""
 MAX_BATCH = 500
@@ -125,7 +130,7 @@ class BagRecorder(Node):
         params.serve()
         bag_path, storage = params['bag_path'], params['storage']
         self.bag_path = Path(bag_path or datetime.now().strftime('rosbag2_%Y_%m_%d-%H_%M_%S'))
-        self._writer = _open_writer(self.bag_path, STORAGES[storage])
+        self._writer = _open_writer(self.bag_path, STORAGE_PLUGINS[storage])
         self._connections: dict[str, Connection] = {}
         self.counts: dict[str, int] = {t.name: 0 for t in RECORDED_TOPICS}
         self._subscriptions_by_topic: dict[str, Subscription] = {}
@@ -141,7 +146,7 @@ class BagRecorder(Node):
 
     def _default_to_sim_time(self) -> None:
         """Turn ``use_sim_time`` on unless it was given at start-up (CLI, params file)."""
-        if 'use_sim_time' not in self._parameter_overrides:
+        if 'use_sim_time' not in parameter_overrides(self):
             self.set_parameters([Parameter('use_sim_time', value=True)])
 
     def _subscribe(self, topic: RecordedTopic) -> None:
@@ -165,12 +170,8 @@ class BagRecorder(Node):
         recorder below the 6000+ messages/s of the loop; taking directly from the
         subscription handle, as the executor itself does, makes it about 10 us/message.
         """
-        with subscription.handle:
-            for _ in range(MAX_BATCH):
-                taken = subscription.handle.take_message(subscription.msg_type, True)
-                if taken is None:
-                    return
-                self._write(topic, taken[0])
+        for data in take_serialized_batch(subscription, MAX_BATCH):
+            self._write(topic, data)
 
     def _write(self, topic: RecordedTopic, data: bytes) -> None:
         """Write one serialized message, stamped with the node clock (sim time by default)."""

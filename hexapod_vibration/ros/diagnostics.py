@@ -1,36 +1,22 @@
-"""``/diagnostics`` messages and sim-time stamps shared by the nodes."""
+"""``/diagnostics`` messages and sim-time stamps shared by the nodes.
+
+The driver's ``/clock`` bytes are :func:`hexapod_vibration.ros.rclpy_internals.clock_cdr`.
+"""
 
 from __future__ import annotations
-
-import struct
 
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 
+from hexapod_vibration.contract import SAMPLE_RATE_HZ, sample_sim_time
+
 HARDWARE_ID = "pph_sim"
 
 
-def _sec_nanosec(sample: int, sample_rate_hz: float) -> tuple[int, int]:
-    """Sim time of loop sample ``sample`` (n / fs s, 0 before sample 0) as (s, ns)."""
-    return divmod(int(round(max(sample, 0) * 1e9 / sample_rate_hz)), 1_000_000_000)
-
-
-def sample_time(sample: int, sample_rate_hz: float = 1000.0) -> Time:
+def sample_time(sample: int, sample_rate_hz: float = SAMPLE_RATE_HZ) -> Time:
     """Sim time of loop sample ``sample`` (n / fs s), as ``builtin_interfaces/Time``."""
-    sec, nanosec = _sec_nanosec(sample, sample_rate_hz)
+    sec, nanosec = sample_sim_time(sample, sample_rate_hz)
     return Time(sec=sec, nanosec=nanosec)
-
-
-_CLOCK_CDR = struct.Struct("<4siI")     # encapsulation (LE CDR), sec (int32), nanosec
-
-
-def clock_cdr(sample: int, sample_rate_hz: float = 1000.0) -> bytes:
-    """``rosgraph_msgs/Clock`` at :func:`sample_time` as serialized (CDR) bytes.
-
-    What rclpy serializes from ``Clock(clock=sample_time(sample))`` (tested), built without
-    the Python message: the driver publishes it every sample.
-    """
-    return _CLOCK_CDR.pack(b"\x00\x01\x00\x00", *_sec_nanosec(sample, sample_rate_hz))
 
 
 def format_value(value: object) -> str:

@@ -5,21 +5,23 @@ Each node has a read-only ``executor`` parameter:
 - ``waitset`` (the default): the node's 1 kHz loop subscriptions are served from one
   persistent rcl wait set and taken directly and serialized (``take_message``: no
   conversion to a Python message, which costs about 19 us per message here), every queued
-  message at each wake-up; their callbacks get the CDR bytes (``messages.receive_strut_array``
-  reads both); everything else (parameter services, ``~/identify``, graph events) is
-  served by a SingleThreadedExecutor at least every ``SERVICE_PERIOD_S``, running or
-  idle. rclpy's executors rebuild a wait set from every entity of the node and go through
-  a task per callback on every spin. Measured on the project's 2-core machine: a
-  ping-pong between two processes takes 388 us per round trip with the executor and
-  222 us with a wait set; the notch controller's CPU per 1 kHz sample fell from 656 to
-  288 us (the README's Performance section has the loop as a whole).
+  message at each wake-up; their callbacks get the CDR bytes (loop subscriptions are raw:
+  ``messages.create_loop_subscription``); everything else (parameter services,
+  ``~/identify``, graph events) is served by a SingleThreadedExecutor at least every
+  ``SERVICE_PERIOD_S``, running or idle. rclpy's executors rebuild a wait set from every
+  entity of the node and go through a task per callback on every spin. Measured on the
+  project's 2-core machine: a ping-pong between two processes takes 388 us per round trip
+  with the executor and 222 us with a wait set; the notch controller's CPU per 1 kHz
+  sample fell from 656 to 288 us (the README's Performance section has the loop as a whole).
 - ``single_threaded``: rclpy's SingleThreadedExecutor for everything.
 - ``events``: rclpy's experimental EventsExecutor (Jazzy), for comparison only: on this
   machine it misses more samples than ``waitset`` in realtime and does not stop on SIGINT
   (``make bench``; it stalled while a 1 kHz ``/clock`` subscriber was in its process).
 
 All three run in the node's one thread: a parameter change is never applied in the middle
-of a sample's computation.
+of a sample's computation. The persistent wait set and the direct take are rclpy internals
+(:mod:`hexapod_vibration.ros.rclpy_internals`): where they are not verified, ``waitset``
+falls back to the executor's own ``spin_once``.
 """
 
 from __future__ import annotations
@@ -28,15 +30,18 @@ import time
 from collections.abc import Callable, Sequence
 
 import rclpy
-from rclpy._rclpy_pybind11 import RCLError
-from rclpy.exceptions import InvalidHandle
 from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedExecutor
-from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
 from rclpy.subscription import Subscription
 
 from hexapod_vibration.parameter_specs import EXECUTOR, EXECUTORS
 from hexapod_vibration.ros.parameters import declare_string
+from hexapod_vibration.ros.rclpy_internals import (
+    RCL_ERRORS,
+    LoopWaitSet,
+    fast_path,
+    take_serialized,
+)
 
 DEFAULT_EXECUTOR = EXECUTOR.default
 SERVICE_PERIOD_S = 0.05
@@ -72,11 +77,12 @@ def make_executor(name: str) -> Executor:
 class LoopSpinner:
     """``spin_once`` for a node with 1 kHz loop subscriptions (see the module docstring).
 
-    With ``fast=False`` it is the executor's own ``spin_once``. With ``fast=True`` the loop
-    subscriptions are waited on in a persistent wait set and their callbacks are called
-    directly with the serialized message (bytes), in arrival order per subscription; the
-    executor serves the rest (and calls the same callbacks with Python messages if it
-    takes a loop message itself), so a loop callback must accept both.
+    With ``fast=False`` (or where rclpy's internals are not verified) it is the executor's
+    own ``spin_once``. With ``fast=True`` the loop subscriptions are waited on in a
+    persistent wait set and their callbacks are called directly with the serialized
+    message (bytes), in arrival order per subscription; the executor serves the rest (and
+    calls the same callbacks if it takes a loop message itself: bytes too, the loop
+    subscriptions being raw).
     """
 
     def __init__(self, executor: Executor, subscriptions: Sequence[Subscription],
@@ -84,13 +90,12 @@ class LoopSpinner:
         """Bind to ``executor`` (which holds the node) and its loop ``subscriptions``."""
         self.executor = executor
         self.subscriptions = list(subscriptions)
-        self.fast = fast and bool(self.subscriptions)
+        self.fast = fast and bool(self.subscriptions) and fast_path()
         self.service_period_s = service_period_s
         self._served_s = 0.0
         self._wait_set = None
         if self.fast:
-            self._wait_set = _rclpy.WaitSet(len(self.subscriptions), 0, 0, 0, 0, 0,
-                                            executor.context.handle)
+            self._wait_set = LoopWaitSet(executor.context, self.subscriptions)
 
     def spin_once(self, timeout_sec: float) -> None:
         """Dispatch ready callbacks, waiting up to ``timeout_sec`` (s) for a loop message."""
@@ -112,33 +117,28 @@ class LoopSpinner:
 
     def _wait(self, timeout_sec: float) -> bool:
         """Block until a loop subscription has data or ``timeout_sec`` passes."""
-        wait_set = self._wait_set
         try:
-            wait_set.clear_entities()
-            for sub in self.subscriptions:
-                wait_set.add_subscription(sub.handle)
-            wait_set.wait(int(timeout_sec * 1e9))
-        except (RuntimeError, RCLError, InvalidHandle):
+            ready = self._wait_set.wait(timeout_sec)
+        except RCL_ERRORS:
             self._raise_if_shut_down()
             raise
         self._raise_if_shut_down()
-        return bool(wait_set.get_ready_entities("subscription"))
+        return ready
 
     def _take_all(self) -> int:
         """Take every queued loop message and call its callback; the number taken."""
         taken = 0
         for sub in self.subscriptions:
-            while (item := self._take(sub)) is not None:
-                sub.callback(item[0])
+            while (raw := self._take(sub)) is not None:
+                sub.callback(raw)
                 taken += 1
         return taken
 
-    def _take(self, sub: Subscription) -> tuple | None:
-        """One message of ``sub`` (with its info), or None if none is queued."""
+    def _take(self, sub: Subscription) -> bytes | None:
+        """One serialized message of ``sub``, or None if none is queued."""
         try:
-            with sub.handle:
-                return sub.handle.take_message(sub.msg_type, True)
-        except (RuntimeError, RCLError, InvalidHandle):
+            return take_serialized(sub)
+        except RCL_ERRORS:
             # rclpy's executors treat a failing take after shutdown (Ctrl-C) as the end.
             self._raise_if_shut_down()
             raise

@@ -2,19 +2,23 @@
 
 Every ``/pph/*`` topic carries six values in strut order 1..6 (SI units: m/s^2, m or N) with
 ``layout.dim[0] = ("strut", 6, 6)``. The driver and the controllers add
-``layout.dim[1] = ("sample:<n>", 1, 1)``: the array keeps its 6 values (shape (6, 1)) and
-carries the loop's sample index ``n`` in band, so commands pair with samples exactly and the
-analysis places every value on its sample whatever the transport jitter.
+``layout.dim[1] = ("sample:<n>", 1, 1)`` and ``layout.dim[2] = ("run:<id>", 1, 1)``: the
+array keeps its 6 values (shape (6, 1, 1)) and carries the loop's sample index ``n`` and the
+driver's run in band, so commands pair with samples exactly, a restarted driver is told
+apart (:mod:`hexapod_vibration.core.loop.sample_sequence`), and the analysis places every
+value on its sample whatever the transport jitter.
 
 Two forms of the same message, both at 1 kHz, without per-element Python work:
 
 - Python messages (:func:`make_strut_array`, :func:`parse_strut_array`: about 6 us to make,
-  2.5 us to parse), for tools, tests and rclpy's executors;
-- serialized CDR bytes (:func:`encode_strut_cdr`, :func:`decode_strut_cdr`), what the
-  nodes' loop publishes and what the ``waitset`` loop spinner takes: rclpy's conversion
-  between a Python message and its C form costs more than the message's whole DDS
-  delivery within a process (numbers in each function). The bytes are exactly what
-  rclpy serializes (tested against it); other encodings are decoded by rclpy.
+  2.5 us to parse), for tools and tests;
+- serialized CDR bytes, what the nodes' loop publishes (:class:`StrutArrayPublisher`) and
+  receives (loop subscriptions are raw, :func:`create_loop_subscription`): the codec is in
+  :mod:`hexapod_vibration.ros.rclpy_internals`.
+
+Receiving never raises: :func:`receive_strut_sample` returns None for a message it refuses,
+and :class:`ControllerLoopPort` adds the physical range and the run/sequence rules a
+controller needs, with one counter per reason for ``/diagnostics``.
 """
 
 from __future__ import annotations
@@ -22,41 +26,58 @@ from __future__ import annotations
 import array
 import math
 import struct
-from collections.abc import Sequence
+from collections import Counter
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from rclpy.serialization import deserialize_message
+from rclpy.node import Node
+from rclpy.qos import QoSProfile
+from rclpy.subscription import Subscription
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
 from hexapod_vibration.contract import (
-    SAMPLE_LABEL_PREFIX,
     STRUT_COUNT,
     STRUT_LABEL,
     InvalidStrutMessage,
-    parse_sample_label,
+    StrutSample,
+    parse_layout_labels,
+    run_label,
     sample_label,
+)
+from hexapod_vibration.core.loop.sample_sequence import Admission, SampleSequence
+from hexapod_vibration.core.loop.signal_ranges import out_of_range
+from hexapod_vibration.ros.qos import LOOP_QOS
+from hexapod_vibration.ros.rclpy_internals import (
+    UnsupportedCdr,
+    decode_strut_cdr,
+    encode_strut_cdr,
+    serialized_publish,
 )
 
 __all__ = [
-    'SAMPLE_LABEL_PREFIX',
-    'STRUT_COUNT',
-    'STRUT_LABEL',
+    'ControllerLoopPort',
     'InvalidStrutMessage',
+    'LoopSample',
     'StrutArrayPublisher',
+    'StrutSample',
     'UnsupportedCdr',
-    'decode_strut_cdr',
-    'encode_strut_cdr',
+    'create_loop_subscription',
     'make_strut_array',
     'parse_strut_array',
+    'parse_strut_sample',
     'receive_strut_array',
+    'receive_strut_sample',
 ]
 
 _FLOAT64 = np.dtype(np.float64)
+_DECODE_ERRORS = (InvalidStrutMessage, ValueError, TypeError, struct.error)
+"""What decoding a hostile message may raise; each is a refusal, never an escape."""
 
 
 def make_strut_array(
-    values: np.ndarray | Sequence[float], sample_index: int | None
+    values: np.ndarray | Sequence[float], sample_index: int | None, run: int | None = None
 ) -> Float64MultiArray:
     """Build a ``/pph/*`` message from six per-strut values.
 
@@ -64,12 +85,15 @@ def make_strut_array(
         values: Six values in strut order 1..6, SI units of the topic (m/s^2, m or N).
         sample_index: Loop sample index ``n`` (>= 0) the values belong to, carried in
             ``layout.dim[1]``; ``None`` leaves it out (shape (6,), as other publishers do).
+        run: The driver's run identity, carried in ``layout.dim[2]`` (needs an index);
+            ``None`` leaves it out.
 
     Returns:
         The message, ready to publish.
 
     Raises:
-        ValueError: ``values`` does not hold exactly six numbers or ``sample_index`` < 0.
+        ValueError: ``values`` does not hold exactly six numbers, ``sample_index`` < 0,
+            or ``run`` out of range or given without an index.
     """
     flat = np.ascontiguousarray(values, dtype=_FLOAT64).reshape(-1)
     if flat.shape[0] != STRUT_COUNT:
@@ -77,14 +101,53 @@ def make_strut_array(
     dims = [MultiArrayDimension(label=STRUT_LABEL, size=STRUT_COUNT, stride=STRUT_COUNT)]
     if sample_index is not None:
         dims.append(MultiArrayDimension(label=sample_label(sample_index), size=1, stride=1))
+    if run is not None:
+        if sample_index is None:
+            raise ValueError('a run needs a sample index')
+        dims.append(MultiArrayDimension(label=run_label(run), size=1, stride=1))
     msg = Float64MultiArray()
     msg.layout.dim = dims
     msg.data = array.array('d', flat.tobytes())
     return msg
 
 
+def parse_strut_sample(msg: Float64MultiArray) -> StrutSample:
+    """Extract the six values, the sample index and the run of a ``/pph/*`` message.
+
+    ``layout.dim[0]`` is not checked: a publisher that sends six values without a layout
+    (e.g. ``ros2 topic pub``) is accepted, without a sample index.
+
+    Returns:
+        ``values`` is a read-only float64 view of shape (6,) on the message's buffer (copy
+        it if the message is mutated afterwards); ``index`` and ``run`` are None when the
+        publisher did not send them.
+
+    Raises:
+        InvalidStrutMessage: Not six values, a value is NaN or infinite, or
+            ``layout.dim[1]`` / ``layout.dim[2]`` hold a garbled sample or run label.
+    """
+    data = msg.data
+    if len(data) != STRUT_COUNT:
+        raise InvalidStrutMessage(f'expected {STRUT_COUNT} strut values, got {len(data)}')
+    if not all(map(math.isfinite, data)):
+        raise InvalidStrutMessage(f'non-finite strut value in {list(data)}')
+    if isinstance(data, array.array):
+        values = np.frombuffer(data, dtype=_FLOAT64)
+    else:
+        values = np.asarray(data, dtype=_FLOAT64)
+    values.flags.writeable = False
+    index, run = parse_layout_labels([d.label for d in msg.layout.dim[:3]])
+    return StrutSample(values, index, run)
+
+
+def parse_strut_array(msg: Float64MultiArray) -> tuple[np.ndarray, int | None]:
+    """``(values, sample_index)`` of :func:`parse_strut_sample` (same rules)."""
+    values, index, _ = parse_strut_sample(msg)
+    return values, index
+
+
 class StrutArrayPublisher:
-    """Publish ``/pph/*`` messages at 1 kHz as serialized bytes (:func:`encode_strut_cdr`).
+    """Publish ``/pph/*`` messages at 1 kHz as serialized bytes (``encode_strut_cdr``).
 
     The bytes are what rclpy would serialize from :func:`make_strut_array` (subscribers
     see the same message), without building the Python message and converting it.
@@ -94,168 +157,159 @@ class StrutArrayPublisher:
 
     def __init__(self, publisher: Any) -> None:
         """Wrap an rclpy publisher of ``std_msgs/Float64MultiArray``."""
-        # rclpy's Publisher.publish(bytes) is this call behind a type check and a
-        # destruction guard (~3 us); the node outlives its loop, so call it directly.
-        self._publish_raw = publisher.handle.publish_raw
+        self.publish_bytes: Callable[[bytes], None] = serialized_publish(publisher)
+        """Publish bytes made by :meth:`encode` (e.g. again)."""
 
-    def publish(self, values: np.ndarray | Sequence[float], sample_index: int) -> None:
+    @staticmethod
+    def encode(values: np.ndarray | Sequence[float], sample_index: int,
+               run: int | None = None) -> bytes:
+        """The bytes :meth:`publish` sends."""
+        return encode_strut_cdr(values, sample_index, run)
+
+    def publish(self, values: np.ndarray | Sequence[float], sample_index: int,
+                run: int | None = None) -> bytes:
         """Publish six values (SI units of the topic) for loop sample ``sample_index`` >= 0.
+
+        Returns:
+            The bytes published.
 
         Raises:
             ValueError: ``values`` does not hold exactly six numbers or the index is < 0.
         """
-        self._publish_raw(encode_strut_cdr(values, sample_index))
+        raw = encode_strut_cdr(values, sample_index, run)
+        self.publish_bytes(raw)
+        return raw
 
 
-_CDR_LE = b'\x00\x01'          # encapsulation: plain CDR (XCDR1), little endian
-_CDR_HEADER = 4                # encapsulation bytes; alignment counts from after them
-_U32 = struct.Struct('<I')
-_CDR_PREFIX = (_CDR_LE + b'\x00\x00' + _U32.pack(2) + _U32.pack(len(STRUT_LABEL) + 1)
-               + STRUT_LABEL.encode() + b'\x00' + bytes(-(len(STRUT_LABEL) + 1) % 4)
-               + _U32.pack(STRUT_COUNT) + _U32.pack(STRUT_COUNT))
-"""Encapsulation, two dims, dim[0] = ("strut", 6, 6): the same for every loop message."""
-_CDR_SAMPLE_TAIL = struct.pack('<IIII', 1, 1, 0, STRUT_COUNT)
-"""dim[1] size and stride, data_offset, length of data."""
-_LABEL_FORMAT = SAMPLE_LABEL_PREFIX.encode() + b'%d\x00'
+def create_loop_subscription(node: Node, topic: str, callback: Callable[[bytes], None],
+                             qos: QoSProfile = LOOP_QOS) -> Subscription:
+    """A raw (bytes) 1 kHz loop subscription of ``node`` (QoS :data:`LOOP_QOS` by default).
 
-
-def _after_label(label_bytes: int) -> bytes:
-    """Padding, dim[1] size/stride, data_offset, data length and padding to the doubles."""
-    pos = len(_CDR_PREFIX) + 4 + label_bytes
-    pad = -(pos - _CDR_HEADER) % 4
-    pos += pad + len(_CDR_SAMPLE_TAIL)
-    return bytes(pad) + _CDR_SAMPLE_TAIL + bytes(-(pos - _CDR_HEADER) % 8)
-
-
-_AFTER_LABEL = [_after_label(n) for n in range(8)]
-""":func:`_after_label` by label length modulo 8 (it depends on nothing else)."""
-
-
-def encode_strut_cdr(values: np.ndarray | Sequence[float], sample_index: int) -> bytes:
-    """The serialized (little-endian CDR) form of ``make_strut_array(values, sample_index)``.
-
-    Raises:
-        ValueError: ``values`` does not hold exactly six numbers or ``sample_index`` < 0.
+    Raw on every executor, so no received loop message goes through rclpy's deserializer
+    (which raises on malformed bytes and misreads impossible layouts, see
+    :mod:`hexapod_vibration.ros.rclpy_internals`): the callback decodes the bytes.
     """
-    flat = np.asarray(values, dtype='<f8')
-    if flat.size != STRUT_COUNT:
-        raise ValueError(f'expected {STRUT_COUNT} strut values, got {flat.size}')
-    if sample_index < 0:
-        raise ValueError(f'sample index must be >= 0, got {sample_index}')
-    label = _LABEL_FORMAT % sample_index
-    return b''.join((_CDR_PREFIX, _U32.pack(len(label)), label, _AFTER_LABEL[len(label) % 8],
-                     flat.tobytes()))
+    return node.create_subscription(Float64MultiArray, topic, callback, qos, raw=True)
 
 
-def parse_strut_array(msg: Float64MultiArray) -> tuple[np.ndarray, int | None]:
-    """Extract the six values and the in-band sample index of a ``/pph/*`` message.
+def receive_strut_sample(msg: Float64MultiArray | bytes, logger: Any, topic: str
+                         ) -> StrutSample | None:
+    """:func:`parse_strut_sample` for a subscription callback: None for a refused message.
 
-    ``layout.dim[0]`` is not checked: a publisher that sends six values without a layout
-    (e.g. ``ros2 topic pub``) is accepted, without a sample index.
-
-    Args:
-        msg: A received (or locally built) ``std_msgs/Float64MultiArray``.
-
-    Returns:
-        ``(values, sample_index)``: ``values`` is a read-only float64 view of shape (6,)
-        on the message's buffer (copy it if the message is mutated afterwards),
-        ``sample_index`` the index from ``layout.dim[1]``, or ``None`` when the publisher
-        did not send one.
-
-    Raises:
-        InvalidStrutMessage: Not six values, a value is NaN or infinite, or
-            ``layout.dim[1]`` is present but not a well-formed ``sample:<n>`` label.
+    ``msg`` is the message or its serialized bytes. Nothing raises: malformed bytes, an
+    impossible layout, a bad label or value are a refusal. Its reason is logged as a
+    warning, throttled by rclpy to once a second per process (keyed by this call site);
+    the caller counts every refusal.
     """
-    data = msg.data
-    _check_count(len(data))
-    _check_finite(data)
-    if isinstance(data, array.array):
-        values = np.frombuffer(data, dtype=_FLOAT64)
-    else:
-        values = np.asarray(data, dtype=_FLOAT64)
-    values.flags.writeable = False
-    dims = msg.layout.dim
-    if len(dims) < 2:
-        return values, None
-    return values, parse_sample_label(dims[1].label)
-
-
-class UnsupportedCdr(ValueError):
-    """A serialized message this decoder does not read (not little-endian XCDR1, truncated)."""
-
-
-def decode_strut_cdr(raw: bytes) -> tuple[np.ndarray, int | None]:
-    """:func:`parse_strut_array` straight from the serialized (CDR) message bytes.
-
-    Reads only what the loop needs (``data`` and the ``layout.dim[1]`` label) without
-    building the Python message: about 3 us against about 19 us for rclpy's conversion to
-    a Python message on the project's machine. Same rules and results as
-    :func:`parse_strut_array` (tested against rclpy's serializer).
-
-    Raises:
-        InvalidStrutMessage: As :func:`parse_strut_array`.
-        UnsupportedCdr: Another encoding (e.g. big-endian) or malformed bytes: decode with
-            rclpy instead (:func:`receive_strut_array` does).
-    """
-    if raw[:2] != _CDR_LE:
-        raise UnsupportedCdr(f'encapsulation {raw[:2].hex()} is not little-endian CDR')
     try:
-        pos, label = _skip_layout(raw)
-        (count,) = _U32.unpack_from(raw, pos)
-    except (struct.error, ValueError) as exc:        # also UnicodeDecodeError
-        raise UnsupportedCdr(f'malformed Float64MultiArray CDR: {exc}') from None
-    _check_count(count)
-    pos += 4
-    pos += -(pos - _CDR_HEADER) % 8                        # float64 alignment
-    if pos + 8 * count > len(raw):
-        raise UnsupportedCdr(f'malformed Float64MultiArray CDR: {len(raw)} bytes')
-    values = np.frombuffer(raw, dtype='<f8', count=count, offset=pos)
-    _check_finite(values.tolist())
-    return values, None if label is None else parse_sample_label(label)
-
-
-def _check_count(count: int) -> None:
-    if count != STRUT_COUNT:
-        raise InvalidStrutMessage(f'expected {STRUT_COUNT} strut values, got {count}')
-
-
-def _check_finite(values: Sequence[float]) -> None:
-    if not all(map(math.isfinite, values)):
-        raise InvalidStrutMessage(f'non-finite strut value in {list(values)}')
-
-
-def _skip_layout(raw: bytes) -> tuple[int, str | None]:
-    """Walk ``layout`` (dims, data_offset); the offset of ``data`` and dim[1]'s label."""
-    (dims,) = _U32.unpack_from(raw, _CDR_HEADER)
-    pos, label = _CDR_HEADER + 4, None
-    for d in range(dims):
-        (length,) = _U32.unpack_from(raw, pos)              # string length incl. NUL
-        if length < 1 or pos + 4 + length > len(raw):
-            raise UnsupportedCdr(f'bad string length {length} in layout.dim[{d}]')
-        if d == 1:
-            label = raw[pos + 4:pos + 3 + length].decode()
-        pos += 4 + length
-        pos += -(pos - _CDR_HEADER) % 4 + 8                 # align, then size and stride
-    return pos + 4, label                                   # data_offset (uint32)
+        if isinstance(msg, bytes | bytearray | memoryview):
+            return decode_strut_cdr(bytes(msg))
+        return parse_strut_sample(msg)
+    except _DECODE_ERRORS as exc:
+        logger.warn(f'{topic}: rejected message ({exc})', throttle_duration_sec=1.0)
+        return None
 
 
 def receive_strut_array(msg: Float64MultiArray | bytes, logger: Any, topic: str
                         ) -> tuple[np.ndarray, int | None] | None:
-    """:func:`parse_strut_array` for a subscription callback: ``None`` for a bad message.
+    """``(values, sample_index)`` of :func:`receive_strut_sample`, or None."""
+    sample = receive_strut_sample(msg, logger, topic)
+    return None if sample is None else (sample.values, sample.index)
 
-    ``msg`` is the message, or its serialized bytes (what the ``waitset`` loop spinner
-    takes): those are read by :func:`decode_strut_cdr`, or by rclpy for an encoding it does
-    not read. The reason of a rejection is logged as a warning, throttled by rclpy to once
-    a second per process (the throttle is keyed by this call site); the caller counts
-    every rejection.
+
+@dataclass(frozen=True)
+class LoopSample:
+    """A received sample a controller acts on."""
+
+    values: np.ndarray
+    """Six values (SI units of the topic), read-only."""
+    index: int
+    """Its sample index (a publisher without one: the one after the last)."""
+    run: int | None
+    """The driver's run (None from a publisher without one)."""
+    gap: int
+    """Samples of this run missing since the last one acted on."""
+    new_run: bool
+    """First sample of a run adopted after another one (a restarted driver): reset the
+    run-dependent state (integrators, identification, phase references) before acting."""
+
+
+class ControllerLoopPort:
+    """A controller's end of the loop: one topic's samples in, one command per sample out.
+
+    :meth:`receive` decodes (never raises), refuses values beyond ``limit_abs`` (the
+    sensor's physical range) and applies the run and sequence rules of
+    :class:`~hexapod_vibration.core.loop.sample_sequence.SampleSequence`; it returns the
+    samples to act on. :meth:`answer` publishes the command of a sample with its index and
+    run. A sample offered again (lockstep re-offers a sample whose commands it misses) is
+    answered again with the same bytes, without acting. ``counters`` has one count per
+    reason for ``/diagnostics``.
     """
-    try:
-        if isinstance(msg, bytes):
-            try:
-                return decode_strut_cdr(msg)
-            except UnsupportedCdr:
-                msg = deserialize_message(msg, Float64MultiArray)
-        return parse_strut_array(msg)
-    except InvalidStrutMessage as exc:
-        logger.warn(f'{topic}: rejected message ({exc})', throttle_duration_sec=1.0)
-        return None
+
+    def __init__(self, topic: str, limit_abs: float, publisher: StrutArrayPublisher,
+                 logger: Any, sequence: SampleSequence | None = None) -> None:
+        """Receive on ``topic``, answer through ``publisher``, log through ``logger``."""
+        self.topic = topic
+        self.limit_abs = limit_abs
+        self.publisher = publisher
+        self.logger = logger
+        self.sequence = sequence or SampleSequence()
+        self.counters: Counter = Counter()
+        self._answer: tuple[int | None, int, bytes] | None = None
+
+    @property
+    def last_sample(self) -> int:
+        """Index of the last sample acted on (-1 before any)."""
+        return self.sequence.last
+
+    @property
+    def invalid(self) -> int:
+        """Messages refused as malformed or out of range."""
+        return self.counters['malformed'] + self.counters['out_of_range']
+
+    def receive(self, msg: Float64MultiArray | bytes) -> LoopSample | None:
+        """The sample to act on, or None (refused, repeated, late or unconfirmed)."""
+        sample = receive_strut_sample(msg, self.logger, self.topic)
+        if sample is None:
+            self.counters['malformed'] += 1
+            return None
+        reason = out_of_range(sample.values, self.limit_abs)
+        if reason:
+            self.counters['out_of_range'] += 1
+            self.logger.warn(f'{self.topic}: rejected message ({reason})',
+                             throttle_duration_sec=1.0)
+            return None
+        verdict = self.sequence.admit(sample.index, sample.run)
+        if not verdict.act:
+            self._not_acted(verdict.admission, verdict.index, sample.run)
+            return None
+        new_run = verdict.admission is Admission.NEW_RUN and self.sequence.runs_adopted > 1
+        if new_run:
+            self.counters['new_runs'] += 1
+            self.logger.info(f'{self.topic}: new run {sample.run} from sample {verdict.index}')
+        self.counters['missed_samples'] += verdict.gap
+        return LoopSample(sample.values, verdict.index, sample.run, verdict.gap, new_run)
+
+    def _not_acted(self, admission: Admission, index: int, run: int | None) -> None:
+        if admission is Admission.REPEAT:
+            self.counters['repeats'] += 1
+            if self._answer is not None and self._answer[:2] == (run, index):
+                self.publisher.publish_bytes(self._answer[2])
+        elif admission is Admission.LATE:
+            self.counters['late'] += 1
+        else:
+            self.counters['unconfirmed'] += 1
+            self.logger.warn(f'{self.topic}: sample {index} of run {run} does not follow '
+                             f'sample {self.sequence.last} of run {self.sequence.run}: '
+                             'ignored until confirmed', throttle_duration_sec=1.0)
+
+    def answer(self, values: np.ndarray | Sequence[float], sample: LoopSample) -> None:
+        """Publish ``values`` as the command for ``sample`` (its index and run)."""
+        raw = self.publisher.publish(values, sample.index, sample.run)
+        self._answer = (sample.run, sample.index, raw)
+
+    def diagnostics(self) -> dict[str, int]:
+        """Counters for ``/diagnostics``: ``invalid`` and one per reason."""
+        keys = ('malformed', 'out_of_range', 'unconfirmed', 'late', 'repeats', 'new_runs',
+                'missed_samples')
+        return {'invalid': self.invalid, **{k: self.counters[k] for k in keys}}

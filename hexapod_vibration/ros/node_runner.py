@@ -46,12 +46,12 @@ def run_node(name: str, factory: Callable[[], object],
 
 def _run(name: str, factory, loop, args, companions) -> int:
     import rclpy
-    from rclpy._rclpy_pybind11 import RCLError
     from rclpy.exceptions import InvalidHandle, ParameterException
     from rclpy.executors import ExternalShutdownException
     from rclpy.signals import SignalHandlerOptions
 
     from hexapod_vibration.ros.executors import LoopSpinner, make_executor, spin_loop
+    from hexapod_vibration.ros.rclpy_internals import RCLError
 
     cli.exit_if_stopped()
     try:

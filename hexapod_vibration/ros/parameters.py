@@ -44,6 +44,7 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 
 from hexapod_vibration.parameter_specs import RCLPY_PARAMETERS, NodeSpec, ParameterSpec
+from hexapod_vibration.ros.rclpy_internals import parameter_overrides
 
 NodeCheck = Callable[[Mapping[str, Any], frozenset], str]
 """A node's own check of its parameters (values after the change, names changed): reason or ''."""
@@ -124,7 +125,7 @@ class NodeParameters:
             reason = str(exc.args[0]).split("Reason: ", 1)[-1].removesuffix(f": {spec.name}")
             raise ValueError(_naming(spec.name, reason)) from None
         except InvalidParameterTypeException:
-            given = self.node._parameter_overrides[spec.name].type_
+            given = parameter_overrides(self.node)[spec.name].type_
             reason = (f"Wrong parameter type, expected '{Parameter.Type(descriptor.type)}' "
                       f"got '{given}'")                 # rclpy's run-time wording
             raise ValueError(_naming(spec.name, reason)) from None
@@ -133,7 +134,7 @@ class NodeParameters:
 
     def _report_unknown(self) -> list[str]:
         """Warn about parameters given to the node (CLI, params file) that it does not have."""
-        unknown = sorted(name for name in self.node._parameter_overrides
+        unknown = sorted(name for name in parameter_overrides(self.node)
                          if name not in self.spec.by_name and name not in RCLPY_PARAMETERS
                          and not name.startswith("qos_overrides."))
         if unknown:

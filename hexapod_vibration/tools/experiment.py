@@ -31,6 +31,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from hexapod_vibration import cli
+from hexapod_vibration.contract import DRIVER_STATUS, NOTCH_STATUS
+from hexapod_vibration.parameter_specs import STORAGES
 from hexapod_vibration.paths import available_scenarios, config_path, scenario_path
 from hexapod_vibration.tools import outputs
 from hexapod_vibration.tools.processes import Child, spawn_module, stop_all
@@ -161,11 +163,11 @@ class Supervisor:
     def _on_diag(self, msg: Any) -> None:
         for status in msg.status:
             values = {kv.key: kv.value for kv in status.values}
-            if status.name == "pph_driver: loop":
+            if status.name == DRIVER_STATUS:
                 self.driver = values
                 if not self._watch_clock:
                     self.sim_time_s = max(self.sim_time_s, int(values.get("sample", 0)) / 1e3)
-            elif status.name == "notch_controller":
+            elif status.name == NOTCH_STATUS:
                 self.notch = values
 
     def spin(self, seconds: float) -> None:
@@ -373,7 +375,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--composed", action="store_true",
                         help="driver and controllers as one process (pph_graph): same nodes "
                              "and topics, intra-process delivery, faster loop")
-    parser.add_argument("--storage", choices=("mcap", "sqlite3"), default="mcap",
+    parser.add_argument("--storage", choices=STORAGES, default="mcap",
                         help="rosbag2 storage of DIR/bag (default mcap, as Jazzy)")
     parser.add_argument("--demo", action="store_true",
                         help="run the paper's Tables 1 and 2 into DIR/<scenario>")

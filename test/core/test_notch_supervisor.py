@@ -172,3 +172,16 @@ def test_bad_settings_are_refused_with_a_reason():
             sup.check(changes)
     with pytest.raises(KeyError, match="not a notch setting"):
         sup.apply({"gain": 1.0})
+
+
+def test_a_new_run_restarts_the_sequence_and_keeps_what_was_identified():
+    sup = NotchSupervisor(config(enabled=True))
+    run(sup, coupled_gain(0.0), 100 + 3200 + 2000)
+    response, weights = sup.plant_response.copy(), sup.canceller.weights.copy()
+    assert sup.state == NotchState.ADAPTING
+    sup.reset_run(0)                                 # a restarted driver starts at 0 again
+    assert sup.step(0, np.full(6, GRAVITY)) is not None
+    assert sup.last_sample == 0 and sup.counters["duplicates"] == 0
+    assert np.array_equal(sup.plant_response, response)
+    assert np.allclose(sup.canceller.weights, weights, atol=1e-3)
+    assert sup.state == NotchState.ADAPTING and sup.status()["enabled_since_sample"] == 0

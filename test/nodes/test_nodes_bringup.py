@@ -4,7 +4,10 @@ pph_driver (lockstep), notch_controller and pointing_controller run as separate 
 (or composed in one ``pph_graph`` process) on the test's own ROS domain; the test process
 listens on every contract topic. The closed loop is judged on the data only (the 40 Hz
 amplitude of /pph/accel with the notch controller disabled versus converged after
-``enabled`` is set true), never on timing.
+``enabled`` is set true), never on timing. The driver stops at lockstep breakpoints
+(``hold_at_time_s``) at the end of each window until this process has received every
+sample of it: a listener slower than the loop (one core busy) then lags, but never drops
+samples nor waits for a window it can only reach long after the hang guard.
 """
 
 from __future__ import annotations
@@ -13,6 +16,7 @@ import numpy as np
 import pytest
 import yaml
 from node_graph import (
+    FS_HZ,
     STRUT_TOPICS,
     ClockTopic,
     Diagnostics,
@@ -23,6 +27,7 @@ from node_graph import (
     wait_until,
 )
 
+from hexapod_vibration.contract import DRIVER_STATUS, NOTCH_STATUS
 from hexapod_vibration.core.model.config import load_model_config
 from hexapod_vibration.core.model.plant import saturate_commands
 from hexapod_vibration.paths import config_path
@@ -33,14 +38,16 @@ MU = 0.01
 CONVERGED_AFTER_SAMPLES = 1000   # 10 time constants of mu = 0.01 (per sample)
 WINDOW_SAMPLES = 1000            # 40 periods of the tone
 MIN_REDUCTION_DB = 20.0
-NOTCH = 'notch_controller'
+NOTCH = NOTCH_STATUS
+CONTROL_ON_SAMPLE = 5000         # after identification (0.5 s + 3.2 s of samples) and a window
 
 
 def _params_file(tmp_path) -> str:
     """One ROS params file for all three nodes (each takes its own section)."""
     params = {
         'pph_driver': {'clock_mode': 'lockstep', 'shaker_frequencies_hz': [TONE_HZ],
-                       'shaker_amplitudes_n': [80.0]},
+                       'shaker_amplitudes_n': [80.0],
+                       'hold_at_time_s': CONTROL_ON_SAMPLE / FS_HZ},
         'notch_controller': {'tone_frequencies_hz': [TONE_HZ], 'mu': MU,
                              'identify_delay_s': IDENTIFY_DELAY_S, 'enabled': False},
         'pointing_controller': {'enabled': True},
@@ -72,24 +79,35 @@ def test_nodes_exchange_contract_topics_and_cancel_the_tone(ros_context, node_pr
     diagnostics = Diagnostics(node)
     accel = topics['/pph/accel']
     notch_params = ParameterClient(ros_context, node, NOTCH)
+    driver_params = ParameterClient(ros_context, node, 'pph_driver')
 
-    # Control off: the controller identifies the plant (test tones), then stays disabled.
+    def held_at(sample: int) -> bool:
+        """The driver holds before ``sample`` and every topic has reached the one before."""
+        return (diagnostics.value(DRIVER_STATUS, 'held') == 'true'
+                and diagnostics.int_value(DRIVER_STATUS, 'sample') == sample
+                and all(t.last_index >= sample - 1 for t in topics.values()))
+
+    # Control off: the controller identifies the plant (test tones), then stays disabled;
+    # the driver holds at CONTROL_ON_SAMPLE, after a window of control off.
     identified = wait_until(ros_context, lambda: not running() or (
-        diagnostics.value(NOTCH, 'identified_tones_hz') == f'[{TONE_HZ}]'
+        held_at(CONTROL_ON_SAMPLE)
+        and diagnostics.value(NOTCH, 'identified_tones_hz') == f'[{TONE_HZ}]'
         and diagnostics.value(NOTCH, 'state') == 'disabled'))
-    assert identified and running(), logs()
-    # Samples the controller had processed when it reported 'disabled' may not be here yet.
-    off_start = max(accel.last_index, diagnostics.int_value(NOTCH, 'last_sample')) + 1
-    assert wait_until(ros_context, lambda: accel.last_index >= off_start + WINDOW_SAMPLES)
+    assert identified and running(), (diagnostics.values(DRIVER_STATUS), logs())
+    identified_at = min(int(v['last_sample']) for v in diagnostics.history_values(NOTCH)
+                        if v.get('identified_tones_hz') == f'[{TONE_HZ}]')
+    off_start = CONTROL_ON_SAMPLE - WINDOW_SAMPLES
+    assert identified_at < off_start, identified_at
     # Control on (ros2 param set /notch_controller enabled true): converge, then measure.
     assert notch_params.set('enabled', True).successful
     assert wait_until(ros_context, lambda: diagnostics.value(NOTCH, 'state') == 'adapting')
     enabled_since = diagnostics.int_value(NOTCH, 'enabled_since_sample')
     assert enabled_since >= off_start + WINDOW_SAMPLES, diagnostics.values(NOTCH)
     end = enabled_since + CONVERGED_AFTER_SAMPLES + WINDOW_SAMPLES
+    assert driver_params.set('hold_at_time_s', (end + 100) / FS_HZ).successful
     done = wait_until(ros_context, lambda: not running() or (
-        accel.last_index >= end + 10 and 'pph_driver: loop' in diagnostics.latest))
-    assert done and running(), logs()
+        held_at(end + 100) and accel.last_index >= end + 10))
+    assert done and running(), (diagnostics.values(DRIVER_STATUS), logs())
 
     # Every contract topic: six values, layout.dim[0] = ("strut", 6, 6), in-band index.
     for name, topic in topics.items():
@@ -105,9 +123,9 @@ def test_nodes_exchange_contract_topics_and_cancel_the_tone(ros_context, node_pr
     assert all(t % 1_000_000 == 0 for t in clock.times_ns)
     assert max(clock.times_ns) >= 1_000_000 * (end - 1000)
     # /diagnostics from every node.
-    for name in ('pph_driver: loop', 'notch_controller', 'pointing_controller'):
+    for name in (DRIVER_STATUS, NOTCH_STATUS, 'pointing_controller'):
         assert name in diagnostics.latest, (name, sorted(diagnostics.latest))
-    assert diagnostics.value('pph_driver: loop', 'mode') == 'lockstep'
+    assert diagnostics.value(DRIVER_STATUS, 'mode') == 'lockstep'
     # Raw accelerometers: gravity (DC) included.
     _, raw = accel.window(0, end)
     assert np.all(np.abs(raw.mean(axis=0)) > 1.0), raw.mean(axis=0)
@@ -137,7 +155,7 @@ def test_nodes_exchange_contract_topics_and_cancel_the_tone(ros_context, node_pr
     reduction_db = db(np.linalg.norm(before) / np.linalg.norm(after))
     print(f'40 Hz accel amplitude per strut before {np.round(before, 4)} m/s^2, after '
           f'{np.round(after, 5)} m/s^2: reduction {reduction_db:.1f} dB; driver '
-          f'{diagnostics.values("pph_driver: loop")}')
+          f'{diagnostics.values(DRIVER_STATUS)}')
     assert np.all(before > 0.05), before    # tens of mg: the shaker is on
     assert reduction_db > MIN_REDUCTION_DB, (before, after)
     for process in processes:

@@ -39,7 +39,7 @@ from typing import Any
 
 import numpy as np
 
-from hexapod_vibration.contract import SAMPLE_RATE_HZ, STRUT_COUNT
+from hexapod_vibration.contract import SAMPLE_RATE_HZ, STRUT_COUNT, NotchState
 from hexapod_vibration.core.control import adaptation
 from hexapod_vibration.core.control.filters import DCBlocker
 from hexapod_vibration.core.control.notch import (
@@ -50,17 +50,6 @@ from hexapod_vibration.core.control.notch import (
 
 MAX_TONES = 16
 """Largest number of tones the controller accepts."""
-
-
-class NotchState:
-    """State names of the notch controller, as reported on ``/diagnostics``."""
-
-    IDENTIFYING = "identifying"
-    ADAPTING = "adapting"
-    ENABLED = "enabled"
-    DISABLED = "disabled"
-    REFUSED = "refused"
-    """Control kept off: the identification gave no usable coefficients or no stable mu."""
 
 
 @dataclass(frozen=True)
@@ -427,6 +416,23 @@ class NotchSupervisor:
                             f"{bound:.4g}: clamped to {clamped:.4g}", ("mu", clamped))
 
     # ------------------------------------------------------------------ loop
+    def reset_run(self, first_index: int) -> None:
+        """A new run of the loop starts at ``first_index`` (a restarted driver).
+
+        The sample sequence restarts there and the DC blocker forgets the old run's
+        accelerations; the identified plant, the coefficients and the weights are kept (the
+        plant is the same); an identification that was running starts again.
+        """
+        self.last_sample = int(first_index) - 1
+        self.dc_blocker.reset()
+        if self._config.enabled and not self.refusal:
+            self.enabled_since_sample = int(first_index)
+        self._event("warn", f"new run of the loop from sample {first_index}: sequence "
+                            "restarted, identification and weights kept")
+        if self.identifier is not None:
+            self._start_identification(list(self.identifier.tone_frequencies_hz),
+                                       int(first_index))
+
     def step(self, index: int | None, accel_m_s2: np.ndarray) -> np.ndarray | None:
         """Take the raw accelerations of sample ``index``; the command (N) for that sample.
 

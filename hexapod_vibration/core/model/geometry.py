@@ -21,8 +21,6 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-STRUT_COUNT = 6
-
 
 def skew(v: np.ndarray) -> np.ndarray:
     """Return the cross-product matrix ``[v]x`` so that ``skew(v) @ w == cross(v, w)``."""

@@ -1,0 +1,1 @@
+"""The loop's protocol without ROS: runs and sample sequences, command pairing, signal ranges."""

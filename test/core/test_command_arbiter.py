@@ -1,0 +1,179 @@
+"""The driver's command pairing and watchdog (core/loop/command_arbiter.py), without ROS.
+
+The rules the node tests check through processes (test/nodes/test_watchdog.py), here exact
+and per call: one command per sample (the first valid one), refusals by reason, the
+watchdog's hold and drop, lockstep's waited streams, missed and late counts.
+"""
+
+import numpy as np
+import pytest
+
+from hexapod_vibration.core.loop.command_arbiter import (
+    NO_FORCE_N,
+    CommandArbiter,
+    Refusal,
+)
+
+RUN = 42
+TIMEOUT = 5
+LIMIT_N = 70.0
+
+
+def _arbiter(expected=("notch", "pointing")) -> CommandArbiter:
+    arbiter = CommandArbiter(("notch", "pointing"), expected, RUN, LIMIT_N, "notch")
+    arbiter.refresh_connections({"notch": 1, "pointing": 1}, TIMEOUT)
+    return arbiter
+
+
+def _force(value: float) -> np.ndarray:
+    return np.full(6, value)
+
+
+def _step(arbiter, lockstep=True):
+    forces, stale = arbiter.close_sample(lockstep, TIMEOUT)
+    arbiter.advance()
+    return forces, stale
+
+
+def test_first_valid_command_per_sample_is_applied():
+    arbiter = _arbiter()
+    assert arbiter.offer("notch", _force(1.0), 0, RUN, 0.0) is None
+    assert arbiter.offer("notch", _force(2.0), 0, RUN, 0.0) is Refusal.DUPLICATE
+    assert arbiter.offer("pointing", _force(3.0), None, None, 0.0) is None
+    assert arbiter.ready(TIMEOUT)
+    forces, _ = _step(arbiter)
+    np.testing.assert_array_equal(forces["notch"], _force(1.0))
+    np.testing.assert_array_equal(forces["pointing"], _force(3.0))
+    assert arbiter.streams["notch"].refused[Refusal.DUPLICATE] == 1
+    assert arbiter.streams["notch"].invalid == 0
+
+
+def test_late_duplicate_for_the_previous_sample_is_not_applied_now():
+    """Issue 14: a second command for n-1 arriving at n replaced the first and was held."""
+    arbiter = _arbiter(expected=("pointing",))
+    arbiter.offer("notch", _force(1.0), 0, RUN, 0.0)
+    _step(arbiter)
+    # sample 1: the notch's command for 1 is late; a duplicate for 0 arrives first
+    assert arbiter.offer("notch", _force(9.0), 0, RUN, 0.0) is Refusal.DUPLICATE
+    forces, _ = _step(arbiter)
+    np.testing.assert_array_equal(forces["notch"], _force(1.0))     # held, not 9 N
+
+
+def test_late_first_command_is_held_as_the_latest():
+    """A command whose sample was passed (after a timeout) is still the freshest one."""
+    arbiter = _arbiter(expected=("pointing",))
+    arbiter.offer("notch", _force(1.0), 0, RUN, 0.0)
+    _step(arbiter)
+    _step(arbiter)
+    assert arbiter.offer("notch", _force(2.0), 1, RUN, 0.0) is None
+    assert arbiter.offer("notch", _force(3.0), 0, RUN, 0.0) is Refusal.OUT_OF_ORDER
+    forces, _ = _step(arbiter)
+    np.testing.assert_array_equal(forces["notch"], _force(2.0))
+
+
+@pytest.mark.parametrize("values, index, run, reason", [
+    (_force(70.5), 0, RUN, Refusal.OUT_OF_RANGE),
+    (np.array([0, 0, 0, 0, 0, -1e300]), 0, RUN, Refusal.OUT_OF_RANGE),
+    (_force(1.0), 0, RUN + 1, Refusal.OTHER_RUN),
+    (_force(1.0), 1, RUN, Refusal.FUTURE),
+    (_force(1.0), 10**9, None, Refusal.FUTURE),
+])
+def test_refused_commands_are_counted_and_never_applied(values, index, run, reason):
+    arbiter = _arbiter(expected=())
+    assert arbiter.offer("notch", values, index, run, 0.0) is reason
+    assert arbiter.streams["notch"].refused[reason] == 1
+    assert arbiter.streams["notch"].invalid == 1
+    forces, _ = _step(arbiter)
+    assert forces["notch"] is NO_FORCE_N
+    values, warn, _ = arbiter.report(1.0, lockstep=True)
+    assert values[f"notch_{reason}"] == 1 and values["notch_invalid"] == 1 and warn
+
+
+def test_command_at_the_actuator_limit_is_accepted():
+    arbiter = _arbiter(expected=())
+    assert arbiter.offer("notch", _force(-LIMIT_N), 0, RUN, 0.0) is None
+
+
+def test_watchdog_holds_then_drops_after_the_timeout():
+    arbiter = _arbiter(expected=())
+    arbiter.offer("notch", _force(4.0), 0, RUN, 0.0)
+    held, events = [], []
+    for _ in range(TIMEOUT + 3):
+        forces, stale = _step(arbiter)
+        held.append(float(forces["notch"][0]))
+        events += stale
+    assert held == [4.0] * (TIMEOUT + 1) + [0.0] * 2
+    assert events == ["notch"] and arbiter.streams["notch"].stale_events == 1
+    values, warn, message = arbiter.report(1.0, lockstep=True)
+    assert "notch" in message and warn
+
+
+def test_lockstep_waits_for_fresh_connected_expected_streams_only():
+    arbiter = _arbiter(expected=("notch",))
+    assert arbiter.waited(TIMEOUT) == []                 # never commanded: not fresh
+    arbiter.offer("notch", _force(1.0), 0, RUN, 0.0)
+    assert arbiter.ready(TIMEOUT)
+    _step(arbiter)
+    assert arbiter.waited(TIMEOUT) == ["notch"] and not arbiter.ready(TIMEOUT)
+    for _ in range(TIMEOUT):
+        _step(arbiter)
+    assert arbiter.waited(TIMEOUT) == [] and arbiter.ready(TIMEOUT)   # dropped: not waited
+    assert arbiter.stats.missed == TIMEOUT         # samples 1..5 unanswered
+
+
+def test_a_late_answer_makes_a_dropped_stream_waited_again():
+    """A restarted controller first answers samples the loop has passed (its queue)."""
+    arbiter = _arbiter(expected=("notch",))
+    for _ in range(60):
+        _step(arbiter)
+    assert arbiter.waited(TIMEOUT) == []
+    assert arbiter.offer("notch", _force(1.0), 10, RUN, 0.0) is None   # 50 samples late
+    assert not arbiter.fresh("notch", TIMEOUT)
+    assert arbiter.waited(TIMEOUT) == ["notch"] and not arbiter.ready(TIMEOUT)
+    forces, _ = _step(arbiter)
+    assert forces["notch"] is NO_FORCE_N                 # too old to apply: watchdog
+    assert arbiter.offer("notch", _force(2.0), 61, RUN, 0.0) is None
+    assert arbiter.ready(TIMEOUT)
+
+
+def test_handshake_waits_for_every_expected_stream():
+    arbiter = _arbiter()
+    assert arbiter.unanswered() == ["notch", "pointing"]
+    arbiter.offer("pointing", _force(0.0), 0, RUN, 0.0)
+    assert arbiter.unanswered() == ["notch"]
+
+
+def test_realtime_counts_late_streams():
+    arbiter = _arbiter()
+    arbiter.offer("notch", _force(1.0), 0, RUN, 0.0)
+    _step(arbiter, lockstep=False)
+    assert arbiter.stats.late_commands == 1
+    assert (arbiter.streams["notch"].late, arbiter.streams["pointing"].late) == (0, 1)
+    values, _, _ = arbiter.report(1.0, lockstep=False)
+    assert values["missed_samples"] == 1
+
+
+def test_latency_and_period_from_the_given_times():
+    arbiter = _arbiter()
+    arbiter.published(10.000)
+    arbiter.offer("notch", _force(1.0), 0, RUN, 10.002)
+    arbiter.offer("pointing", _force(1.0), 0, RUN, 10.009)
+    _step(arbiter)
+    arbiter.published(10.005)
+    assert list(arbiter.stats.latencies_ms) == pytest.approx([2.0])
+    assert list(arbiter.stats.periods_ms) == pytest.approx([5.0])
+
+
+def test_unknown_expected_stream_is_refused():
+    with pytest.raises(ValueError, match="unknown"):
+        CommandArbiter(("notch", "pointing"), ("other",), RUN, LIMIT_N)
+
+
+def test_duplicates_do_not_warn():
+    arbiter = _arbiter()
+    for name in ("notch", "pointing"):
+        arbiter.offer(name, _force(1.0), 0, RUN, 0.0)
+        arbiter.offer(name, _force(1.0), 0, RUN, 0.0)
+    _step(arbiter)
+    values, warn, message = arbiter.report(1.0, lockstep=True)
+    assert values["notch_duplicate"] == 1 and not warn and message == "ok"
