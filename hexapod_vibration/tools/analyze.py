@@ -13,7 +13,13 @@ import sys
 from pathlib import Path
 
 from hexapod_vibration.analysis.bag_io import BagError
-from hexapod_vibration.analysis.report import DEFAULT_WINDOW_S, analyze_bag, format_table
+from hexapod_vibration.analysis.report import (
+    Request,
+    WindowTooShort,
+    analyze_bag,
+    format_harmonics,
+    format_table,
+)
 from hexapod_vibration.core.model.config import load_model_config
 from hexapod_vibration.paths import config_path
 
@@ -38,11 +44,13 @@ def build_parser() -> argparse.ArgumentParser:
                              "in the bag, else the 3 strongest peaks)")
     parser.add_argument("--control-on", type=float, metavar="S", default=None,
                         help="sim time (s) control went on (default: from the bag)")
-    parser.add_argument("--window", type=float, default=DEFAULT_WINDOW_S, metavar="S",
-                        help="spectrum window length (s), at least 10 s recommended")
-    parser.add_argument("--harmonics-of", type=float, default=0.0, metavar="HZ",
+    parser.add_argument("--window", type=float, default=None, metavar="S",
+                        help="spectrum window length (s; default: the run's, else 10 s)")
+    parser.add_argument("--harmonics-of", type=float, default=None, metavar="HZ",
                         help="also report harmonic distortion of this fundamental")
-    parser.add_argument("--scenario", default=None, help="name written into report.json")
+    parser.add_argument("--scenario", default=None,
+                        help="name written into report.json (default: the run's, else the "
+                             "bag directory's name)")
     parser.add_argument("--model", type=Path, default=None,
                         help="physical model YAML for the Jacobian (default: packaged)")
     parser.add_argument("--no-plots", action="store_true", help="skip the PNG figures")
@@ -52,18 +60,20 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     """Entry point; returns the exit code (2 on bad input, with the reason on stderr)."""
     args = build_parser().parse_args(argv)
-    if args.window <= 0.0:
+    if args.window is not None and args.window <= 0.0:
         print("analyze: --window must be > 0 s", file=sys.stderr)
         return 2
     try:
         model = load_model_config(args.model or config_path("pph_model.yaml"))
-        result = analyze_bag(args.bag, args.out, model, args.tones,
-                             args.scenario or args.bag.resolve().name, args.window,
-                             args.control_on, args.harmonics_of, plots=not args.no_plots)
-    except (BagError, ValueError, FileNotFoundError) as exc:
-        print(f"analyze: {exc}", file=sys.stderr)
+        request = Request(args.tones, args.scenario, args.window, args.harmonics_of)
+        result = analyze_bag(args.bag, args.out, model, request, args.control_on,
+                             plots=not args.no_plots)
+    except (BagError, WindowTooShort, ValueError, FileNotFoundError) as exc:
+        print(f"analyze: {' '.join(str(exc).split())}", file=sys.stderr)
         return 2
-    print(format_table(result.report))
+    print(format_table(result.report, result.paper_reduction_db))
+    if result.harmonics is not None:
+        print(format_harmonics(result.harmonics, result.report["scenario"]))
     for note in result.details["notes"]:
         print(f"note: {note}")
     print(f"wrote {args.out / 'report.json'}")
