@@ -108,6 +108,8 @@ class JazzyWriter(Writer):
         super().__init__(path, version=BAG_VERSION, storage_plugin=storage_plugin)
         self._last_flush = time.monotonic()
         self._unflushed = 0
+        self.flushed = 0
+        """Messages on disk (in the OS's hands) for sure: written before the last flush."""
 
     def open(self) -> None:
         """Create the bag and its provisional ``metadata.yaml``."""
@@ -129,6 +131,7 @@ class JazzyWriter(Writer):
                 now - self._last_flush < period_s and self._unflushed < max_messages):
             return False
         self.storage.flush()
+        self.flushed += self._unflushed
         self._last_flush, self._unflushed = now, 0
         return True
 

@@ -184,9 +184,9 @@ class BagRecorder(Node):
         self._status_publisher = self.create_publisher(
             DiagnosticArray, '/diagnostics', DIAGNOSTICS_QOS
         )
-        self.create_timer(
-            STATUS_PERIOD_S, self._publish_status, clock=Clock(clock_type=ClockType.STEADY_TIME)
-        )
+        steady = Clock(clock_type=ClockType.STEADY_TIME)
+        self.create_timer(STATUS_PERIOD_S, self._publish_status, clock=steady)
+        self.create_timer(FLUSH_PERIOD_S, self._flush, clock=steady)
         self.get_logger().info(f'recording {len(RECORDED_TOPICS)} topics into {self.bag_path}')
 
     def _default_to_sim_time(self) -> None:
@@ -266,6 +266,11 @@ class BagRecorder(Node):
         return [qos_from_rclpy(info.qos_profile) for info in infos
                 if info.node_name != self.get_name()]
 
+    def _flush(self) -> None:
+        """Put the messages written so far on disk (a timer: also when nothing arrives)."""
+        if self._writer is not None:
+            self._writer.flush_if_due(FLUSH_PERIOD_S, COMMIT_EVERY)
+
     def status(self) -> DiagnosticStatus:
         """Health of the recording: per topic, messages written and publishers matched."""
         values = []
@@ -277,6 +282,8 @@ class BagRecorder(Node):
             if name in self.duplicates:
                 values.append(KeyValue(key=f'{name} duplicates', value=str(self.duplicates[name])))
         recording = self._writer is not None
+        if recording:
+            values.append(KeyValue(key='flushed messages', value=str(self._writer.flushed)))
         level = DiagnosticStatus.OK if recording else DiagnosticStatus.WARN
         state = 'recording' if recording else 'closed'
         return DiagnosticStatus(
