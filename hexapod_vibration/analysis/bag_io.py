@@ -14,6 +14,7 @@ counted; gaps are counted, never interpolated.
 
 from __future__ import annotations
 
+import dataclasses
 import sqlite3
 import struct
 from collections.abc import Iterable, Iterator, Mapping, Sequence
@@ -254,11 +255,16 @@ class Keep:
         every: Keep values only of samples ``n`` with ``n % every == 0`` (in-band topics;
             the sample accounting still covers every sample).
         timestamps: Keep the bag timestamps of the kept rows.
+        block: If > 0, keep per block of ``block`` samples (in-band topics) the mean and
+            the RMS deviation from it of each (projected) value instead of the rows:
+            ``values`` is then ``(blocks, 2 m)`` (means, then RMS), ``sample_index`` the
+            blocks' first samples (for plots of long runs; duplicates count twice).
     """
 
     columns: np.ndarray | None = None
     every: int = 1
     timestamps: bool = True
+    block: int = 0
 
 
 KEEP_ALL = Keep()
@@ -285,6 +291,7 @@ class _TopicStream:
         self._buf_values = np.empty((_BLOCK, STRUT_COUNT))
         self._n = 0
         self.first_timestamp: int | None = None
+        self._blocks: dict[int, np.ndarray] = {}   # block -> [count, sums (m), squares (m)]
 
     def add(self, timestamp: int, data: bytes | memoryview) -> None:
         """Decode one serialized message; an unusable one is counted and skipped."""
@@ -319,8 +326,40 @@ class _TopicStream:
         rows = self._buf_values[:n][self._value_rows(labels)]
         if self.keep.columns is not None:
             rows = rows @ self.keep.columns
-        self._values.append(np.array(rows, dtype=np.float64))
+        if self.keep.block > 0:
+            self._accumulate_blocks(labels, rows)
+        else:
+            self._values.append(np.array(rows, dtype=np.float64))
         self._n = 0
+
+    def _accumulate_blocks(self, labels: np.ndarray, rows: np.ndarray) -> None:
+        valid = labels >= 0
+        ids, inverse = np.unique(labels[valid] // self.keep.block, return_inverse=True)
+        values = rows[valid]
+        width = values.shape[1]
+        sums = np.zeros((ids.size, 1 + 2 * width))
+        np.add.at(sums[:, 0], inverse, 1.0)
+        np.add.at(sums[:, 1:1 + width], inverse, values)
+        np.add.at(sums[:, 1 + width:], inverse, values ** 2)
+        for k, block in enumerate(ids.tolist()):
+            if block in self._blocks:
+                self._blocks[block] += sums[k]
+            else:
+                self._blocks[block] = sums[k]
+
+    def _block_series(self, base: StrutSeries) -> StrutSeries:
+        """``base`` with its rows replaced by the per-block means and RMS deviations."""
+        blocks = sorted(self._blocks)
+        if not blocks:
+            return base
+        sums = np.stack([self._blocks[b] for b in blocks])
+        width = (sums.shape[1] - 1) // 2
+        count = sums[:, :1]
+        mean = sums[:, 1:1 + width] / count
+        rms = np.sqrt(np.maximum(sums[:, 1 + width:] / count - mean ** 2, 0.0))
+        return dataclasses.replace(
+            base, sample_index=np.asarray(blocks, np.int64) * self.keep.block,
+            values=np.hstack([mean, rms]), timestamp_ns=np.zeros(0, np.int64))
 
     def series(self, t0_ns: int, sample_rate_hz: float) -> StrutSeries:
         """Place the messages on their samples: sort, drop duplicates, count gaps."""
@@ -331,6 +370,8 @@ class _TopicStream:
         values = np.concatenate(self._values) if self._values else np.zeros((0, width))
         self._labels, self._stamps, self._values = [], [], []
         value_rows = self._value_rows(labels)
+        if self.keep.block > 0:       # rows were aggregated into blocks as they came
+            values = np.zeros((int(np.count_nonzero(value_rows)), width))
         invalid = self.invalid
         if np.any(labels >= 0):
             source: IndexSource = 'in-band'
@@ -354,7 +395,7 @@ class _TopicStream:
         first = np.ones(k_index.shape, dtype=bool)
         first[1:] = k_index[1:] != k_index[:-1]
         span = int(everything[-1] - everything[0] + 1) if everything.size else 0
-        return StrutSeries(
+        series = StrutSeries(
             topic=self.topic,
             sample_index=k_index[first],
             values=values[first],
@@ -367,6 +408,7 @@ class _TopicStream:
             first_sample=int(everything[0]) if everything.size else -1,
             last_sample=int(everything[-1]) if everything.size else -1,
         )
+        return self._block_series(series) if self.keep.block > 0 else series
 
 
 def _index_from_timestamps(timestamps: np.ndarray, t0_ns: int, sample_rate_hz: float) -> np.ndarray:

@@ -24,10 +24,9 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from hexapod_vibration.analysis.report import FS, Analysis, BagSignals  # noqa: E402
+from hexapod_vibration.analysis.report import FS, POSE_BLOCK, Analysis, BagSignals  # noqa: E402
 from hexapod_vibration.core import spectrum  # noqa: E402
 from hexapod_vibration.core.model.config import ModelConfig  # noqa: E402
-from hexapod_vibration.core.model.sensors import EddySensorArray  # noqa: E402
 
 G0 = spectrum.G0
 DPI = 150
@@ -41,8 +40,7 @@ def write_all(out: Path, signals: BagSignals, result: Analysis, model: ModelConf
     """Write every figure (and CSV) that the bag's content allows; return their paths."""
     paths = [spectra_figure(out / "spectra.png", result),
              spectra_csv(out / "spectra.csv", result)]
-    if result.harmonics is not None or "controlled" not in result.windows:
-        paths.append(plant_response_figure(out / "plant_response.png", result))
+    paths.append(plant_response_figure(out / "plant_response.png", result))
     if result.levels_over_time:
         paths.append(convergence_figure(out / "convergence.png", signals, result))
     eddy = signals.series.get("/pph/eddy")
@@ -75,7 +73,12 @@ def _window_label(result: Analysis, name: str) -> str:
 
 
 def _mark_tones(ax: plt.Axes, result: Analysis, label: bool = True) -> None:
+    """Dotted lines at the reported tones (green: notch tones), labelled if they fit."""
     top = ax.get_ylim()[1]
+    freqs = sorted(r["frequency_hz"] for r in result.report["tones"])
+    lo, hi = ax.get_xlim()
+    if len(freqs) > 1 and min(np.diff(freqs)) < (hi - lo) / 40:
+        label = False
     for row in result.report["tones"]:
         f = row["frequency_hz"]
         ax.axvline(f, color="tab:green" if row["controlled"] else "0.6", lw=0.7, ls=":",
@@ -104,8 +107,8 @@ def spectra_figure(path: Path, result: Analysis) -> Path:
         ax.set(xlim=(0, top_f), ylim=ylim, ylabel="PSD (dB re 1 g$^2$/Hz)",
                title=f"{result.report['scenario']}: top plate z acceleration, "
                      f"{_window_label(result, name)}")
-        _mark_tones(ax, result)
         ax.grid(alpha=0.3)
+        _mark_tones(ax, result)
         axes.append(ax)
     axes[-1].set_xlabel("frequency (Hz)")
     if zoom:
@@ -124,25 +127,11 @@ def _zoom_panel(ax: plt.Axes, psds: dict, result: Analysis, notch: list[float]) 
         sel = (f >= a) & (f <= b)
         ax.plot(f[sel], db[sel], color=COLORS[name], lw=1.2 if name == "uncontrolled" else 1.0,
                 ls="-" if name == "uncontrolled" else "--", label=_window_label(result, name))
-    for row in result.report["tones"]:
-        if a <= row["frequency_hz"] <= b:
-            for name, key in (("uncontrolled", "uncontrolled_db"), ("controlled",
-                                                                   "controlled_db")):
-                if row[key] is not None:
-                    ax.plot(row["frequency_hz"], row[key] + 10 * np.log10(
-                        1.0 / _lobe_bandwidth_hz()), "o", ms=3.5, color=COLORS[name],
-                        mfc="white")
     ax.set(xlim=(a, b), xlabel="frequency (Hz)", ylabel="PSD (dB re 1 g$^2$/Hz)",
-           title="zoom on the notch tones (circles: table levels as a PSD in one main lobe)")
+           title="zoom on the notch tones (* = notch tone; levels in the table)")
     _mark_tones(ax, result)
     ax.grid(alpha=0.3)
     ax.legend(loc="lower right")
-
-
-def _lobe_bandwidth_hz() -> float:
-    """Integration bandwidth of a table level (Hz): the main lobe, 9 bins of 0.1 Hz."""
-    hw = spectrum.main_lobe_half_width_bins(spectrum.DEFAULT_WINDOW)
-    return (2 * hw + 1) / spectrum.DEFAULT_SEGMENT_S
 
 
 def spectra_csv(path: Path, result: Analysis) -> Path:
@@ -293,20 +282,24 @@ STARTUP_S = 2.0
 
 
 def pointing_figure(path: Path, signals: BagSignals, model: ModelConfig) -> Path:
-    """Pose of the top plate from the eddy sensors: tilts, twist, translations."""
+    """Pose of the top plate from the eddy sensors: tilts, twist, translations.
+
+    Each line is the pose's mean over 0.1 s (the pointing), the band around it +-1 RMS
+    deviation within that 0.1 s (the vibration).
+    """
     eddy = signals.series["/pph/eddy"]
-    height = float(model.geometry.top_joints_m[0, 2])
-    pose = EddySensorArray(model.eddy, height).pose(eddy.values)
-    t = eddy.sample_index / FS
+    mean, rms = eddy.values[:, :6], eddy.values[:, 6:]
+    t = (eddy.sample_index + 0.5 * POSE_BLOCK) / FS
     steady = t >= min(STARTUP_S, t[-1] / 2)
     fig, axes = plt.subplots(len(POSE_GROUPS), 1, figsize=(8.0, 7.0), sharex=True)
     for ax, (ylabel, members, scale) in zip(axes, POSE_GROUPS, strict=True):
-        values = []
+        span = []
         for k, name in members:
-            y = pose[:, k] * scale
-            ax.plot(t, y, lw=0.8, label=name)
-            values.append(y[steady])
-        lo, hi = np.percentile(np.concatenate(values), [0.5, 99.5])
+            y, band = mean[:, k] * scale, rms[:, k] * scale
+            line, = ax.plot(t, y, lw=1.0, label=f"{name} (band: vibration RMS)")
+            ax.fill_between(t, y - band, y + band, color=line.get_color(), alpha=0.2, lw=0)
+            span.append(np.concatenate([(y - band)[steady], (y + band)[steady]]))
+        lo, hi = np.percentile(np.concatenate(span), [0.5, 99.5])
         pad = max(0.15 * (hi - lo), 1e-3)
         ax.set(ylabel=ylabel, ylim=(lo - pad, hi + pad))
         ax.legend(loc="upper right", ncol=len(members))
@@ -315,8 +308,8 @@ def pointing_figure(path: Path, signals: BagSignals, model: ModelConfig) -> Path
     if on is not None:
         for ax in axes:
             ax.axvline(on / FS, color="k", lw=0.8, ls="--")
-    axes[0].set_title(f"pointing: pose from the eddy-current sensors (100 Hz; y axes fit the "
-                      f"motion after {STARTUP_S:g} s, the start-up may be off scale)")
+    axes[0].set_title(f"pointing: pose from the eddy-current sensors, 0.1 s means "
+                      f"(y axes fit t > {STARTUP_S:g} s)")
     axes[-1].set_xlabel("sim time (s)" + ("; dashed: control on" if on is not None else ""))
     return _save(fig, path)
 

@@ -37,6 +37,7 @@ from hexapod_vibration.analysis import bag_io
 from hexapod_vibration.core import spectrum
 from hexapod_vibration.core.model.config import ModelConfig
 from hexapod_vibration.core.model.geometry import CubicHexapodGeometry
+from hexapod_vibration.core.model.sensors import EddySensorArray
 
 FS = 1000.0
 DEFAULT_WINDOW_S = 10.0
@@ -51,8 +52,10 @@ MIN_BINS_PER_SPACING = 9
 """A spectrum separates two lines ``d`` Hz apart when it has at least 9 bins per ``d``
 (main lobe 4 bins each side plus a half-bin offset and margin, see core.spectrum): a window
 shorter than ``9 / d`` s cannot give the tone table."""
-EDDY_EVERY = 10
-"""Eddy-current gaps kept for the pointing figure: every 10th sample (100 Hz)."""
+POSE_BLOCK = 100
+"""Pointing figure: the pose's mean and RMS deviation per block of 100 samples (0.1 s)."""
+COMMAND_EVERY = 10
+"""Notch-command timestamps kept (for a bag-timestamp latency estimate): every 10th."""
 WEIGHTS_EVERY = 10
 """Notch weights kept for the convergence figure: every 10th message (10 Hz)."""
 
@@ -105,8 +108,9 @@ class BagSignals:
     """What the analysis needs from one bag, sample-indexed.
 
     ``series["/pph/accel"].values`` holds the top plate's z acceleration (m/s^2, one
-    column), ``series["/pph/eddy"]`` every ``EDDY_EVERY``-th sample's six gaps (m), the
-    other topics only their sample accounting.
+    column); ``series["/pph/eddy"]`` per block of ``POSE_BLOCK`` samples the mean pose
+    (m, rad; 6 columns) then its RMS deviation (6 columns); the other topics only their
+    sample accounting.
     """
 
     path: Path
@@ -149,13 +153,21 @@ def z_columns(geometry: CubicHexapodGeometry) -> np.ndarray:
     return geometry.platform_from_struts(np.eye(6))[:, 2:3]
 
 
-def load_signals(bag_path: str | Path, geometry: CubicHexapodGeometry,
+def pose_columns(model: ModelConfig) -> np.ndarray:
+    """(6, 6) matrix: eddy-current gaps (m) @ it = the top plate's pose (m, rad)."""
+    height = float(model.geometry.top_joints_m[0, 2])
+    return EddySensorArray(model.eddy, height).pose(np.eye(6))
+
+
+def load_signals(bag_path: str | Path, model: ModelConfig,
                  control_on_s: float | None = None) -> BagSignals:
     """Read the bag in one pass; find the run record and when control went on."""
-    keep = {topic: bag_io.Keep(timestamps=False) for topic in bag_io.STRUT_TOPICS}
-    keep[bag_io.ACCEL_TOPIC] = bag_io.Keep(columns=z_columns(geometry))
-    keep["/pph/eddy"] = bag_io.Keep(every=EDDY_EVERY, timestamps=False)
-    keep["/pph/notch_command"] = bag_io.Keep(columns=np.zeros((6, 0)), every=EDDY_EVERY)
+    none = np.zeros((6, 0))
+    keep = {topic: bag_io.Keep(columns=none, timestamps=False) for topic in bag_io.STRUT_TOPICS}
+    keep[bag_io.ACCEL_TOPIC] = bag_io.Keep(columns=z_columns(model.geometry))
+    keep["/pph/eddy"] = bag_io.Keep(columns=pose_columns(model), timestamps=False,
+                                    block=POSE_BLOCK)
+    keep["/pph/notch_command"] = bag_io.Keep(columns=none, every=COMMAND_EVERY)
     content = bag_io.read_bag(bag_path, keep, FS, weights_every=WEIGHTS_EVERY)
     signals = BagSignals(Path(bag_path), content.strut, recovered=content.recovered,
                          bad_messages=content.bad_messages)
@@ -573,10 +585,15 @@ def level_text(level: float | None, at_floor: bool | None) -> str:
 
 
 def reduction_text(row: dict[str, Any]) -> str:
-    """A reduction (dB); ``>= 84.1`` when the controlled level is at the noise floor."""
+    """A reduction (dB), ``>= 84.1`` when it is a lower bound.
+
+    A lower bound: the controlled level is at the noise floor and the uncontrolled one is
+    not (a floor-to-floor difference bounds nothing).
+    """
     if row["reduction_db"] is None:
         return "-"
-    bound = row.get("at_noise_floor", {}).get("controlled")
+    floor = row.get("at_noise_floor", {})
+    bound = floor.get("controlled") and not floor.get("uncontrolled")
     return (">= " if bound else "") + f"{row['reduction_db']:.1f}"
 
 
@@ -633,7 +650,7 @@ def analyze_bag(bag_path: str | Path, out_dir: str | Path, model: ModelConfig,
     The bag is read and analysed completely before anything is written, so a bad bag
     leaves ``out_dir`` untouched.
     """
-    signals = load_signals(bag_path, model.geometry, control_on_s)
+    signals = load_signals(bag_path, model, control_on_s)
     result = analyze_signals(signals, request)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)

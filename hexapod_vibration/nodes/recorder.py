@@ -90,8 +90,9 @@ MAX_BATCH = 500
 DRAIN_IDLE_SPINS = 3
 """Consecutive idle spins (each up to DRAIN_SPIN_S) that end the drain at shutdown."""
 DRAIN_SPIN_S = 0.05
-DRAIN_MAX_S = 2.0
-"""Upper bound (s) of the drain at shutdown, reached only if publishers keep publishing."""
+DRAIN_MAX_S = 10.0
+"""Upper bound (s) of the drain at shutdown, reached only if publishers keep publishing
+(a recorder behind a fast lockstep loop may have a few seconds of messages queued)."""
 FLUSH_PERIOD_S = 0.25
 """Longest time (s, wall) that written messages stay in memory before they are on disk."""
 COMMIT_EVERY = 2000

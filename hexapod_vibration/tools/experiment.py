@@ -237,6 +237,10 @@ class Supervisor:
             needed.append(n.count_publishers("/pph/notch_command") >= 1)
         return all(needed)
 
+    def recorder_behind(self, topics: list[str], samples: int) -> list[str]:
+        """Topics of which the recorder reports fewer than ``samples`` messages written."""
+        return [t for t in topics if int(self.recorder.get(f"{t} messages", "0")) < samples]
+
     def recorder_unmatched(self, topics: list[str]) -> list[str]:
         """Topics on which the recorder itself reports no matched publisher yet."""
         return [t for t in topics if int(self.recorder.get(f"{t} publishers", "0")) < 1]
@@ -441,6 +445,11 @@ class ExperimentRun:
             self.say(f"  [{sc.name}] control on at {sc.control_on_s:.3f} s (sample {self.n_on})")
         self.sup.set_parameter("pph_driver", "hold_at_time_s", sc.duration_s)
         self._wait(lambda: self.sup.held_at(self.n_end), "running")
+        # The loop is held at its last sample: wait until the recorder wrote every sample
+        # (it may lag a fast lockstep loop by seconds; stopping it then would lose them).
+        loop = [t for t in STRUT_TOPICS if t != "/pph/notch_command" or self.has_notch]
+        self._wait(lambda: not self.sup.recorder_behind(loop, self.n_end),
+                   "recorder writing the last samples")
 
     def _run_realtime(self) -> None:
         sc = self.o.scenario
