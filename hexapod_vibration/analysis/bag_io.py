@@ -166,14 +166,28 @@ def read_custom_data(bag_path: str | Path) -> dict[str, str]:
 def _iter_messages(
     reader: Any, connections: Sequence[Connection]
 ) -> Iterator[tuple[Connection, int, bytes]]:
-    """Messages of ``connections`` in bag order; corruption becomes a BagError."""
+    """Messages of ``connections`` in bag order; corruption becomes a BagError.
+
+    An uncompressed MCAP bag is read sequentially (:func:`recovery.iter_mcap_messages`,
+    bounded memory), in file order; anything else through the reader.
+    """
     if not connections:
         return
     counts = dict.fromkeys((c.id for c in connections), 0)
+    files = _sequential_mcap_files(reader)
     try:
-        for conn, timestamp, data in reader.messages(connections=connections):
-            counts[conn.id] += 1
-            yield conn, timestamp, data
+        if files is None:
+            for conn, timestamp, data in reader.messages(connections=connections):
+                counts[conn.id] += 1
+                yield conn, timestamp, data
+        else:
+            wanted = {(c.topic, c.msgtype): c for c in connections}
+            for path in files:
+                for topic, schema, timestamp, data in recovery.iter_mcap_messages(path):
+                    conn = wanted.get((topic, schema))
+                    if conn is not None:
+                        counts[conn.id] += 1
+                        yield conn, timestamp, data
     except _READ_ERRORS as err:
         raise BagError(f'bag {reader.path} is truncated or corrupt: {err!r}') from err
     for conn in connections:  # a damaged MCAP chunk can end the iteration silently
@@ -182,6 +196,17 @@ def _iter_messages(
                 f'bag {reader.path} is truncated or corrupt: read {counts[conn.id]} of the '
                 f'{conn.msgcount} messages on {conn.topic} listed in its metadata.yaml'
             )
+
+
+def _sequential_mcap_files(reader: Any) -> list[Path] | None:
+    """The data files of a closed, uncompressed MCAP bag (None: read through rosbags)."""
+    storage = getattr(reader, 'storage', None)
+    storages = getattr(storage, 'storages', None)
+    metadata = getattr(storage, 'metadata', None)
+    if not storages or getattr(metadata, 'compression_mode', None):
+        return None
+    paths = [Path(getattr(s, 'path', '')) for s in storages]
+    return paths if all(p.suffix == '.mcap' and p.is_file() for p in paths) else None
 
 
 def _topics_summary(reader: Any) -> str:
@@ -274,24 +299,58 @@ MAX_SAMPLE_INDEX = 2**40
 _BLOCK = 4096
 
 
+class _SampleSet:
+    """Set of sample indices as a bitmap in 64 Ki-sample chunks (1 bit per sample)."""
+
+    CHUNK = 1 << 16
+
+    def __init__(self) -> None:
+        self._chunks: dict[int, bytearray] = {}
+        self.count = 0
+        self.first = -1
+        self.last = -1
+
+    def add(self, n: int) -> bool:
+        """Add ``n``; True if it was there already."""
+        chunk, offset = divmod(n, self.CHUNK)
+        bits = self._chunks.get(chunk)
+        if bits is None:
+            bits = self._chunks[chunk] = bytearray(self.CHUNK // 8)
+        byte, bit = divmod(offset, 8)
+        if bits[byte] >> bit & 1:
+            return True
+        bits[byte] |= 1 << bit
+        self.count += 1
+        self.first = n if self.first < 0 else min(self.first, n)
+        self.last = max(self.last, n)
+        return False
+
+
 class _TopicStream:
     """Messages of one strut topic, decoded as they stream by into compact numpy blocks.
 
-    Memory per message: 16 bytes (label, timestamp) plus what :class:`Keep` keeps.
+    In-band samples are accounted for in a bitmap (1 bit per sample); a row (label,
+    timestamp and what :class:`Keep` keeps of the values) is stored only for the first
+    copy of a sample that the Keep asks for, so a topic read for its accounting only costs
+    1 bit per sample.
     """
 
     def __init__(self, topic: str, keep: Keep) -> None:
         self.topic, self.keep = topic, keep
         self.invalid = 0
-        self._labels: list[np.ndarray] = []   # every valid message's label (-1: none)
+        self.duplicates = 0
+        self._set = _SampleSet()
+        self._labels: list[np.ndarray] = []   # stored rows' labels (-1: none)
         self._stamps: list[np.ndarray] = []
-        self._values: list[np.ndarray] = []   # rows selected by _value_rows
+        self._values: list[np.ndarray] = []
         self._buf_label = np.empty(_BLOCK, np.int64)
         self._buf_stamp = np.empty(_BLOCK, np.int64)
         self._buf_values = np.empty((_BLOCK, STRUT_COUNT))
         self._n = 0
         self.first_timestamp: int | None = None
         self._blocks: dict[int, np.ndarray] = {}   # block -> [count, sums (m), squares (m)]
+        width = STRUT_COUNT if keep.columns is None else int(keep.columns.shape[1])
+        self._rows_wanted = keep.block > 0 or width > 0 or keep.timestamps
 
     def add(self, timestamp: int, data: bytes | memoryview) -> None:
         """Decode one serialized message; an unusable one is counted and skipped."""
@@ -300,36 +359,39 @@ class _TopicStream:
         except InvalidStrutMessage:
             self.invalid += 1
             return
+        if self.first_timestamp is None or timestamp < self.first_timestamp:
+            self.first_timestamp = timestamp
+        if label is not None:
+            if self._set.add(label):
+                self.duplicates += 1
+                return
+            every = max(1, self.keep.every)
+            if not self._rows_wanted or (self.keep.block <= 0 and label % every):
+                return
         k = self._n
         self._buf_label[k] = -1 if label is None else label
         self._buf_stamp[k] = timestamp
         self._buf_values[k] = values
         self._n += 1
-        if self.first_timestamp is None or timestamp < self.first_timestamp:
-            self.first_timestamp = timestamp
         if self._n == _BLOCK:
             self._flush()
-
-    def _value_rows(self, labels: np.ndarray) -> np.ndarray:
-        every = max(1, self.keep.every)
-        if every == 1:
-            return np.ones(labels.shape, dtype=bool)
-        return (labels < 0) | (labels % every == 0)
 
     def _flush(self) -> None:
         n = self._n
         if not n:
             return
         labels = self._buf_label[:n].copy()
-        self._labels.append(labels)
-        self._stamps.append(self._buf_stamp[:n].copy())
-        rows = self._buf_values[:n][self._value_rows(labels)]
+        stamps = self._buf_stamp[:n].copy()
+        rows = self._buf_values[:n]
         if self.keep.columns is not None:
             rows = rows @ self.keep.columns
-        if self.keep.block > 0:
+        if self.keep.block > 0:      # in-band rows go into the blocks, only others are kept
             self._accumulate_blocks(labels, rows)
+            labels, stamps = labels[labels < 0], stamps[labels < 0]
         else:
             self._values.append(np.array(rows, dtype=np.float64))
+        self._labels.append(labels)
+        self._stamps.append(stamps)
         self._n = 0
 
     def _accumulate_blocks(self, labels: np.ndarray, rows: np.ndarray) -> None:
@@ -367,48 +429,50 @@ class _TopicStream:
         width = STRUT_COUNT if self.keep.columns is None else int(self.keep.columns.shape[1])
         labels = np.concatenate(self._labels) if self._labels else np.zeros(0, np.int64)
         stamps = np.concatenate(self._stamps) if self._stamps else np.zeros(0, np.int64)
-        values = np.concatenate(self._values) if self._values else np.zeros((0, width))
+        values = (np.concatenate(self._values) if self._values
+                  else np.zeros((labels.size if self.keep.block > 0 else 0, width)))
+        if self.keep.block > 0:
+            values = np.zeros((labels.size, width))   # rows went into the blocks
         self._labels, self._stamps, self._values = [], [], []
-        value_rows = self._value_rows(labels)
-        if self.keep.block > 0:       # rows were aggregated into blocks as they came
-            values = np.zeros((int(np.count_nonzero(value_rows)), width))
         invalid = self.invalid
-        if np.any(labels >= 0):
+        if self._set.count:
             source: IndexSource = 'in-band'
-            valid = labels >= 0
-            invalid += int(np.count_nonzero(~valid))
-            index = labels
+            labelled = labels >= 0
+            invalid += int(np.count_nonzero(~labelled))
+            index, stamps, values = labels[labelled], stamps[labelled], values[labelled]
+            order = np.argsort(index, kind='stable')
+            index, stamps, values = index[order], stamps[order], values[order]
+            distinct, duplicates = self._set.count, self.duplicates
+            first, last = self._set.first, self._set.last
         else:
             source = 'timestamp'
-            valid = np.ones(labels.shape, dtype=bool)
             index = _index_from_timestamps(stamps, t0_ns, sample_rate_hz)
-        every = max(1, self.keep.every)
-        kept = valid & value_rows if source == 'in-band' else valid
-        if source == 'in-band' and every > 1:
-            kept &= index % every == 0
-        values = values[kept[value_rows]]
-        everything = np.sort(index[valid], kind='stable')
-        distinct = int(np.count_nonzero(np.diff(everything) != 0) + 1) if everything.size else 0
-        k_index, k_stamps = index[kept], stamps[kept]
-        order = np.argsort(k_index, kind='stable')  # stable: the first copy comes first
-        k_index, k_stamps, values = k_index[order], k_stamps[order], values[order]
-        first = np.ones(k_index.shape, dtype=bool)
-        first[1:] = k_index[1:] != k_index[:-1]
-        span = int(everything[-1] - everything[0] + 1) if everything.size else 0
+            order = np.argsort(index, kind='stable')  # stable: the first copy comes first
+            index, stamps, values = index[order], stamps[order], values[order]
+            keep = np.ones(index.shape, dtype=bool)
+            keep[1:] = index[1:] != index[:-1]
+            duplicates = int(np.count_nonzero(~keep))
+            index, stamps, values = index[keep], stamps[keep], values[keep]
+            distinct = int(index.size)
+            first = int(index[0]) if index.size else -1
+            last = int(index[-1]) if index.size else -1
         series = StrutSeries(
             topic=self.topic,
-            sample_index=k_index[first],
-            values=values[first],
-            timestamp_ns=k_stamps[first] if self.keep.timestamps else np.zeros(0, np.int64),
-            missing_samples=span - distinct,
-            duplicate_samples=int(everything.size - distinct),
+            sample_index=index,
+            values=values,
+            timestamp_ns=stamps if self.keep.timestamps else np.zeros(0, np.int64),
+            missing_samples=(last - first + 1 - distinct) if distinct else 0,
+            duplicate_samples=duplicates,
             index_source=source,
             invalid_messages=invalid,
             samples=distinct,
-            first_sample=int(everything[0]) if everything.size else -1,
-            last_sample=int(everything[-1]) if everything.size else -1,
+            first_sample=first,
+            last_sample=last,
         )
-        return self._block_series(series) if self.keep.block > 0 else series
+        if self.keep.block > 0:
+            series = (self._block_series(series) if source == 'in-band' else dataclasses.replace(
+                series, sample_index=np.zeros(0, np.int64), values=np.zeros((0, 2 * width))))
+        return series
 
 
 def _index_from_timestamps(timestamps: np.ndarray, t0_ns: int, sample_rate_hz: float) -> np.ndarray:

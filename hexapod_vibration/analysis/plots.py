@@ -112,26 +112,42 @@ def spectra_figure(path: Path, result: Analysis) -> Path:
         axes.append(ax)
     axes[-1].set_xlabel("frequency (Hz)")
     if zoom:
-        _zoom_panel(fig.add_subplot(grid[2]), psds, result, notch)
+        clusters = _tone_clusters(notch)
+        cells = grid[2].subgridspec(1, len(clusters), wspace=0.25)
+        for k, cluster in enumerate(clusters):
+            _zoom_panel(fig.add_subplot(cells[k]), psds, result, cluster, legend=k == 0)
     return _save(fig, path)
 
 
-def _zoom_panel(ax: plt.Axes, psds: dict, result: Analysis, notch: list[float]) -> None:
-    """Both spectra around the notch tones, with each reported tone's level marked."""
+def _tone_clusters(tones: list[float], gap_hz: float = 5.0) -> list[list[float]]:
+    """Notch tones grouped when less than ``gap_hz`` apart (one zoom panel each, <= 3)."""
+    clusters: list[list[float]] = []
+    for f in sorted(tones):
+        if clusters and f - clusters[-1][-1] < gap_hz:
+            clusters[-1].append(f)
+        else:
+            clusters.append([f])
+    return clusters[:3]
+
+
+def _zoom_panel(ax: plt.Axes, psds: dict, result: Analysis, notch: list[float],
+                legend: bool) -> None:
+    """Both spectra around a group of notch tones (and the reported tones beside them)."""
     reported = [r["frequency_hz"] for r in result.report["tones"]]
-    near = [f for f in reported if min(abs(f - n) for n in notch) <= 5.0]
-    a, b = min(near) - 2.0, max(near) + 2.0
+    near = [f for f in reported if min(abs(f - n) for n in notch) <= 3.0] + notch
+    a, b = min(near) - 1.5, max(near) + 1.5
     if b - a < 6.0:
         a, b = 0.5 * (a + b) - 3.0, 0.5 * (a + b) + 3.0
     for name, (f, db) in psds.items():
         sel = (f >= a) & (f <= b)
         ax.plot(f[sel], db[sel], color=COLORS[name], lw=1.2 if name == "uncontrolled" else 1.0,
-                ls="-" if name == "uncontrolled" else "--", label=_window_label(result, name))
+                ls="-" if name == "uncontrolled" else "--", label=LABELS[name])
     ax.set(xlim=(a, b), xlabel="frequency (Hz)", ylabel="PSD (dB re 1 g$^2$/Hz)",
-           title="zoom on the notch tones (* = notch tone; levels in the table)")
+           title=f"zoom: {', '.join(f'{f:g}' for f in notch)} Hz (notch)")
     _mark_tones(ax, result)
     ax.grid(alpha=0.3)
-    ax.legend(loc="lower right")
+    if legend:
+        ax.legend(loc="best")
 
 
 def spectra_csv(path: Path, result: Analysis) -> Path:

@@ -20,7 +20,6 @@ against the independent ``mcap`` package).
 
 from __future__ import annotations
 
-import mmap
 import sqlite3
 import struct
 from collections.abc import Iterator, Sequence
@@ -94,13 +93,13 @@ class _McapPrefix(_PrefixReader):
 
     def __init__(self, path: Path, data_file: Path) -> None:
         self.path = path
+        self._data_file = data_file
         self._file = data_file.open('rb')
         size = data_file.stat().st_size
-        self._map = mmap.mmap(self._file.fileno(), 0, access=mmap.ACCESS_READ) if size else b''
         self.connections = []
         self.message_count = 0
         self._end = 0
-        if self._map[:8] != MCAP_MAGIC:
+        if self._file.read(8) != MCAP_MAGIC:
             self.extent = 'no MCAP header'
             return
         schemas: dict[int, str] = {}
@@ -119,15 +118,23 @@ class _McapPrefix(_PrefixReader):
         self.extent = f'(complete records up to byte {self._end} of {size})'
 
     def _records(self) -> Iterator[tuple[int, memoryview]]:
-        """(opcode, body) of every complete record, chunks opened; stops at damage."""
-        data = memoryview(self._map)
+        """(opcode, body) of every complete record, chunks opened; stops at damage.
+
+        Reads the file sequentially, one record (at most one chunk) in memory at a time.
+        """
+        stream = self._file
+        stream.seek(8)
         pos = 8
-        while pos + 9 <= len(data):
-            op, length = data[pos], _U64.unpack_from(data, pos + 1)[0]
-            start, stop = pos + 9, pos + 9 + length
-            if stop > len(data) or op == _OP_FOOTER:
+        while True:
+            head = stream.read(9)
+            if len(head) < 9:
                 break
-            body = data[start:stop]
+            op, length = head[0], _U64.unpack_from(head, 1)[0]
+            if op == _OP_FOOTER or length > (1 << 34):
+                break
+            body = memoryview(stream.read(length))
+            if len(body) < length:
+                break
             if op == _OP_CHUNK:
                 records = _chunk_records(body)
                 if records is None:
@@ -135,7 +142,7 @@ class _McapPrefix(_PrefixReader):
                 yield from _inner_records(records)
             else:
                 yield op, body
-            pos = stop
+            pos += 9 + length
             self._end = pos
 
     def messages(self, connections: Sequence[Connection] = ()) -> Iterator[
@@ -150,12 +157,36 @@ class _McapPrefix(_PrefixReader):
 
     def close(self) -> None:
         """Release the file."""
-        if isinstance(self._map, mmap.mmap):
-            try:
-                self._map.close()
-            except BufferError:   # a message view is still referenced: freed with it
-                pass
         self._file.close()
+
+
+def iter_mcap_messages(data_file: Path) -> Iterator[tuple[str, str, int, bytes]]:
+    """``(topic, schema name, log time (ns), data)`` of every message, in file order.
+
+    One pass, one chunk in memory at a time (rosbags' indexed reader merges every chunk at
+    once, so its memory grows with the file). Stops at the first damaged record; the
+    caller compares the counts with the metadata.
+    """
+    reader = _McapPrefix.__new__(_McapPrefix)
+    reader._file = data_file.open('rb')
+    reader._end = 0
+    schemas: dict[int, str] = {}
+    channels: dict[int, tuple[str, str]] = {}
+    try:
+        if reader._file.read(8) != MCAP_MAGIC:
+            return
+        for op, body in reader._records():
+            if op == _OP_MESSAGE:
+                topic, schema = channels.get(_U16.unpack_from(body, 0)[0], ('', ''))
+                yield topic, schema, _U64.unpack_from(body, 6)[0], bytes(body[22:])
+            elif op == _OP_SCHEMA:
+                schemas[_U16.unpack_from(body, 0)[0]] = _string(body, 2)[0]
+            elif op == _OP_CHANNEL:
+                cid, sid = struct.unpack_from('<HH', body, 0)
+                channels[cid] = (_string(body, 4)[0], schemas.get(sid, ''))
+            del body
+    finally:
+        reader.close()
 
 
 def _string(body: memoryview, pos: int) -> tuple[str, int]:
