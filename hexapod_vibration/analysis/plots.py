@@ -223,23 +223,22 @@ def convergence_figure(path: Path, signals: BagSignals, result: Analysis) -> Pat
         label = f"{f:g} Hz{' (notch)' if controlled else ''}"
         if controlled and np.isfinite(conv):
             label += f": converged in {conv:.2f} s"
-        ax_e.plot(lev["t_s"], lev["level_db"], color=color, lw=1.3 if controlled else 0.8,
-                  ls="-" if controlled else ":", label=label)
+        ax_e.plot(lev["t_s"], lev["level_db"], color=color, lw=1.4 if controlled else 0.8,
+                  ls="-" if controlled else ":", alpha=1.0 if controlled else 0.7, label=label)
         if controlled and np.isfinite(conv):
             t_c = on + conv
             ax_e.plot(t_c, np.interp(t_c, lev["t_s"], lev["level_db"]), "v", color=color,
                       ms=7, mec="k", mew=0.5)
             ax_e.axvline(t_c, color=color, lw=0.7, ls="--")
-    _shade_identification(ax_e, result)
+    t_first = min(v["t_s"][0] for v in result.levels_over_time.values() if v["t_s"].size)
+    _shade_identification(ax_e, result, max(t_first - 1.0, 0.0))
     ax_e.axvline(on, color="k", lw=1.0, label=f"control on ({on:.2f} s)")
     windows = {round(v["level_window_s"], 3) for v in result.details["convergence"].values()}
     ax_e.set(ylabel="tone level (dB re 1 g)",
              title="tone levels over time (Blackman-Harris window "
                    f"{', '.join(f'{w:g}' for w in sorted(windows))} s); "
                    "\u25bc: within 3 dB of the final level")
-    t_first = min(v["t_s"][0] for v in result.levels_over_time.values() if v["t_s"].size)
-    t_ident = min((a / FS for a, _ in result.identification), default=t_first)
-    ax_e.set_xlim(max(min(t_first, t_ident) - 0.5, 0.0), result.index[-1] / FS)
+    ax_e.set_xlim(max(t_first - 1.0, 0.0), result.index[-1] / FS)
     ax_e.legend(loc="upper right", ncol=2)
     _weights_panel(ax_w, signals, result, on)
     for ax in (ax_e, ax_w):
@@ -247,13 +246,16 @@ def convergence_figure(path: Path, signals: BagSignals, result: Analysis) -> Pat
     return _save(fig, path)
 
 
-def _shade_identification(ax: plt.Axes, result: Analysis) -> None:
-    t0, t1 = result.index[0] / FS, result.index[-1] / FS
-    for k, (a, b) in enumerate(result.identification):
-        a_s, b_s = max(a / FS, t0), min(b / FS, t1)
+def _shade_identification(ax: plt.Axes, result: Analysis, t_from: float) -> None:
+    """Grey spans where the notch identified the plant (those after ``t_from`` s)."""
+    t1 = result.index[-1] / FS
+    labelled = False
+    for a, b in result.identification:
+        a_s, b_s = max(a / FS, t_from), min(b / FS, t1)
         if a_s < b_s:
             ax.axvspan(a_s, b_s, color="0.85", zorder=0,
-                       label="identification" if k == 0 else None)
+                       label=None if labelled else "identification")
+            labelled = True
 
 
 def _weights_panel(ax: plt.Axes, signals: BagSignals, result: Analysis, on: float) -> None:
@@ -272,6 +274,10 @@ def _weights_panel(ax: plt.Axes, signals: BagSignals, result: Analysis, on: floa
                             color=color, alpha=0.25, lw=0)
             ax.plot(t_w, magnitude[:, k].mean(axis=1), color=color, lw=1.2,
                     label=f"{tones[k]:g} Hz: mean of 6 struts (band: min-max)")
+        peaks = magnitude.max(axis=(0, 2))
+        if peaks.size > 1 and peaks.min() > 0 and peaks.max() / peaks.min() > 10:
+            ax.set_yscale("log")          # tones whose weights differ by decades
+            ax.set_ylim(bottom=max(1e-3, 0.3 * float(peaks.min()) / 10))
         ax.legend(loc="lower right")
     else:
         ax.text(0.5, 0.5, "no /pph/notch_weights in the bag", transform=ax.transAxes,

@@ -198,3 +198,40 @@ def test_a_few_invalid_messages_do_not_give_wrong_levels_with_exit_0(tmp_path, c
     err = capsys.readouterr().err
     assert code == 2 and err.count('\n') == 1
     assert 'usable run is 0.099 s' in err
+
+
+def test_memory_does_not_grow_with_the_messages_of_a_long_bag(tmp_path):
+    """60 s of all five strut topics (300 000 messages), read within 20 MB.
+
+    The analysis keeps ~70 bytes per accelerometer sample, not the messages (it took
+    2.3 MB per second of bag before).
+    """
+    import tracemalloc
+
+    from rosbags.rosbag2 import StoragePlugin, Writer
+
+    from hexapod_vibration.analysis.bag_io import BAG_VERSION, STRUT_MSGTYPE, STRUT_TOPICS
+    from hexapod_vibration.analysis.bag_io import typestore as store
+    from hexapod_vibration.analysis.report import Request, analyze_signals, load_signals
+    from hexapod_vibration.core.model.config import load_model_config
+    from hexapod_vibration.paths import config_path
+
+    n = 60_000
+    accel = struts_from_z(G0 + tone(-31.0, 40.0, n))
+    with Writer(tmp_path / 'bag', version=BAG_VERSION, storage_plugin=StoragePlugin.MCAP) as w:
+        conns = [w.add_connection(t, STRUT_MSGTYPE, typestore=store()) for t in STRUT_TOPICS]
+        for k in range(n):
+            raw = strut_cdr(accel[k], k)
+            for conn in conns:
+                w.write(conn, k * 10**6, raw)
+    model = load_model_config(config_path('pph_model.yaml'))
+    tracemalloc.start()
+    try:
+        signals = load_signals(tmp_path / 'bag', model)
+        result = analyze_signals(signals, Request(tones=[40.0]))
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert result.report['tones'][0]['uncontrolled_db'] == pytest.approx(-31.0, abs=0.2)
+    assert all(len(s) == n for s in signals.series.values())
+    assert peak < 20e6, f'{peak / 1e6:.1f} MB'
