@@ -93,10 +93,12 @@ def spectra_figure(path: Path, result: Analysis) -> Path:
     psds = _window_psds(result)
     tones = [r["frequency_hz"] for r in result.report["tones"]]
     notch = [r["frequency_hz"] for r in result.report["tones"] if r["controlled"]]
-    top_f = min(FS / 2, max(150.0, 1.6 * max(tones, default=100.0)))
+    top_f = (FS / 2 if result.harmonics is not None
+             else min(FS / 2, max(150.0, 1.6 * max(tones, default=100.0))))
     zoom = len(psds) == 2 and bool(notch)
-    fig = plt.figure(figsize=(8.0, 7.5 if zoom else 5.0))
-    grid = fig.add_gridspec(3 if zoom else 2, 1, height_ratios=[1, 1, 1.1][:3 if zoom else 2])
+    rows = len(psds) + (1 if zoom else 0)
+    fig = plt.figure(figsize=(8.0, 2.6 * rows + 0.3))
+    grid = fig.add_gridspec(rows, 1, height_ratios=[1.0] * len(psds) + ([1.1] if zoom else []))
     lo = min(float(np.percentile(db[(f > 2) & (f < top_f)], 1)) for f, db in psds.values())
     hi = max(float(db[(f > 2) & (f < top_f)].max()) for f, db in psds.values())
     ylim = (lo - 5.0, hi + 8.0)
