@@ -311,9 +311,14 @@ def choose_window(index: np.ndarray, start: int, stop: int,
     return slice(a, b), notes
 
 
-def tone_levels(x: np.ndarray, tones: list[float], segment_s: float
+def tone_levels(x: np.ndarray, tones: list[float], segment_s: float | None = None
                 ) -> tuple[list[float], list[float], list[bool]]:
-    """(level dB re 1 g, floor dB re 1 g, at-floor flag) per tone; level >= floor."""
+    """(level dB re 1 g, floor dB re 1 g, at-floor flag) per tone; level >= floor.
+
+    ``segment_s``: Welch segment (s), default 10 s or the whole signal if shorter.
+    """
+    if segment_s is None:
+        segment_s = min(spectrum.DEFAULT_SEGMENT_S, np.size(x) / FS)
     raw, floor = spectrum.tone_and_floor_db(x, FS, tones, segment_s=segment_s)
     at_floor = [bool(r < fl) for r, fl in zip(raw, floor, strict=True)]
     level = [float(max(r, fl)) for r, fl in zip(raw, floor, strict=True)]
