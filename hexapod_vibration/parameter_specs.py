@@ -404,6 +404,9 @@ PPH_RECORDER = NodeSpec("pph_recorder", summary="records the contract topics int
                   read_only=True),
     ParameterSpec("storage", "string", "mcap", "rosbag2 storage plugin", choices=STORAGES,
                   read_only=True),
+    ParameterSpec("run_record", "string", "", "JSON run record stored in metadata.yaml "
+                  "custom_data (hexapod_vibration.run); given by the experiment runner in its "
+                  "params file", read_only=True),
 ))
 
 NODE_SPECS: dict[str, NodeSpec] = {spec.node: spec for spec in (

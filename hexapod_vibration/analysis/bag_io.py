@@ -14,14 +14,16 @@ counted; gaps are counted, never interpolated.
 
 from __future__ import annotations
 
+import dataclasses
 import sqlite3
 import struct
 from collections.abc import Iterable, Iterator, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
 import numpy as np
+import yaml
 from rosbags.interfaces import Connection
 from rosbags.rosbag2 import Reader, StoragePlugin, Writer
 from rosbags.rosbag2.errors import ReaderError, WriterError
@@ -29,6 +31,7 @@ from rosbags.serde import SerdeError
 from rosbags.typesys import Stores, get_typestore
 from rosbags.typesys.store import Typestore
 
+from hexapod_vibration.analysis import recovery
 from hexapod_vibration.contract import (
     SAMPLE_RATE_HZ,
     STRUT_COUNT,
@@ -53,6 +56,9 @@ CLOCK_TOPIC = '/clock'
 CLOCK_MSGTYPE = 'rosgraph_msgs/msg/Clock'
 PARAMETER_EVENTS_TOPIC = '/parameter_events'
 PARAMETER_EVENT_MSGTYPE = 'rcl_interfaces/msg/ParameterEvent'
+DIAGNOSTICS_TOPIC = '/diagnostics'
+DIAGNOSTICS_MSGTYPE = 'diagnostic_msgs/msg/DiagnosticArray'
+WEIGHTS_TOPIC = '/pph/notch_weights'
 
 TYPESTORE_NAME = Stores.ROS2_JAZZY
 """rosbags typestore matching ROS 2 Jazzy's message definitions and type hashes."""
@@ -88,46 +94,6 @@ class BagError(RuntimeError):
     """A bag that cannot be used: missing, truncated, corrupt or without the needed topics."""
 
 
-@dataclass(frozen=True)
-class StrutSeries:
-    """One ``/pph/*`` topic of a bag, one row per sample.
-
-    Attributes:
-        topic: Topic name.
-        sample_index: Loop sample index of each row, int64 (N,), strictly increasing.
-        values: Six values per row in strut order 1..6, SI units, float64 (N, 6).
-        timestamp_ns: Bag timestamp of each row's message (ns), int64 (N,).
-        missing_samples: Samples absent between the first and the last row.
-        duplicate_samples: Messages dropped because their sample was already present.
-        index_source: ``"in-band"`` (``sample:<n>`` labels) or ``"timestamp"``.
-        invalid_messages: Messages skipped as unusable (wrong length, non-finite values,
-            garbled label, or no index on a topic whose other messages have one).
-    """
-
-    topic: str
-    sample_index: np.ndarray
-    values: np.ndarray
-    timestamp_ns: np.ndarray
-    missing_samples: int
-    duplicate_samples: int
-    index_source: IndexSource
-    invalid_messages: int = 0
-
-    def __len__(self) -> int:
-        """Number of samples (rows)."""
-        return int(self.sample_index.shape[0])
-
-
-@dataclass
-class _RawTopic:
-    """Messages of one strut topic as read, in bag order."""
-
-    timestamps: list[int]
-    values: list[np.ndarray]
-    labels: list[int | None]
-    invalid: int = 0
-
-
 def typestore() -> Typestore:
     """The shared rosbags typestore for ROS 2 Jazzy (built once)."""
     global _TYPESTORE
@@ -136,27 +102,46 @@ def typestore() -> Typestore:
     return _TYPESTORE
 
 
-# --------------------------------------------------------------------------- reading
+# --------------------------------------------------------------------------- opening
+
+RECORDING_KEY = 'hexapod_vibration.recording'
+"""``custom_data`` key of the provisional ``metadata.yaml`` written when a recording starts;
+the final one (written when the bag is closed) does not have it."""
+RECORDING_OPEN = 'open'
+RUN_RECORD_KEY = 'hexapod_vibration.run'
+"""``custom_data`` key holding the experiment's run record (JSON), see analysis.report."""
 
 
 def _bag_directory(bag_path: str | Path) -> Path:
-    """The bag directory for ``bag_path`` (a bag directory or a file inside one)."""
+    """The bag directory for ``bag_path`` (a bag directory or a file inside it)."""
     path = Path(bag_path)
     if not path.exists():
         raise BagError(f'bag not found: {path}')
-    if path.is_file():
-        path = path.parent
-    if not (path / 'metadata.yaml').is_file():
-        raise BagError(
-            f'{path} is not a readable rosbag2 bag: it has no metadata.yaml (not a bag, or a '
-            f'recording that was not closed cleanly: `ros2 bag reindex {path}` can rebuild it)'
-        )
-    return path
+    return path.parent if path.is_file() else path
 
 
-def _open_reader(bag_path: str | Path) -> Reader:
-    """Open a rosbags Reader, turning every failure into a BagError naming the bag."""
+def _metadata_custom_data(path: Path) -> dict[str, str] | None:
+    """``custom_data`` of ``path/metadata.yaml`` (None if absent, {} if it has none)."""
+    meta = path / 'metadata.yaml'
+    if not meta.is_file():
+        return None
+    try:
+        info = yaml.safe_load(meta.read_text(encoding='utf-8'))['rosbag2_bagfile_information']
+        custom = info.get('custom_data') or {}
+    except (yaml.YAMLError, OSError, KeyError, TypeError, AttributeError, UnicodeDecodeError):
+        return {}   # rosbags' Reader reports what is wrong with it
+    return {str(k): str(v) for k, v in custom.items()} if isinstance(custom, dict) else {}
+
+
+def _open_reader(bag_path: str | Path) -> Any:
+    """A reader of the bag (rosbags' Reader, or a recovery reader for an unfinished one).
+
+    Every failure becomes a BagError naming the bag.
+    """
     path = _bag_directory(bag_path)
+    custom = _metadata_custom_data(path)
+    if custom is None or custom.get(RECORDING_KEY) == RECORDING_OPEN:
+        return recovery.open_unfinished(path, custom or {}, BagError)
     try:
         reader = Reader(path)
         reader.open()
@@ -167,17 +152,45 @@ def _open_reader(bag_path: str | Path) -> Reader:
     return reader
 
 
+def _custom_data(reader: Any) -> dict[str, str]:
+    """The bag's ``custom_data`` (rosbags' Reader or the recovery reader)."""
+    custom = getattr(reader, 'custom_data', None)
+    if custom is None:
+        storage = getattr(reader, 'storage', None)
+        custom = getattr(getattr(storage, 'metadata', None), 'custom', None)
+    return {str(k): str(v) for k, v in (custom or {}).items()}
+
+
+def read_custom_data(bag_path: str | Path) -> dict[str, str]:
+    """``custom_data`` of a bag's metadata (empty if it has none)."""
+    return _metadata_custom_data(_bag_directory(bag_path)) or {}
+
+
 def _iter_messages(
-    reader: Reader, connections: Sequence[Connection]
+    reader: Any, connections: Sequence[Connection]
 ) -> Iterator[tuple[Connection, int, bytes]]:
-    """Messages of ``connections`` in bag order; corruption becomes a BagError."""
+    """Messages of ``connections`` in bag order; corruption becomes a BagError.
+
+    An uncompressed MCAP bag is read sequentially (:func:`recovery.iter_mcap_messages`,
+    bounded memory), in file order; anything else through the reader.
+    """
     if not connections:
         return
     counts = dict.fromkeys((c.id for c in connections), 0)
+    files = _sequential_mcap_files(reader)
     try:
-        for conn, timestamp, data in reader.messages(connections=connections):
-            counts[conn.id] += 1
-            yield conn, timestamp, data
+        if files is None:
+            for conn, timestamp, data in reader.messages(connections=connections):
+                counts[conn.id] += 1
+                yield conn, timestamp, data
+        else:
+            wanted = {(c.topic, c.msgtype): c for c in connections}
+            for path in files:
+                for topic, schema, timestamp, data in recovery.iter_mcap_messages(path):
+                    conn = wanted.get((topic, schema))
+                    if conn is not None:
+                        counts[conn.id] += 1
+                        yield conn, timestamp, data
     except _READ_ERRORS as err:
         raise BagError(f'bag {reader.path} is truncated or corrupt: {err!r}') from err
     for conn in connections:  # a damaged MCAP chunk can end the iteration silently
@@ -188,13 +201,24 @@ def _iter_messages(
             )
 
 
-def _topics_summary(reader: Reader) -> str:
+def _sequential_mcap_files(reader: Any) -> list[Path] | None:
+    """The data files of a closed, uncompressed MCAP bag (None: read through rosbags)."""
+    storage = getattr(reader, 'storage', None)
+    storages = getattr(storage, 'storages', None)
+    metadata = getattr(storage, 'metadata', None)
+    if not storages or getattr(metadata, 'compression_mode', None):
+        return None
+    paths = [Path(getattr(s, 'path', '')) for s in storages]
+    return paths if all(p.suffix == '.mcap' and p.is_file() for p in paths) else None
+
+
+def _topics_summary(reader: Any) -> str:
     """``"topic (type), ..."`` of every topic of the bag, for error messages."""
     items = sorted(f'{name} ({info.msgtype})' for name, info in reader.topics.items())
     return ', '.join(items) or 'no topics'
 
 
-def _check_strut_connections(reader: Reader, topics: Sequence[str]) -> list[Connection]:
+def _check_strut_connections(reader: Any, topics: Sequence[str]) -> list[Connection]:
     """Connections of the wanted strut topics; BagError if one has the wrong type."""
     wanted = [c for c in reader.connections if c.topic in topics]
     for conn in wanted:
@@ -206,47 +230,252 @@ def _check_strut_connections(reader: Reader, topics: Sequence[str]) -> list[Conn
     return wanted
 
 
-def _parse_strut(msg: Any) -> tuple[np.ndarray, int | None]:
-    """Values and in-band index of a deserialized Float64MultiArray (rosbags object)."""
-    values = np.asarray(msg.data, dtype=np.float64)
-    if values.shape != (STRUT_COUNT,):
-        raise InvalidStrutMessage(f'expected {STRUT_COUNT} strut values, got {values.size}')
-    if not np.isfinite(values).all():
-        raise InvalidStrutMessage(f'non-finite strut value in {values.tolist()}')
-    dims = msg.layout.dim
-    if len(dims) < 2:
-        return values, None
-    return values, parse_sample_label(dims[1].label)
+@dataclass(frozen=True)
+class StrutSeries:
+    """One ``/pph/*`` topic of a bag, one row per kept sample.
+
+    Attributes:
+        topic: Topic name.
+        sample_index: Loop sample index of each row, int64 (N,), strictly increasing.
+        values: Values per row, float64 (N, 6) in strut order 1..6, SI units; (N, m) when
+            the topic was read with a projection (:class:`Keep`).
+        timestamp_ns: Bag timestamp of each row's message (ns), int64 (N,); empty when the
+            topic was read without timestamps.
+        missing_samples: Samples absent between the first and the last sample received.
+        duplicate_samples: Messages dropped because their sample was already present.
+        index_source: ``"in-band"`` (``sample:<n>`` labels) or ``"timestamp"``.
+        invalid_messages: Messages skipped as unusable (undecodable bytes, wrong length,
+            non-finite values, garbled or out-of-range label, or no index on a topic whose
+            other messages have one).
+        samples: Distinct samples received (all of them, also when rows are decimated).
+        first_sample: First sample received (-1 if none).
+        last_sample: Last sample received (-1 if none).
+    """
+
+    topic: str
+    sample_index: np.ndarray
+    values: np.ndarray
+    timestamp_ns: np.ndarray
+    missing_samples: int
+    duplicate_samples: int
+    index_source: IndexSource
+    invalid_messages: int = 0
+    samples: int = -1
+    first_sample: int = -1
+    last_sample: int = -1
+
+    def __len__(self) -> int:
+        """Number of distinct samples received (rows, unless the rows were decimated)."""
+        return int(self.samples if self.samples >= 0 else self.sample_index.shape[0])
+
+    def missing_in(self, run_samples: int) -> int:
+        """Samples of the run ``[0, run_samples)`` that this topic does not have."""
+        return max(int(run_samples) - len(self), 0)
 
 
-def _collect_strut_messages(
-    reader: Reader, connections: Sequence[Connection]
-) -> dict[str, _RawTopic]:
-    """Deserialize the strut messages, grouped by topic, skipping unusable ones."""
-    store = typestore()
-    raw: dict[str, _RawTopic] = {c.topic: _RawTopic([], [], []) for c in connections}
-    for conn, timestamp, data in _iter_messages(reader, connections):
-        topic = raw[conn.topic]
+@dataclass(frozen=True)
+class Keep:
+    """What to keep of a strut topic while streaming a bag (bounded memory).
+
+    Attributes:
+        columns: ``(6, m)`` matrix: rows keep ``values @ columns`` (m values, e.g. the
+            top plate's z acceleration) instead of the six values; None keeps the six.
+        every: Keep values only of samples ``n`` with ``n % every == 0`` (in-band topics;
+            the sample accounting still covers every sample).
+        timestamps: Keep the bag timestamps of the kept rows.
+        block: If > 0, keep per block of ``block`` samples (in-band topics) the mean and
+            the RMS deviation from it of each (projected) value instead of the rows:
+            ``values`` is then ``(blocks, 2 m)`` (means, then RMS), ``sample_index`` the
+            blocks' first samples (for plots of long runs; duplicates count twice).
+    """
+
+    columns: np.ndarray | None = None
+    every: int = 1
+    timestamps: bool = True
+    block: int = 0
+
+
+KEEP_ALL = Keep()
+
+MAX_SAMPLE_INDEX = 2**40
+"""In-band sample indices at or above this (35 years at 1 kHz) are invalid."""
+_BLOCK = 4096
+
+
+class _SampleSet:
+    """Set of sample indices as a bitmap in 64 Ki-sample chunks (1 bit per sample)."""
+
+    CHUNK = 1 << 16
+
+    def __init__(self) -> None:
+        self._chunks: dict[int, bytearray] = {}
+        self.count = 0
+        self.first = -1
+        self.last = -1
+
+    def add(self, n: int) -> bool:
+        """Add ``n``; True if it was there already."""
+        chunk, offset = divmod(n, self.CHUNK)
+        bits = self._chunks.get(chunk)
+        if bits is None:
+            bits = self._chunks[chunk] = bytearray(self.CHUNK // 8)
+        byte, bit = divmod(offset, 8)
+        if bits[byte] >> bit & 1:
+            return True
+        bits[byte] |= 1 << bit
+        self.count += 1
+        self.first = n if self.first < 0 else min(self.first, n)
+        self.last = max(self.last, n)
+        return False
+
+
+class _TopicStream:
+    """Messages of one strut topic, decoded as they stream by into compact numpy blocks.
+
+    In-band samples are accounted for in a bitmap (1 bit per sample); a row (label,
+    timestamp and what :class:`Keep` keeps of the values) is stored only for the first
+    copy of a sample that the Keep asks for, so a topic read for its accounting only costs
+    1 bit per sample.
+    """
+
+    def __init__(self, topic: str, keep: Keep) -> None:
+        self.topic, self.keep = topic, keep
+        self.invalid = 0
+        self.duplicates = 0
+        self._set = _SampleSet()
+        self._labels: list[np.ndarray] = []   # stored rows' labels (-1: none)
+        self._stamps: list[np.ndarray] = []
+        self._values: list[np.ndarray] = []
+        self._buf_label = np.empty(_BLOCK, np.int64)
+        self._buf_stamp = np.empty(_BLOCK, np.int64)
+        self._buf_values = np.empty((_BLOCK, STRUT_COUNT))
+        self._n = 0
+        self.first_timestamp: int | None = None
+        self._blocks: dict[int, np.ndarray] = {}   # block -> [count, sums (m), squares (m)]
+        width = STRUT_COUNT if keep.columns is None else int(keep.columns.shape[1])
+        self._rows_wanted = keep.block > 0 or width > 0 or keep.timestamps
+
+    def add(self, timestamp: int, data: bytes | memoryview) -> None:
+        """Decode one serialized message; an unusable one is counted and skipped."""
         try:
-            values, label = _parse_strut(store.deserialize_cdr(data, STRUT_MSGTYPE))
+            values, label = decode_strut_message(data)
         except InvalidStrutMessage:
-            topic.invalid += 1
-            continue
-        except _READ_ERRORS as err:
-            raise BagError(
-                f'bag {reader.path}: undecodable message on {conn.topic}: {err!r}'
-            ) from err
-        topic.timestamps.append(timestamp)
-        topic.values.append(values)
-        topic.labels.append(label)
-    return raw
+            self.invalid += 1
+            return
+        if self.first_timestamp is None or timestamp < self.first_timestamp:
+            self.first_timestamp = timestamp
+        if label is not None:
+            if self._set.add(label):
+                self.duplicates += 1
+                return
+            every = max(1, self.keep.every)
+            if not self._rows_wanted or (self.keep.block <= 0 and label % every):
+                return
+        k = self._n
+        self._buf_label[k] = -1 if label is None else label
+        self._buf_stamp[k] = timestamp
+        self._buf_values[k] = values
+        self._n += 1
+        if self._n == _BLOCK:
+            self._flush()
 
+    def _flush(self) -> None:
+        n = self._n
+        if not n:
+            return
+        labels = self._buf_label[:n].copy()
+        stamps = self._buf_stamp[:n].copy()
+        rows = self._buf_values[:n]
+        if self.keep.columns is not None:
+            rows = rows @ self.keep.columns
+        if self.keep.block > 0:      # in-band rows go into the blocks, only others are kept
+            self._accumulate_blocks(labels, rows)
+            labels, stamps = labels[labels < 0], stamps[labels < 0]
+        else:
+            self._values.append(np.array(rows, dtype=np.float64))
+        self._labels.append(labels)
+        self._stamps.append(stamps)
+        self._n = 0
 
-def _index_from_labels(raw: _RawTopic) -> tuple[np.ndarray, np.ndarray, int]:
-    """In-band indices; messages without one are dropped. Returns (rows, index, dropped)."""
-    rows = np.array([i for i, label in enumerate(raw.labels) if label is not None], np.int64)
-    index = np.array([raw.labels[i] for i in rows], dtype=np.int64)
-    return rows, index, len(raw.labels) - rows.size
+    def _accumulate_blocks(self, labels: np.ndarray, rows: np.ndarray) -> None:
+        valid = labels >= 0
+        ids, inverse = np.unique(labels[valid] // self.keep.block, return_inverse=True)
+        values = rows[valid]
+        width = values.shape[1]
+        sums = np.zeros((ids.size, 1 + 2 * width))
+        np.add.at(sums[:, 0], inverse, 1.0)
+        np.add.at(sums[:, 1:1 + width], inverse, values)
+        np.add.at(sums[:, 1 + width:], inverse, values ** 2)
+        for k, block in enumerate(ids.tolist()):
+            if block in self._blocks:
+                self._blocks[block] += sums[k]
+            else:
+                self._blocks[block] = sums[k]
+
+    def _block_series(self, base: StrutSeries) -> StrutSeries:
+        """``base`` with its rows replaced by the per-block means and RMS deviations."""
+        blocks = sorted(self._blocks)
+        if not blocks:
+            return base
+        sums = np.stack([self._blocks[b] for b in blocks])
+        width = (sums.shape[1] - 1) // 2
+        count = sums[:, :1]
+        mean = sums[:, 1:1 + width] / count
+        rms = np.sqrt(np.maximum(sums[:, 1 + width:] / count - mean ** 2, 0.0))
+        return dataclasses.replace(
+            base, sample_index=np.asarray(blocks, np.int64) * self.keep.block,
+            values=np.hstack([mean, rms]), timestamp_ns=np.zeros(0, np.int64))
+
+    def series(self, t0_ns: int, sample_rate_hz: float) -> StrutSeries:
+        """Place the messages on their samples: sort, drop duplicates, count gaps."""
+        self._flush()
+        width = STRUT_COUNT if self.keep.columns is None else int(self.keep.columns.shape[1])
+        labels = np.concatenate(self._labels) if self._labels else np.zeros(0, np.int64)
+        stamps = np.concatenate(self._stamps) if self._stamps else np.zeros(0, np.int64)
+        values = (np.concatenate(self._values) if self._values
+                  else np.zeros((labels.size if self.keep.block > 0 else 0, width)))
+        if self.keep.block > 0:
+            values = np.zeros((labels.size, width))   # rows went into the blocks
+        self._labels, self._stamps, self._values = [], [], []
+        invalid = self.invalid
+        if self._set.count:
+            source: IndexSource = 'in-band'
+            labelled = labels >= 0
+            invalid += int(np.count_nonzero(~labelled))
+            index, stamps, values = labels[labelled], stamps[labelled], values[labelled]
+            order = np.argsort(index, kind='stable')
+            index, stamps, values = index[order], stamps[order], values[order]
+            distinct, duplicates = self._set.count, self.duplicates
+            first, last = self._set.first, self._set.last
+        else:
+            source = 'timestamp'
+            index = _index_from_timestamps(stamps, t0_ns, sample_rate_hz)
+            order = np.argsort(index, kind='stable')  # stable: the first copy comes first
+            index, stamps, values = index[order], stamps[order], values[order]
+            keep = np.ones(index.shape, dtype=bool)
+            keep[1:] = index[1:] != index[:-1]
+            duplicates = int(np.count_nonzero(~keep))
+            index, stamps, values = index[keep], stamps[keep], values[keep]
+            distinct = int(index.size)
+            first = int(index[0]) if index.size else -1
+            last = int(index[-1]) if index.size else -1
+        series = StrutSeries(
+            topic=self.topic,
+            sample_index=index,
+            values=values,
+            timestamp_ns=stamps if self.keep.timestamps else np.zeros(0, np.int64),
+            missing_samples=(last - first + 1 - distinct) if distinct else 0,
+            duplicate_samples=duplicates,
+            index_source=source,
+            invalid_messages=invalid,
+            samples=distinct,
+            first_sample=first,
+            last_sample=last,
+        )
+        if self.keep.block > 0:
+            series = (self._block_series(series) if source == 'in-band' else dataclasses.replace(
+                series, sample_index=np.zeros(0, np.int64), values=np.zeros((0, 2 * width))))
+        return series
 
 
 def _index_from_timestamps(timestamps: np.ndarray, t0_ns: int, sample_rate_hz: float) -> np.ndarray:
@@ -254,34 +483,244 @@ def _index_from_timestamps(timestamps: np.ndarray, t0_ns: int, sample_rate_hz: f
     return np.rint((timestamps - t0_ns) * (sample_rate_hz * 1e-9)).astype(np.int64)
 
 
-def _build_series(topic: str, raw: _RawTopic, t0_ns: int, sample_rate_hz: float) -> StrutSeries:
-    """Place the messages of one topic on their samples: sort, drop duplicates, count gaps."""
-    timestamps = np.asarray(raw.timestamps, dtype=np.int64)
-    values = np.asarray(raw.values, dtype=np.float64).reshape(-1, STRUT_COUNT)
-    invalid = raw.invalid
-    if any(label is not None for label in raw.labels):
-        source: IndexSource = 'in-band'
-        rows, index, dropped = _index_from_labels(raw)
-        timestamps, values, invalid = timestamps[rows], values[rows], invalid + dropped
-    else:
-        source = 'timestamp'
-        index = _index_from_timestamps(timestamps, t0_ns, sample_rate_hz)
-    order = np.argsort(index, kind='stable')  # stable: the first received copy comes first
-    index, timestamps, values = index[order], timestamps[order], values[order]
-    keep = np.ones(index.shape, dtype=bool)
-    keep[1:] = index[1:] != index[:-1]
-    index, timestamps, values = index[keep], timestamps[keep], values[keep]
-    span = int(index[-1] - index[0] + 1) if index.size else 0
-    return StrutSeries(
-        topic=topic,
-        sample_index=index,
-        values=values,
-        timestamp_ns=timestamps,
-        missing_samples=span - int(index.size),
-        duplicate_samples=int((~keep).sum()),
-        index_source=source,
-        invalid_messages=invalid,
-    )
+# --------------------------------------------------------------------------- CDR decoding
+
+_U32 = struct.Struct('<I')
+_LE_CDR = (b'\x00\x01', b'\x00\x03')
+_DECODE_ERRORS = (struct.error, ValueError, IndexError, UnicodeDecodeError, SerdeError,
+                  AssertionError, KeyError, TypeError, OverflowError, MemoryError)
+
+
+def decode_strut_message(data: bytes | memoryview) -> tuple[np.ndarray, int | None]:
+    """Six values and the in-band sample index of a serialized Float64MultiArray.
+
+    Little-endian CDR (what ROS 2 middlewares on x86 and ARM write) is decoded directly,
+    a few microseconds a message; other encapsulations go through rosbags' deserializer.
+
+    Raises:
+        InvalidStrutMessage: Undecodable bytes, not six finite values, a garbled or
+            out-of-range sample label.
+    """
+    raw = bytes(data)
+    try:
+        if raw[:2] in _LE_CDR:
+            values, labels = _decode_le(raw)
+        else:
+            msg = typestore().deserialize_cdr(raw, STRUT_MSGTYPE)
+            values = np.asarray(msg.data, dtype=np.float64)
+            labels = [d.label for d in msg.layout.dim]
+    except _DECODE_ERRORS as err:
+        raise InvalidStrutMessage(f'undecodable message ({err.__class__.__name__})') from None
+    if values.shape != (STRUT_COUNT,):
+        raise InvalidStrutMessage(f'expected {STRUT_COUNT} strut values, got {values.size}')
+    if not np.isfinite(values).all():
+        raise InvalidStrutMessage('non-finite strut value')
+    if len(labels) < 2:
+        return values, None
+    index = parse_sample_label(labels[1])
+    if index >= MAX_SAMPLE_INDEX:
+        raise InvalidStrutMessage(f'sample index {index} out of range')
+    return values, index
+
+
+def sample_index_of_cdr(data: bytes | memoryview) -> int | None:
+    """The ``sample:<n>`` index of any serialized Float64MultiArray (little-endian CDR).
+
+    Looks at the layout's labels only (any dimension), so it serves the strut topics and
+    ``/pph/notch_weights`` alike; None when there is none or the bytes are not that.
+    """
+    raw = bytes(data[:512])
+    if raw[:2] not in _LE_CDR:
+        return None
+    try:
+        pos = 4
+        (ndims,) = _U32.unpack_from(raw, pos)
+        pos += 4
+        for _ in range(min(ndims, 16)):
+            (length,) = _U32.unpack_from(raw, pos)
+            pos += 4
+            label = raw[pos:pos + length - 1]
+            if label.startswith(b'sample:'):
+                index = parse_sample_label(label.decode('ascii'))
+                return index if index < MAX_SAMPLE_INDEX else None
+            pos += length
+            pos += (-(pos - 4)) % 4 + 8
+    except (struct.error, UnicodeDecodeError, InvalidStrutMessage):
+        return None
+    return None
+
+
+def _decode_le(raw: bytes) -> tuple[np.ndarray, list[str]]:
+    """Float64MultiArray from little-endian CDR bytes (alignment relative to byte 4)."""
+    pos = 4
+    (ndims,) = _U32.unpack_from(raw, pos)
+    if ndims > 16:
+        raise ValueError(f'{ndims} layout dimensions')
+    pos += 4
+    labels = []
+    for _ in range(ndims):
+        (length,) = _U32.unpack_from(raw, pos)
+        pos += 4
+        if length == 0 or pos + length > len(raw) or raw[pos + length - 1] != 0:
+            raise ValueError('bad string')
+        labels.append(raw[pos:pos + length - 1].decode('utf-8'))
+        pos += length
+        pos += (-(pos - 4)) % 4
+        pos += 8                                   # size, stride
+    pos += 4                                       # data_offset
+    (count,) = _U32.unpack_from(raw, pos)
+    pos += 4
+    pos += (-(pos - 4)) % 8
+    if count > 64 or pos + 8 * count > len(raw):
+        raise ValueError(f'{count} values in {len(raw)} bytes')
+    return np.frombuffer(raw, '<f8', count, pos).astype(np.float64), labels
+
+
+# --------------------------------------------------------------------------- one pass
+
+
+@dataclass
+class BagContent:
+    """What one pass over a bag collected (see :func:`read_bag`)."""
+
+    path: Path
+    strut: dict[str, StrutSeries]
+    diagnostics: list[tuple[int, str, dict]]
+    weights_index: np.ndarray
+    weights: np.ndarray
+    parameter_events: list[tuple[int, Any]]
+    clock: tuple[np.ndarray, np.ndarray]
+    custom_data: dict[str, str]
+    recovered: str = ''
+    """Empty for a closed bag; else how an unfinished recording was read."""
+    bad_messages: dict[str, int] = field(default_factory=dict)
+    """Undecodable messages skipped on the other topics, per topic."""
+
+
+def read_bag(
+    bag_path: str | Path,
+    strut: Mapping[str, Keep] | None = None,
+    sample_rate_hz: float = SAMPLE_RATE_HZ,
+    required: Sequence[str] | None = None,
+    weights_every: int = 1,
+    parameter: tuple[str, str] = ('/notch_controller', 'enabled'),
+) -> BagContent:
+    """Read everything the analysis uses in ONE streaming pass over the bag.
+
+    Strut topics are decoded into compact arrays as they stream by (``strut``: what to
+    keep of each, default every value of :data:`STRUT_TOPICS`); ``/diagnostics``,
+    ``/pph/notch_weights`` (every ``weights_every``-th message), ``/parameter_events``
+    (values of ``parameter`` = (node, name)) and ``/clock`` are collected too. An
+    undecodable message is skipped and counted, never fatal. A recording that was not
+    closed (no ``metadata.yaml``, or the provisional one ``pph_recorder`` writes when it
+    starts) is read up to its last complete record, and ``recovered`` says so.
+
+    Raises:
+        BagError: Missing, truncated or corrupt bag; a required topic is absent (the
+            message lists the bag's topics); a strut topic of another type.
+    """
+    keeps = dict(strut) if strut is not None else dict.fromkeys(STRUT_TOPICS, KEEP_ALL)
+    if required is None:
+        required = (ACCEL_TOPIC,) if ACCEL_TOPIC in keeps else ()
+    reader = _open_reader(bag_path)
+    try:
+        absent = [t for t in required if t not in reader.topics]
+        if absent:
+            raise BagError(
+                f'bag {reader.path} has no {", ".join(absent)}; its topics: '
+                f'{_topics_summary(reader)}'
+            )
+        struts = _check_strut_connections(reader, tuple(keeps))
+        wanted = {DIAGNOSTICS_TOPIC: DIAGNOSTICS_MSGTYPE, WEIGHTS_TOPIC: STRUT_MSGTYPE,
+                  PARAMETER_EVENTS_TOPIC: PARAMETER_EVENT_MSGTYPE, CLOCK_TOPIC: CLOCK_MSGTYPE}
+        others = [c for c in reader.connections if wanted.get(c.topic) == c.msgtype]
+        return _stream(reader, struts, others, keeps, sample_rate_hz, weights_every,
+                       parameter)
+    finally:
+        reader.close()
+
+
+def _stream(reader: Any, struts: list[Connection], others: list[Connection],
+            keeps: Mapping[str, Keep], sample_rate_hz: float, weights_every: int,
+            parameter: tuple[str, str]) -> BagContent:
+    """The pass of :func:`read_bag` over an open reader."""
+    streams = {c.topic: _TopicStream(c.topic, keeps[c.topic]) for c in struts}
+    by_id = {c.id: streams[c.topic] for c in struts}
+    diagnostics: list[tuple[int, str, dict]] = []
+    events: list[tuple[int, Any]] = []
+    clock: list[tuple[int, int]] = []
+    weights = _WeightsStream(weights_every)
+    bad: dict[str, int] = {}
+    store = typestore()
+    for conn, timestamp, data in _iter_messages(reader, [*struts, *others]):
+        stream = by_id.get(conn.id)
+        if stream is not None:
+            stream.add(timestamp, data)
+            continue
+        try:
+            if conn.topic == WEIGHTS_TOPIC:
+                weights.add(data)
+                continue
+            msg = store.deserialize_cdr(bytes(data), conn.msgtype)
+            if conn.topic == DIAGNOSTICS_TOPIC:
+                diagnostics.extend((timestamp, st.name, {kv.key: kv.value for kv in st.values})
+                                   for st in msg.status)
+            elif conn.topic == CLOCK_TOPIC:
+                clock.append((timestamp, msg.clock.sec * 1_000_000_000 + msg.clock.nanosec))
+            elif conn.topic == PARAMETER_EVENTS_TOPIC and msg.node == parameter[0]:
+                events.extend((timestamp, _parameter_value(p.value))
+                              for p in (*msg.new_parameters, *msg.changed_parameters)
+                              if p.name == parameter[1])
+        except _DECODE_ERRORS:
+            bad[conn.topic] = bad.get(conn.topic, 0) + 1
+    starts = [s.first_timestamp for s in streams.values() if s.first_timestamp is not None]
+    t0_ns = min(starts) if starts else 0
+    series = {topic: s.series(t0_ns, sample_rate_hz) for topic, s in streams.items()}
+    stamps = np.array([t for t, _ in clock], dtype=np.int64)
+    clock_ns = np.array([c for _, c in clock], dtype=np.int64)
+    w_index, w_values = weights.arrays()
+    return BagContent(Path(reader.path), series, diagnostics, w_index, w_values, events,
+                      (stamps, clock_ns), _custom_data(reader), getattr(reader, 'recovered', ''),
+                      bad)
+
+
+class _WeightsStream:
+    """``/pph/notch_weights`` messages ``[tone][strut][a, b]`` (N), every n-th one kept.
+
+    Messages whose tone count differs from the last message's (tones changed) are dropped.
+    """
+
+    def __init__(self, every: int) -> None:
+        self.every = max(1, int(every))
+        self.index: list[int] = []
+        self.rows: list[np.ndarray] = []
+        self.tones = -1
+        self._seen = 0
+
+    def add(self, data: bytes | memoryview) -> None:
+        self._seen += 1
+        if (self._seen - 1) % self.every:
+            return
+        msg = typestore().deserialize_cdr(bytes(data), STRUT_MSGTYPE)
+        dims = msg.layout.dim
+        if len(dims) < 4:
+            return
+        tones = int(dims[0].size)
+        if msg.data.size != tones * 12:
+            return
+        try:
+            sample = parse_sample_label(dims[3].label)
+        except InvalidStrutMessage:
+            return
+        if tones != self.tones:
+            self.index, self.rows, self.tones = [], [], tones
+        self.index.append(sample)
+        self.rows.append(np.asarray(msg.data, dtype=float).reshape(tones, 6, 2))
+
+    def arrays(self) -> tuple[np.ndarray, np.ndarray]:
+        if not self.rows:
+            return np.zeros(0, dtype=np.int64), np.zeros((0, max(self.tones, 0), 6, 2))
+        return np.asarray(self.index, dtype=np.int64), np.stack(self.rows)
 
 
 def read_strut_topics(
@@ -307,43 +746,7 @@ def read_strut_topics(
             message lists the bag's topics); a topic has another type than
             ``std_msgs/msg/Float64MultiArray``.
     """
-    if required is None:
-        required = (ACCEL_TOPIC,) if ACCEL_TOPIC in topics else ()
-    reader = _open_reader(bag_path)
-    try:
-        absent = [t for t in required if t not in reader.topics]
-        if absent:
-            raise BagError(
-                f'bag {reader.path} has no {", ".join(absent)}; its topics: '
-                f'{_topics_summary(reader)}'
-            )
-        raw = _collect_strut_messages(reader, _check_strut_connections(reader, topics))
-    finally:
-        reader.close()
-    starts = [min(r.timestamps) for r in raw.values() if r.timestamps]
-    t0_ns = min(starts) if starts else 0
-    return {topic: _build_series(topic, raw[topic], t0_ns, sample_rate_hz) for topic in raw}
-
-
-def _read_topic(bag_path: str | Path, topic: str, msgtype: str) -> list[tuple[int, Any]]:
-    """``(timestamp_ns, message)`` of one topic, empty if the bag does not have it."""
-    reader = _open_reader(bag_path)
-    try:
-        connections = [c for c in reader.connections if c.topic == topic]
-        for conn in connections:
-            if conn.msgtype != msgtype:
-                raise BagError(
-                    f'bag {reader.path}: topic {topic} has type {conn.msgtype}, expected {msgtype}'
-                )
-        store = typestore()
-        return [
-            (timestamp, store.deserialize_cdr(data, msgtype))
-            for _, timestamp, data in _iter_messages(reader, connections)
-        ]
-    except _READ_ERRORS as err:
-        raise BagError(f'bag {reader.path}: undecodable message on {topic}: {err!r}') from err
-    finally:
-        reader.close()
+    return read_bag(bag_path, dict.fromkeys(topics, KEEP_ALL), sample_rate_hz, required).strut
 
 
 def read_clock(bag_path: str | Path) -> tuple[np.ndarray, np.ndarray]:
@@ -354,12 +757,7 @@ def read_clock(bag_path: str | Path) -> tuple[np.ndarray, np.ndarray]:
     Raises:
         BagError: Missing, truncated or corrupt bag.
     """
-    records = _read_topic(bag_path, CLOCK_TOPIC, CLOCK_MSGTYPE)
-    stamps = np.array([t for t, _ in records], dtype=np.int64)
-    clock = np.array(
-        [m.clock.sec * 1_000_000_000 + m.clock.nanosec for _, m in records], dtype=np.int64
-    )
-    return stamps, clock
+    return read_bag(bag_path, {}).clock
 
 
 # ParameterValue.type -> field holding the value (rcl_interfaces/msg/ParameterType).
@@ -402,14 +800,7 @@ def read_parameter_events(
     Raises:
         BagError: Missing, truncated or corrupt bag.
     """
-    events = []
-    for timestamp, event in _read_topic(bag_path, PARAMETER_EVENTS_TOPIC, PARAMETER_EVENT_MSGTYPE):
-        if event.node != node:
-            continue
-        for param in (*event.new_parameters, *event.changed_parameters):
-            if param.name == name:
-                events.append((timestamp, _parameter_value(param.value)))
-    return events
+    return read_bag(bag_path, {}, parameter=(node, name)).parameter_events
 
 
 # --------------------------------------------------------------------------- writing
@@ -488,9 +879,6 @@ def write_strut_bag(
 
 # --------------------------------------------------------------------------- other topics
 
-DIAGNOSTICS_TOPIC = '/diagnostics'
-DIAGNOSTICS_MSGTYPE = 'diagnostic_msgs/msg/DiagnosticArray'
-WEIGHTS_TOPIC = '/pph/notch_weights'
 
 
 def read_diagnostics(bag_path: str | Path, name_prefix: str = '') -> list[tuple[int, str, dict]]:
@@ -501,13 +889,7 @@ def read_diagnostics(bag_path: str | Path, name_prefix: str = '') -> list[tuple[
     Raises:
         BagError: Missing, truncated or corrupt bag.
     """
-    statuses = []
-    for timestamp, array in _read_topic(bag_path, DIAGNOSTICS_TOPIC, DIAGNOSTICS_MSGTYPE):
-        for status in array.status:
-            if status.name.startswith(name_prefix):
-                values = {kv.key: kv.value for kv in status.values}
-                statuses.append((timestamp, status.name, values))
-    return statuses
+    return [d for d in read_bag(bag_path, {}).diagnostics if d[1].startswith(name_prefix)]
 
 
 def read_notch_weights(bag_path: str | Path) -> tuple[np.ndarray, np.ndarray]:
@@ -519,19 +901,5 @@ def read_notch_weights(bag_path: str | Path) -> tuple[np.ndarray, np.ndarray]:
     Raises:
         BagError: Missing, truncated or corrupt bag.
     """
-    records = _read_topic(bag_path, WEIGHTS_TOPIC, STRUT_MSGTYPE)
-    rows, index = [], []
-    tones = int(records[-1][1].layout.dim[0].size) if records else 0
-    for _, msg in records:
-        dims = msg.layout.dim
-        if len(dims) < 4 or int(dims[0].size) != tones or msg.data.size != tones * 12:
-            continue
-        try:
-            sample = parse_sample_label(dims[3].label)
-        except InvalidStrutMessage:
-            continue
-        index.append(sample)
-        rows.append(np.asarray(msg.data, dtype=float).reshape(tones, 6, 2))
-    if not rows:
-        return np.zeros(0, dtype=np.int64), np.zeros((0, tones, 6, 2))
-    return np.asarray(index, dtype=np.int64), np.stack(rows)
+    content = read_bag(bag_path, {})
+    return content.weights_index, content.weights

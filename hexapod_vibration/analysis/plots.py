@@ -1,14 +1,21 @@
-"""PNG figures of an analysed bag (matplotlib, Agg backend: no display needed).
+"""Figures of an analysed bag (matplotlib, Agg backend: no display needed), 150 dpi.
 
-- ``spectra.png``: z-axis power spectra, uncontrolled vs controlled (paper Figs. 5-8).
-- ``plant_response.png``: z-axis acceleration over a few periods and its spectrum
-  (paper Fig. 4).
-- ``convergence.png``: the tones' envelopes around control-on and the notch weights.
-- ``pointing.png``: the top plate's pose from the eddy-current sensors.
+- ``spectra.png`` (paper Figs. 5-8): z-axis PSD without and with control in separate panels
+  on the same scales, and a zoom around the notch tones with both curves; the spectra
+  also as ``spectra.csv`` for other tools.
+- ``plant_response.png`` (paper Fig. 4): z-axis acceleration over a few periods and its
+  spectrum with each harmonic's level relative to the fundamental.
+- ``convergence.png``: each tone's level over time (the one definition,
+  :func:`hexapod_vibration.core.spectrum.tone_level_over_time`) with control-on, the
+  identification and each convergence time marked; the notch weights per tone
+  (mean over the six struts, and their range).
+- ``pointing.png``: tilts, twist and translations of the top plate from the eddy-current
+  sensors, each on its own axis.
 """
 
 from __future__ import annotations
 
+import csv
 from pathlib import Path
 
 import matplotlib
@@ -17,126 +24,324 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from hexapod_vibration.analysis.report import FS, Analysis, BagSignals  # noqa: E402
+from hexapod_vibration.analysis.report import FS, POSE_BLOCK, Analysis, BagSignals  # noqa: E402
 from hexapod_vibration.core import spectrum  # noqa: E402
 from hexapod_vibration.core.model.config import ModelConfig  # noqa: E402
-from hexapod_vibration.core.model.sensors import EddySensorArray  # noqa: E402
 
 G0 = spectrum.G0
+DPI = 150
+COLORS = {"uncontrolled": "tab:blue", "controlled": "tab:red"}
+LABELS = {"uncontrolled": "without control", "controlled": "with control"}
+plt.rcParams.update({"font.size": 9, "axes.titlesize": 10, "axes.labelsize": 9,
+                     "legend.fontsize": 8, "figure.dpi": DPI})
 
 
 def write_all(out: Path, signals: BagSignals, result: Analysis, model: ModelConfig) -> list[Path]:
-    """Write every figure that the bag's content allows; return their paths."""
+    """Write every figure (and CSV) that the bag's content allows; return their paths."""
     paths = [spectra_figure(out / "spectra.png", result),
-             plant_response_figure(out / "plant_response.png", result)]
-    if signals.control_on_sample is not None:
+             spectra_csv(out / "spectra.csv", result)]
+    paths.append(plant_response_figure(out / "plant_response.png", result))
+    if result.levels_over_time:
         paths.append(convergence_figure(out / "convergence.png", signals, result))
-    if "/pph/eddy" in signals.series and len(signals.series["/pph/eddy"]):
+    eddy = signals.series.get("/pph/eddy")
+    if eddy is not None and eddy.sample_index.size > 1:
         paths.append(pointing_figure(out / "pointing.png", signals, model))
     return paths
 
 
+# ---------------------------------------------------------------------------- spectra
 def _psd_db(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    f, psd = spectrum.power_spectral_density(x - x.mean(), FS,
-                                             segment_s=min(10.0, x.size / FS))
+    """Welch PSD of the z acceleration in dB re 1 g^2/Hz (the tables' spectrum)."""
+    f, psd = spectrum.power_spectral_density(x - x.mean(), FS, segment_s=min(
+        spectrum.DEFAULT_SEGMENT_S, x.size / FS))
     return f, 10.0 * np.log10(np.maximum(psd, 1e-30) / G0**2)
 
 
-def _mark_tones(ax: plt.Axes, result: Analysis) -> None:
+def _window_psds(result: Analysis) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    out = {}
+    for name in ("uncontrolled", "controlled"):
+        rows = result.windows.get(name)
+        if rows is not None and rows.stop - rows.start >= 16:
+            out[name] = _psd_db(result.z[rows])
+    return out
+
+
+def _window_label(result: Analysis, name: str) -> str:
+    rows = result.windows[name]
+    a = result.index[rows.start] / FS
+    return f"{LABELS[name]} ({a:.1f}-{a + (rows.stop - rows.start) / FS:.1f} s)"
+
+
+def _mark_tones(ax: plt.Axes, result: Analysis, label: bool = True) -> None:
+    """Dotted lines at the reported tones (green: notch tones), labelled if they fit."""
+    top = ax.get_ylim()[1]
+    freqs = sorted(r["frequency_hz"] for r in result.report["tones"])
+    lo, hi = ax.get_xlim()
+    if len(freqs) > 1 and min(np.diff(freqs)) < (hi - lo) / 40:
+        label = False
     for row in result.report["tones"]:
-        ax.axvline(row["frequency_hz"], color="0.8" if not row["controlled"] else "tab:red",
-                   lw=0.8, ls="--", zorder=0)
+        f = row["frequency_hz"]
+        ax.axvline(f, color="tab:green" if row["controlled"] else "0.6", lw=0.7, ls=":",
+                   zorder=0)
+        if label:
+            ax.annotate(f"{f:g}{'*' if row['controlled'] else ''}", (f, top), xytext=(2, -9),
+                        textcoords="offset points", fontsize=7, color="0.3")
 
 
 def spectra_figure(path: Path, result: Analysis) -> Path:
-    """Uncontrolled and controlled power spectral density of the z-axis acceleration."""
-    fig, ax = plt.subplots(figsize=(9, 4.5))
-    for name, color in (("uncontrolled", "tab:blue"), ("controlled", "tab:orange")):
-        rows = result.windows.get(name)
-        if rows is None or rows.stop - rows.start < 16:
-            continue
-        f, db = _psd_db(result.z[rows])
-        ax.plot(f, db, color=color, lw=0.8, label=f"{name} ({(rows.stop - rows.start) / FS:.0f} s)")
-    _mark_tones(ax, result)
-    top = max(r["frequency_hz"] for r in result.report["tones"]) if result.report["tones"] else 100
-    ax.set(xlim=(0, min(FS / 2, max(150.0, 1.5 * top))), xlabel="frequency (Hz)",
-           ylabel="PSD (dB re 1 g$^2$/Hz)",
-           title=f"{result.report['scenario']}: top plate z-axis acceleration")
-    ax.grid(alpha=0.3)
-    ax.legend()
+    """Without/with control PSD panels on the same scales, and a zoom on the notch tones."""
+    psds = _window_psds(result)
+    tones = [r["frequency_hz"] for r in result.report["tones"]]
+    notch = [r["frequency_hz"] for r in result.report["tones"] if r["controlled"]]
+    top_f = (FS / 2 if result.harmonics is not None
+             else min(FS / 2, max(150.0, 1.6 * max(tones, default=100.0))))
+    zoom = len(psds) == 2 and bool(notch)
+    rows = len(psds) + (1 if zoom else 0)
+    fig = plt.figure(figsize=(8.0, 2.6 * rows + 0.3))
+    grid = fig.add_gridspec(rows, 1, height_ratios=[1.0] * len(psds) + ([1.1] if zoom else []))
+    lo = min(float(np.percentile(db[(f > 2) & (f < top_f)], 1)) for f, db in psds.values())
+    hi = max(float(db[(f > 2) & (f < top_f)].max()) for f, db in psds.values())
+    ylim = (lo - 5.0, hi + 8.0)
+    axes = []
+    for k, (name, (f, db)) in enumerate(psds.items()):
+        ax = fig.add_subplot(grid[k], sharex=axes[0] if axes else None)
+        ax.plot(f, db, color=COLORS[name], lw=0.7)
+        ax.set(xlim=(0, top_f), ylim=ylim, ylabel="PSD (dB re 1 g$^2$/Hz)",
+               title=f"{result.report['scenario']}: top plate z acceleration, "
+                     f"{_window_label(result, name)}")
+        ax.grid(alpha=0.3)
+        _mark_tones(ax, result)
+        axes.append(ax)
+    axes[-1].set_xlabel("frequency (Hz)")
+    if zoom:
+        clusters = _tone_clusters(notch)
+        cells = grid[2].subgridspec(1, len(clusters), wspace=0.25)
+        for k, cluster in enumerate(clusters):
+            _zoom_panel(fig.add_subplot(cells[k]), psds, result, cluster, legend=k == 0)
     return _save(fig, path)
 
 
+def _tone_clusters(tones: list[float], gap_hz: float = 5.0) -> list[list[float]]:
+    """Notch tones grouped when less than ``gap_hz`` apart (one zoom panel each, <= 3)."""
+    clusters: list[list[float]] = []
+    for f in sorted(tones):
+        if clusters and f - clusters[-1][-1] < gap_hz:
+            clusters[-1].append(f)
+        else:
+            clusters.append([f])
+    return clusters[:3]
+
+
+def _zoom_panel(ax: plt.Axes, psds: dict, result: Analysis, notch: list[float],
+                legend: bool) -> None:
+    """Both spectra around a group of notch tones (and the reported tones beside them)."""
+    reported = [r["frequency_hz"] for r in result.report["tones"]]
+    near = [f for f in reported if min(abs(f - n) for n in notch) <= 3.0] + notch
+    a, b = min(near) - 1.5, max(near) + 1.5
+    if b - a < 6.0:
+        a, b = 0.5 * (a + b) - 3.0, 0.5 * (a + b) + 3.0
+    for name, (f, db) in psds.items():
+        sel = (f >= a) & (f <= b)
+        ax.plot(f[sel], db[sel], color=COLORS[name], lw=1.2 if name == "uncontrolled" else 1.0,
+                ls="-" if name == "uncontrolled" else "--", label=LABELS[name])
+    ax.set(xlim=(a, b), xlabel="frequency (Hz)", ylabel="PSD (dB re 1 g$^2$/Hz)",
+           title=f"zoom: {', '.join(f'{f:g}' for f in notch)} Hz (notch)")
+    _mark_tones(ax, result)
+    ax.grid(alpha=0.3)
+    if legend:
+        ax.legend(loc="best")
+
+
+def spectra_csv(path: Path, result: Analysis) -> Path:
+    """The spectra of the figure as CSV: frequency (Hz), PSD per window (dB re 1 g^2/Hz)."""
+    psds = _window_psds(result)
+    names = list(psds)
+    freq = psds[names[0]][0]
+    tmp = path.with_name(f".{path.name}.tmp")
+    with tmp.open("w", newline="", encoding="utf-8") as stream:
+        writer = csv.writer(stream)
+        writer.writerow(["frequency_hz", *[f"{n}_psd_db_re_1g2_per_hz" for n in names]])
+        columns = [np.interp(freq, *psds[n]) for n in names]
+        for k, f in enumerate(freq):
+            writer.writerow([f"{f:.4f}", *[f"{c[k]:.3f}" for c in columns]])
+    tmp.replace(path)
+    return path
+
+
+# ---------------------------------------------------------------------------- Fig. 4
 def plant_response_figure(path: Path, result: Analysis) -> Path:
-    """Time trace (0.1 s) and spectrum of the uncontrolled z-axis acceleration."""
+    """Time trace (5 periods) and spectrum of the uncontrolled z-axis acceleration."""
     rows = result.windows["uncontrolled"]
     x = result.z[rows]
-    fig, (ax_t, ax_f) = plt.subplots(1, 2, figsize=(11, 4))
-    seg = x[-100:] - x.mean()
-    ax_t.plot(np.arange(seg.size) / FS * 1e3, seg / G0 * 1e3, lw=1.0)
-    ax_t.set(xlabel="time (ms)", ylabel="z acceleration (mg, DC removed)",
-             title="plant response (last 0.1 s of the window)")
+    hd = result.harmonics
+    f0 = hd["frequencies_hz"][0] if hd else (result.report["tones"] or [{"frequency_hz": 40}]
+                                             )[0]["frequency_hz"]
+    fig, (ax_t, ax_f) = plt.subplots(2, 1, figsize=(8.0, 6.5))
+    n = int(round(5 * FS / f0))
+    seg = (x[-n:] - x.mean()) / G0 * 1e3
+    t_ms = np.arange(seg.size) / FS * 1e3
+    ax_t.plot(t_ms, seg, color="tab:blue", lw=1.0, marker=".", ms=2.5)
+    sine = _fundamental_fit(seg, f0)
+    ax_t.plot(t_ms, sine, color="0.5", lw=0.8, ls="--", label=f"{f0:g} Hz sinusoid fitted")
+    ax_t.set(xlabel="time (ms)", ylabel="z acceleration (mg, mean removed)",
+             title=f"{result.report['scenario']}: response over 5 periods of {f0:g} Hz "
+                   "(samples at 1 kHz)")
+    ax_t.legend(loc="upper right")
     f, db = _psd_db(x)
-    ax_f.plot(f, db, lw=0.8)
-    _mark_tones(ax_f, result)
-    ax_f.set(xlabel="frequency (Hz)", ylabel="PSD (dB re 1 g$^2$/Hz)", xlim=(0, FS / 2),
-             title="spectrum: harmonics of the response")
+    ax_f.plot(f, db, color="tab:blue", lw=0.7)
+    if hd:
+        for fk, rel in zip(hd["frequencies_hz"][1:], hd["relative_db"][1:], strict=True):
+            ax_f.annotate(f"{rel:.0f}", (fk, float(np.interp(fk, f, db))), xytext=(0, 4),
+                          textcoords="offset points", ha="center", fontsize=7)
+        ax_f.set_title(f"spectrum: harmonics in dB re the fundamental; THD "
+                       f"{hd['thd_percent']:.1f} % over {hd['harmonics']} harmonics "
+                       "below fs/2")
+    ax_f.set(xlabel="frequency (Hz)", ylabel="PSD (dB re 1 g$^2$/Hz)", xlim=(0, FS / 2))
     for ax in (ax_t, ax_f):
         ax.grid(alpha=0.3)
     return _save(fig, path)
 
 
+def _fundamental_fit(x: np.ndarray, f0: float) -> np.ndarray:
+    """Least-squares sinusoid at f0 through x (same units)."""
+    t = np.arange(x.size) / FS
+    basis = np.column_stack([np.cos(2 * np.pi * f0 * t), np.sin(2 * np.pi * f0 * t),
+                             np.ones_like(t)])
+    coef, *_ = np.linalg.lstsq(basis, x, rcond=None)
+    return basis @ coef
+
+
+# ---------------------------------------------------------------------------- convergence
 def convergence_figure(path: Path, signals: BagSignals, result: Analysis) -> Path:
-    """Tone envelopes (dB re 1 g) around control-on and the notch weights' magnitudes."""
-    index = signals.accel.sample_index
-    on = signals.control_on_sample
-    start = int(np.searchsorted(index, on - 2 * int(FS)))
-    z = result.z[start:]
-    t0 = index[start] / FS
-    fig, (ax_e, ax_w) = plt.subplots(2, 1, figsize=(9, 6.5), sharex=True)
-    for row in result.report["tones"]:
-        t, env = spectrum.tone_envelope(z, FS, row["frequency_hz"])
-        ax_e.plot(t + t0, 20 * np.log10(np.maximum(env, 1e-15) / G0),
-                  lw=1.0, label=f"{row['frequency_hz']:g} Hz")
-    ax_e.axvline(on / FS, color="k", lw=0.8, ls="--", label="control on")
-    ax_e.set(ylabel="tone level (dB re 1 g)", title="convergence of the notch controller")
-    ax_e.legend(ncol=3, fontsize=8)
-    if signals.weights.size:
-        keep = signals.weights_index >= index[start]
-        t_w = signals.weights_index[keep] / FS
-        magnitude = np.hypot(signals.weights[keep, ..., 0], signals.weights[keep, ..., 1])
-        tones = signals.notch_tones() or list(range(magnitude.shape[1]))
-        for k in range(magnitude.shape[1]):
-            for strut in range(6):
-                ax_w.plot(t_w, magnitude[:, k, strut], lw=0.7, color=f"C{k}",
-                          label=f"{tones[k]:g} Hz" if strut == 0 else None)
-        ax_w.legend(fontsize=8)
-    ax_w.set(xlabel="sim time (s)", ylabel="|W| per strut (N)")
+    """Tone levels over time with control-on, identification and convergence marked."""
+    on = signals.control_on_sample / FS
+    fig, (ax_e, ax_w) = plt.subplots(2, 1, figsize=(8.0, 6.8), sharex=True,
+                                     height_ratios=[1.4, 1])
+    rows = {r["frequency_hz"]: r for r in result.report["tones"]}
+    for k, (f, lev) in enumerate(result.levels_over_time.items()):
+        controlled = rows[f]["controlled"]
+        color = f"C{k}"
+        conv = lev["convergence_s"]
+        label = f"{f:g} Hz{' (notch)' if controlled else ''}"
+        if controlled and np.isfinite(conv):
+            label += f": converged in {conv:.2f} s"
+        ax_e.plot(lev["t_s"], lev["level_db"], color=color, lw=1.4 if controlled else 0.8,
+                  ls="-" if controlled else ":", alpha=1.0 if controlled else 0.7, label=label)
+        if controlled and np.isfinite(conv):
+            t_c = on + conv
+            ax_e.plot(t_c, np.interp(t_c, lev["t_s"], lev["level_db"]), "v", color=color,
+                      ms=7, mec="k", mew=0.5)
+            ax_e.axvline(t_c, color=color, lw=0.7, ls="--")
+    t_first = min(v["t_s"][0] for v in result.levels_over_time.values() if v["t_s"].size)
+    _shade_identification(ax_e, result, max(t_first - 1.0, 0.0))
+    ax_e.axvline(on, color="k", lw=1.0, label=f"control on ({on:.2f} s)")
+    windows = {round(v["level_window_s"], 3) for v in result.details["convergence"].values()}
+    ax_e.set(ylabel="tone level (dB re 1 g)",
+             title="tone levels over time (Blackman-Harris window "
+                   f"{', '.join(f'{w:g}' for w in sorted(windows))} s); "
+                   "\u25bc: within 3 dB of the final level")
+    ax_e.set_xlim(max(t_first - 1.0, 0.0), result.index[-1] / FS)
+    ax_e.legend(loc="upper right", ncol=2)
+    _weights_panel(ax_w, signals, result, on)
     for ax in (ax_e, ax_w):
         ax.grid(alpha=0.3)
     return _save(fig, path)
 
 
+def _shade_identification(ax: plt.Axes, result: Analysis, t_from: float) -> None:
+    """Grey spans where the notch identified the plant (those after ``t_from`` s)."""
+    t1 = result.index[-1] / FS
+    labelled = False
+    for a, b in result.identification:
+        a_s, b_s = max(a / FS, t_from), min(b / FS, t1)
+        if a_s < b_s:
+            ax.axvspan(a_s, b_s, color="0.85", zorder=0,
+                       label=None if labelled else "identification")
+            labelled = True
+
+
+def _weights_panel(ax: plt.Axes, signals: BagSignals, result: Analysis, on: float) -> None:
+    """Mean |W| over the six struts per tone, with the struts' range shaded."""
+    t_start = result.levels_over_time and min(v["t_s"][0] for v in
+                                              result.levels_over_time.values()
+                                              if v["t_s"].size)
+    if signals.weights.size:
+        keep = signals.weights_index / FS >= (t_start or 0.0)
+        t_w = signals.weights_index[keep] / FS
+        magnitude = np.hypot(signals.weights[keep, ..., 0], signals.weights[keep, ..., 1])
+        tones = signals.notch_tones() or list(range(magnitude.shape[1]))
+        for k in range(magnitude.shape[1]):
+            color = _tone_color(result, tones[k])
+            ax.fill_between(t_w, magnitude[:, k].min(axis=1), magnitude[:, k].max(axis=1),
+                            color=color, alpha=0.25, lw=0)
+            ax.plot(t_w, magnitude[:, k].mean(axis=1), color=color, lw=1.2,
+                    label=f"{tones[k]:g} Hz: mean of 6 struts (band: min-max)")
+        peaks = magnitude.max(axis=(0, 2))
+        if peaks.size > 1 and peaks.min() > 0 and peaks.max() / peaks.min() > 10:
+            ax.set_yscale("log")          # tones whose weights differ by decades
+            ax.set_ylim(bottom=max(1e-3, 0.3 * float(peaks.min()) / 10))
+        ax.legend(loc="lower right")
+    else:
+        ax.text(0.5, 0.5, "no /pph/notch_weights in the bag", transform=ax.transAxes,
+                ha="center", va="center")
+    ax.axvline(on, color="k", lw=1.0)
+    ax.set(xlabel="sim time (s)", ylabel="notch weight |W| (N)",
+           title="notch weights (amplitude of each strut's cancelling force)")
+
+
+def _tone_color(result: Analysis, f: float) -> str:
+    for k, tone in enumerate(result.levels_over_time):
+        if abs(tone - f) < 1e-6:
+            return f"C{k}"
+    return "k"
+
+
+# ---------------------------------------------------------------------------- pointing
+POSE_GROUPS = (
+    ("tilt (urad)", ((3, "tilt x"), (4, "tilt y")), 1e6),
+    ("twist (urad)", ((5, "twist"),), 1e6),
+    ("translation (um)", ((0, "x"), (1, "y"), (2, "z")), 1e6),
+)
+STARTUP_S = 2.0
+
+
 def pointing_figure(path: Path, signals: BagSignals, model: ModelConfig) -> Path:
-    """Tilts, twist (deg) and z (um) of the top plate from the eddy-current sensors."""
+    """Pose of the top plate from the eddy sensors: tilts, twist, translations.
+
+    Each line is the pose's mean over 0.1 s (the pointing), the band around it +-1 RMS
+    deviation within that 0.1 s (the vibration).
+    """
     eddy = signals.series["/pph/eddy"]
-    height = float(model.geometry.top_joints_m[0, 2])
-    pose = EddySensorArray(model.eddy, height).pose(eddy.values)
-    t = eddy.sample_index / FS
-    fig, (ax_a, ax_z) = plt.subplots(2, 1, figsize=(9, 5.5), sharex=True)
-    for k, name in ((3, "tilt x"), (4, "tilt y"), (5, "twist")):
-        ax_a.plot(t, np.rad2deg(pose[:, k]), lw=0.8, label=name)
-    ax_a.set(ylabel="angle (deg)", title="pointing: pose from the eddy-current sensors")
-    ax_a.legend()
-    ax_z.plot(t, pose[:, 2] * 1e6, lw=0.8, color="tab:green")
-    ax_z.set(xlabel="sim time (s)", ylabel="z (um)")
-    for ax in (ax_a, ax_z):
+    mean, rms = eddy.values[:, :6], eddy.values[:, 6:]
+    t = (eddy.sample_index + 0.5 * POSE_BLOCK) / FS
+    steady = t >= min(STARTUP_S, t[-1] / 2)
+    fig, axes = plt.subplots(len(POSE_GROUPS), 1, figsize=(8.0, 7.0), sharex=True)
+    for ax, (ylabel, members, scale) in zip(axes, POSE_GROUPS, strict=True):
+        span = []
+        for k, name in members:
+            y, band = mean[:, k] * scale, rms[:, k] * scale
+            line, = ax.plot(t, y, lw=1.0, label=f"{name} (band: vibration RMS)")
+            ax.fill_between(t, y - band, y + band, color=line.get_color(), alpha=0.2, lw=0)
+            span.append(np.concatenate([(y - band)[steady], (y + band)[steady]]))
+        lo, hi = np.percentile(np.concatenate(span), [0.5, 99.5])
+        pad = max(0.15 * (hi - lo), 1e-3)
+        ax.set(ylabel=ylabel, ylim=(lo - pad, hi + pad))
+        ax.legend(loc="upper right", ncol=len(members))
         ax.grid(alpha=0.3)
+    on = signals.control_on_sample
+    if on is not None:
+        for ax in axes:
+            ax.axvline(on / FS, color="k", lw=0.8, ls="--")
+    axes[0].set_title(f"pointing: pose from the eddy-current sensors, 0.1 s means "
+                      f"(y axes fit t > {STARTUP_S:g} s)")
+    axes[-1].set_xlabel("sim time (s)" + ("; dashed: control on" if on is not None else ""))
     return _save(fig, path)
 
 
 def _save(fig: plt.Figure, path: Path) -> Path:
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    tmp = path.with_name(f".{path.stem}.tmp{path.suffix}")
+    fig.savefig(tmp, dpi=DPI)
     plt.close(fig)
+    tmp.replace(path)
     return path

@@ -74,12 +74,6 @@ COST_RATIO_TARGET = 10.0        # issue: FxLMS / notch 6x8 at least 10x, equal a
 # FxLMS attenuation within this of the notch's (or both floor-limited) counts as equal
 EQUAL_ATTENUATION_TOL_DB = 3.0
 TABLE1_SCENARIO = 'single_tone_harmonic'
-ENVELOPE_WINDOW_S = 0.2
-FINAL_WINDOW_S = 2.0
-# Levels below the final mean power + this margin count as "at the final level" for the
-# convergence time: a tone cancelled down to the noise floor has a Rayleigh-distributed
-# envelope that leaves any 3 dB band around its mean many times in 10 s.
-FLOOR_MARGIN_DB = 6.0
 
 
 @dataclasses.dataclass(frozen=True)
@@ -500,23 +494,17 @@ def _controlled_tones(sc: Scenario) -> list[float]:
     return [float(f) for f in sc.notch.tone_frequencies_hz]
 
 
-def tone_convergence_s(z: np.ndarray, fs: float, freq_hz: float, t_on_s: float
-                       ) -> dict[str, float]:
-    """Convergence time (s) of one tone from its envelope (spectrum.convergence_time_s).
+def tone_convergence_s(z: np.ndarray, fs: float, freq_hz: float, t_on_s: float,
+                       other_hz: Sequence[float] = ()) -> dict[str, float]:
+    """Convergence time (s) of one tone, by :func:`spectrum.tone_convergence`.
 
-    ``convergence_s``: the 0.2 s envelope in dB, with levels below the final mean power +
-    6 dB set to that value, stays within 3 dB of its final level (i.e. within ~9 dB of the
-    final mean power, robust when the tone ends at the noise floor). ``raw_s``: the same
-    on the unmodified envelope (NaN or near the end of the run when the tone ends in noise).
+    The package's one definition (control-on until the tone's level over time first comes
+    within 3 dB of its final level), as in report.json's ``convergence_s``.
     """
-    t, rms = spectrum.tone_envelope(z, fs, freq_hz, ENVELOPE_WINDOW_S)
-    level = np.asarray(spectrum.to_db_re_g(rms), dtype=float)
-    final = t >= t[-1] - FINAL_WINDOW_S
-    final_db = float(spectrum.to_db_re_g(np.sqrt(np.mean(rms[final] ** 2))))
-    clipped = np.maximum(level, final_db + FLOOR_MARGIN_DB)
-    return {'convergence_s': spectrum.convergence_time_s(t, clipped, t_on_s, FINAL_WINDOW_S),
-            'raw_s': spectrum.convergence_time_s(t, level, t_on_s, FINAL_WINDOW_S),
-            'final_level_db': final_db}
+    result = spectrum.tone_convergence(z, fs, freq_hz, int(round(t_on_s * fs)), other_hz)
+    return {'convergence_s': result['convergence_s'],
+            'final_level_db': result['final_level_db'],
+            'level_window_s': result['window_s']}
 
 
 def suppression_report(z: np.ndarray, sc: Scenario, control_on_sample: int,
@@ -547,7 +535,8 @@ def suppression_report(z: np.ndarray, sc: Scenario, control_on_sample: int,
                  'attenuation_db': float(before[k] - max(after[k], floor)),
                  'attenuation_raw_db': float(before[k] - after[k])}
         if f in tones:
-            entry.update(tone_convergence_s(z, fs, f, control_on_sample / fs))
+            entry.update(tone_convergence_s(z, fs, f, control_on_sample / fs,
+                                            sorted(set(report) | set(tones))))
         out['tones'][f'{f:g}'] = entry
     conv = [out['tones'][f'{f:g}']['convergence_s'] for f in tones]
     out['convergence_s'] = float(max(conv)) if np.all(np.isfinite(conv)) else float('nan')
@@ -800,8 +789,8 @@ def _summary_table1(results: dict[str, Any]) -> list[str]:
               "'<' and '>=': controlled level below the noise floor (the attenuation is a "
               'lower bound, set by the floor each controller leaves). Equal attenuation (both '
               f'floor-limited, or FxLMS within {EQUAL_ATTENUATION_TOL_DB:g} dB): {equal}. '
-              'Convergence: control-on to within 3 dB of the final level of the 0.2 s tone '
-              'envelope (levels under the final mean power + 6 dB count as final).']
+              'Convergence: control-on until the tone level over time (core.spectrum.'
+              'tone_level_over_time) first comes within 3 dB of its final level.']
     if 'fxlms_model_relative_error' in t1:
         errs = ', '.join(f'{k} Hz {100 * v:.1f} %'
                          for k, v in t1['fxlms_model_relative_error'].items())

@@ -23,13 +23,18 @@ from collections.abc import Sequence
 from functools import lru_cache
 
 import numpy as np
-from scipy import signal, stats
+from scipy import ndimage, signal, stats
 
 G0 = 9.80665
 DEFAULT_SEGMENT_S = 10.0
 DEFAULT_WINDOW = 'blackmanharris'
 DEFAULT_BAND_HZ = 2.0
 MIN_FLOOR_BINS = 8
+LINE_FACTOR = 20.0
+"""A bin is a spectral line (left out of every noise floor) when it is a local maximum more
+than 20x (13 dB) above the local floor: white noise in a one-segment Welch PSD (2 degrees of
+freedom, the least averaged case) exceeds that with probability e^-20 per bin."""
+LINE_MEDIAN_HZ = 2.0
 TINY_RMS = 1e-12
 
 
@@ -121,6 +126,19 @@ class _Lines:
         self.df = self.f[1] - self.f[0]
         self.hw = main_lobe_half_width_bins(window)
         self.bias = _median_bias(np.size(x), nperseg, window)
+        self.lines = self._find_lines()
+
+    def _find_lines(self) -> np.ndarray:
+        """Bins of the spectral lines (see LINE_FACTOR): what every floor estimate leaves out.
+
+        Found in the spectrum itself, so a tone's floor does not depend on which other
+        tones were asked for.
+        """
+        size = max(3, 2 * int(round(0.5 * LINE_MEDIAN_HZ / self.df)) + 1)
+        local = ndimage.median_filter(self.psd, size=size, mode='nearest') / self.bias
+        peak = ndimage.maximum_filter(self.psd, size=3, mode='nearest') == self.psd
+        lines = np.flatnonzero(peak & (self.psd > LINE_FACTOR * local))
+        return lines[lines > 0]
 
     def bin_of(self, freqs_hz: Sequence[float] | np.ndarray) -> np.ndarray:
         f = np.asarray(freqs_hz, dtype=float).reshape(-1)
@@ -153,13 +171,14 @@ class _Lines:
                              ) -> tuple[np.ndarray, np.ndarray]:
         """Main-lobe power and the floor's power in the same bandwidth, (m/s^2)^2 each."""
         bins = self.bin_of(freqs_hz)
-        excluded = np.concatenate([bins, self.bin_of(exclude_hz) if len(exclude_hz) else []])
-        excluded = excluded.astype(int)
+        common = np.concatenate([self.lines, self.bin_of(exclude_hz) if len(exclude_hz)
+                                 else []]).astype(int)
         lobe_p = np.empty(bins.size)
         floor_p = np.empty(bins.size)
         for m, k in enumerate(bins):
             lobe = self.lobe(k)
             lobe_p[m] = np.sum(self.psd[lobe]) * self.df
+            excluded = np.append(common, k)
             floor_p[m] = self.floor_psd(k, excluded, band_hz) * lobe.size * self.df
         return lobe_p, floor_p
 
@@ -171,8 +190,10 @@ def tone_rms(x: np.ndarray, fs: float, freqs_hz: Sequence[float] | np.ndarray,
 
     The PSD is integrated over the main lobe (+-half-width bins, 4 for Blackman-Harris)
     around each tone's nearest bin; the local floor (median PSD within +-band_hz/2 outside
-    the main lobes of all requested tones, widened until 8 bins remain, debiased from median
-    to mean) times the same bandwidth is subtracted. Clamped at 1e-12 m/s^2.
+    the tone's own main lobe and those of the spectral lines found in the spectrum, see
+    LINE_FACTOR, widened until 8 bins remain, debiased from median to mean) times the same
+    bandwidth is subtracted. The floor does not depend on which other tones are requested.
+    Clamped at 1e-12 m/s^2.
 
     Args:
         x: signal (m/s^2), 1-D.
@@ -195,8 +216,9 @@ def tone_and_floor_db(x: np.ndarray, fs: float, freqs_hz: Sequence[float] | np.n
                       band_hz: float = DEFAULT_BAND_HZ) -> tuple[np.ndarray, np.ndarray]:
     """:func:`tone_levels_db` and :func:`noise_floor_db` of every tone from one spectrum.
 
-    The floor of each tone excludes the main lobes of all ``freqs_hz``, as
-    ``noise_floor_db(x, fs, f, exclude_hz=freqs_hz)`` does.
+    The floor of each tone is ``noise_floor_db(x, fs, f)``: it leaves out the tone's own
+    main lobe and the spectral lines found in the spectrum, not the other requested tones,
+    so a tone's level and floor do not depend on which other tones are asked for.
     """
     lobe_p, floor_p = _Lines(x, fs, segment_s, window).tone_and_floor_power(freqs_hz, (),
                                                                             band_hz)
@@ -285,7 +307,7 @@ def band_levels_db(x: np.ndarray, fs: float, bands_hz: np.ndarray,
 
 
 def harmonic_distortion(x: np.ndarray, fs: float, fundamental_hz: float,
-                        n_harmonics: int = 5, segment_s: float = DEFAULT_SEGMENT_S,
+                        n_harmonics: int | None = None, segment_s: float = DEFAULT_SEGMENT_S,
                         window: str = DEFAULT_WINDOW) -> dict:
     """Levels of f0, 2 f0, ..., n f0 (those below fs/2) and the total harmonic distortion.
 
@@ -293,87 +315,162 @@ def harmonic_distortion(x: np.ndarray, fs: float, fundamental_hz: float,
         x: signal (m/s^2), 1-D.
         fs: sample rate (Hz).
         fundamental_hz: f0 (Hz).
-        n_harmonics: highest harmonic number n (1 = fundamental only).
+        n_harmonics: highest harmonic number n (1 = fundamental only); default: every
+            harmonic below fs/2 (12 for 40 Hz at 1 kHz).
         segment_s: Welch segment (s).
         window: scipy window name.
 
     Returns:
         ``{"frequencies_hz": [...], "rms_m_s2": [...], "levels_db": [...],
-        "thd_ratio": sqrt(sum_{k>=2} rms_k^2) / rms_1, "thd_percent": 100 * thd_ratio}``.
+        "relative_db": [level - fundamental level], "harmonics": number of harmonics
+        counted (2 f0 and above), "thd_ratio": sqrt(sum_{k>=2} rms_k^2) / rms_1,
+        "thd_percent": 100 * thd_ratio}``.
     """
-    k = np.arange(1, int(n_harmonics) + 1)
+    if not fundamental_hz > 0.0:
+        raise ValueError(f'fundamental must be > 0 Hz, got {fundamental_hz}')
+    highest = int(np.ceil(0.5 * fs / fundamental_hz)) if n_harmonics is None else int(n_harmonics)
+    k = np.arange(1, highest + 1)
     freqs = fundamental_hz * k
     freqs = freqs[freqs < 0.5 * fs]
     if freqs.size == 0:
         raise ValueError(f'fundamental {fundamental_hz} Hz is not below fs/2')
     rms = tone_rms(x, fs, freqs, segment_s, window)
+    levels = np.asarray(to_db_re_g(rms)).reshape(-1)
     thd = float(np.sqrt(np.sum(rms[1:] ** 2)) / rms[0])
     return {'frequencies_hz': freqs.tolist(), 'rms_m_s2': rms.tolist(),
-            'levels_db': np.asarray(to_db_re_g(rms)).tolist(),
-            'thd_ratio': thd, 'thd_percent': 100.0 * thd}
+            'levels_db': levels.tolist(), 'relative_db': (levels - levels[0]).tolist(),
+            'harmonics': int(freqs.size - 1), 'thd_ratio': thd, 'thd_percent': 100.0 * thd}
 
 
-def tone_envelope(x: np.ndarray, fs: float, freq_hz: float, window_s: float = 0.2
-                  ) -> tuple[np.ndarray, np.ndarray]:
-    """Sliding RMS (m/s^2) of one tone's component, for convergence plots.
+LEVEL_WINDOW = 'blackmanharris'
+LEVEL_WINDOW_PER_HZ_S = 4.5
+"""Tone level over time: window length (s) times the spacing (Hz) to the nearest other line.
 
-    Complex demodulation ``z_n = x_n e^{-j 2 pi f n / fs}`` followed by a causal moving
-    average over ``window_s``; the tone's RMS is ``sqrt(2) |mean z|``. The boxcar nulls
-    components at multiples of ``1 / window_s`` Hz from the tone (choose window_s so that
-    ``2 f`` and neighbouring tones fall on those nulls).
+A Blackman-Harris window of length L has its first null at 4/L Hz and every sidelobe
+beyond it below -92 dB, so a line 4.5/L Hz away is rejected by more than 92 dB."""
+LEVEL_WINDOW_MIN_S = 0.2
+LEVEL_WINDOW_MAX_S = 10.0
+LEVEL_STEP_S = 0.01
+CONVERGENCE_TOLERANCE_DB = 3.0
+CONVERGENCE_FINAL_WINDOW_S = 2.0
+
+
+def level_window_s(freq_hz: float, other_hz: Sequence[float] | np.ndarray = ()) -> float:
+    """Window (s) of :func:`tone_level_over_time` for a tone with lines at ``other_hz``.
+
+    The shortest Blackman-Harris window that rejects the nearest other line (and DC, i.e.
+    gravity, at ``freq_hz`` away) by more than 92 dB: ``4.5 / spacing``, clipped to
+    [0.2, 10] s. 0.2 s for 40 Hz beside 80 Hz, 4.5 s for tones 1 Hz apart.
+    """
+    others = np.asarray(other_hz, dtype=float).reshape(-1)
+    others = others[np.abs(others - freq_hz) > 1e-9]
+    spacing = min([float(freq_hz), *np.abs(others - freq_hz).tolist()])
+    if not np.isfinite(spacing) or spacing <= 0.0:
+        raise ValueError(f'tone frequency must be > 0 Hz, got {freq_hz}')
+    return float(np.clip(LEVEL_WINDOW_PER_HZ_S / spacing, LEVEL_WINDOW_MIN_S, LEVEL_WINDOW_MAX_S))
+
+
+def tone_level_over_time(x: np.ndarray, fs: float, freq_hz: float, window_s: float,
+                         index: np.ndarray | None = None, step_s: float = LEVEL_STEP_S
+                         ) -> tuple[np.ndarray, np.ndarray]:
+    """RMS (m/s^2) of one tone's component over time: THE tone level over time.
+
+    The mean is removed (gravity), the signal is demodulated at the tone
+    (``z_n = x_n e^{-j 2 pi f n / fs}``) and averaged over a Blackman-Harris window of
+    ``window_s`` centred on each output time; the RMS is ``sqrt(2) |sum w z| / sum w``.
+    A line ``d`` Hz away is rejected by more than 92 dB when ``window_s >= 4.5 / d`` (see
+    :func:`level_window_s`). Only complete windows are returned: none reaches past either
+    end or over a missing sample (no edge transient, no interpolation).
 
     Args:
-        x: signal (m/s^2), 1-D.
+        x: signal (m/s^2), 1-D, one value per present sample.
         fs: sample rate (Hz).
-        freq_hz: tone frequency (Hz).
-        window_s: averaging window (s).
+        freq_hz: tone frequency (Hz), in (0, fs/2).
+        window_s: window length (s).
+        index: sample index of each value (increasing); default ``0..N-1``. Gaps are
+            missing samples.
+        step_s: spacing of the output times (s).
 
     Returns:
-        (t_s, rms): window-centre times (s, sample 0 at t = 0) and RMS (m/s^2), one value
-        per complete window.
+        (t_s, rms): window-centre times (s, sample n at n / fs) and RMS (m/s^2).
     """
     x = np.asarray(x, dtype=float).reshape(-1)
-    n_win = max(1, int(round(window_s * fs)))
-    if x.size < n_win:
-        raise ValueError(f'signal ({x.size} samples) shorter than the window ({n_win})')
-    n = np.arange(x.size)
-    z = x * np.exp(-2j * np.pi * freq_hz * n / fs)
-    avg = signal.lfilter(np.full(n_win, 1.0 / n_win), [1.0], z)[n_win - 1:]
-    t_s = (n[n_win - 1:] - 0.5 * (n_win - 1)) / fs
-    return t_s, np.sqrt(2.0) * np.abs(avg)
+    if not 0.0 < freq_hz < 0.5 * fs:
+        raise ValueError(f'tone frequency must be in (0, fs/2), got {freq_hz}')
+    n_win = max(2, int(round(window_s * fs)))
+    idx = np.arange(x.size) if index is None else np.asarray(index, dtype=np.int64)
+    if idx.shape != x.shape:
+        raise ValueError('index and x must have the same length')
+    if x.size == 0 or int(idx[-1] - idx[0]) + 1 < n_win:
+        return np.zeros(0), np.zeros(0)
+    grid = np.zeros(int(idx[-1] - idx[0]) + 1, dtype=complex)
+    present = np.zeros(grid.size)
+    n = idx - idx[0]
+    grid[n] = (x - x.mean()) * np.exp(-2j * np.pi * freq_hz * n / fs)
+    present[n] = 1.0
+    w = signal.get_window(LEVEL_WINDOW, n_win, fftbins=False)
+    step = max(1, int(round(step_s * fs)))
+    avg = signal.fftconvolve(grid, w[::-1], mode='valid')[::step] / w.sum()
+    complete = signal.fftconvolve(present, np.ones(n_win), mode='valid')[::step] > n_win - 0.5
+    centre = idx[0] + np.arange(avg.size) * step + 0.5 * (n_win - 1)
+    return centre[complete] / fs, np.sqrt(2.0) * np.abs(avg[complete])
 
 
 def convergence_time_s(t_s: np.ndarray, level_db: np.ndarray, t_on_s: float,
-                       final_window_s: float = 2.0, tolerance_db: float = 3.0) -> float:
-    """Time (s) from ``t_on_s`` until the level stays within tolerance of its final value.
+                       final_window_s: float = CONVERGENCE_FINAL_WINDOW_S,
+                       tolerance_db: float = CONVERGENCE_TOLERANCE_DB) -> float:
+    """THE convergence time (s): from ``t_on_s`` until the level first nears its end.
 
-    The final level is the mean of ``level_db`` over the last ``final_window_s``. The result
-    is ``t_k - t_on_s`` for the first sample ``t_k >= t_on_s`` from which every later sample
-    is within ``tolerance_db`` (a duration, as in report.json's ``convergence_s``).
+    The time from ``t_on_s`` until the level first comes within ``tolerance_db`` of its
+    final level.
+
+    The final level is the mean power (in dB) of ``level_db`` over the last
+    ``final_window_s``. First passage, not "stays within": a tone cancelled down to the
+    noise floor has a Rayleigh-distributed level that leaves any 3 dB band around its mean
+    again and again, which is not a lack of convergence.
 
     Args:
-        t_s: sample times (s), increasing.
+        t_s: times (s), increasing.
         level_db: levels (dB) at those times.
         t_on_s: time control was switched on (s).
         final_window_s: length of the final window (s).
-        tolerance_db: allowed deviation from the final level (dB).
+        tolerance_db: allowed distance from the final level (dB).
 
     Returns:
-        The duration (s), or NaN if the level never settles (or no sample after t_on).
+        The duration (s), or NaN if there is no level after ``t_on_s``.
     """
     t = np.asarray(t_s, dtype=float)
     lev = np.asarray(level_db, dtype=float)
     if t.shape != lev.shape or t.ndim != 1:
         raise ValueError('t_s and level_db must be 1-D arrays of the same length')
-    final_sel = t >= t[-1] - final_window_s
-    final = np.nanmean(lev[final_sel])
-    after = np.flatnonzero(t >= t_on_s)
-    if after.size == 0 or not np.isfinite(final):
+    if t.size == 0:
         return float('nan')
-    bad = ~(np.abs(lev[after] - final) <= tolerance_db)
-    if not np.any(bad):
-        return float(t[after[0]] - t_on_s)
-    last_bad = np.flatnonzero(bad)[-1]
-    if last_bad == after.size - 1:
+    final_sel = (t >= t[-1] - final_window_s) & np.isfinite(lev)
+    if not np.any(final_sel):
         return float('nan')
-    return float(t[after[last_bad + 1]] - t_on_s)
+    final = 10.0 * np.log10(np.mean(10.0 ** (lev[final_sel] / 10.0)))
+    inside = np.flatnonzero((np.abs(lev - final) <= tolerance_db) & (t >= t_on_s))
+    return float(t[inside[0]] - t_on_s) if inside.size else float('nan')
+
+
+def tone_convergence(x: np.ndarray, fs: float, freq_hz: float, on_sample: int,
+                     other_hz: Sequence[float] | np.ndarray = (),
+                     index: np.ndarray | None = None) -> dict:
+    """Level over time and convergence of one tone after control-on at ``on_sample``.
+
+    Uses :func:`tone_level_over_time` with :func:`level_window_s` and
+    :func:`convergence_time_s`: the one definition shared by the reports, the plots and
+    the benchmark.
+
+    Returns:
+        ``{"t_s", "level_db" (dB re 1 g), "window_s", "convergence_s", "final_level_db"}``.
+    """
+    window = level_window_s(freq_hz, other_hz)
+    t, rms = tone_level_over_time(x, fs, freq_hz, window, index)
+    level = np.asarray(to_db_re_g(rms), dtype=float).reshape(-1)
+    conv = convergence_time_s(t, level, on_sample / fs)
+    final = t >= (t[-1] - CONVERGENCE_FINAL_WINDOW_S) if t.size else t > 0
+    final_db = (float(10.0 * np.log10(np.mean(10.0 ** (level[final] / 10.0))))
+                if np.any(final) else float('nan'))
+    return {'t_s': t, 'level_db': level, 'window_s': window, 'convergence_s': conv,
+            'final_level_db': final_db}

@@ -8,14 +8,31 @@ Parameters (read-only, set at start-up):
     bag_path (string): bag directory to create; default ``rosbag2_<date>-<time>`` in the
         current directory. An existing directory is never overwritten.
     storage (string): ``mcap`` (default) or ``sqlite3``.
-    use_sim_time (bool): default **true** here, so messages are stamped with the sim time
-        of ``/clock`` (0 until the first ``/clock`` message arrives).
+    run_record (string): JSON written into ``metadata.yaml`` ``custom_data`` under
+        ``hexapod_vibration.run`` (the experiment runner's record of its run); default none.
+    use_sim_time (bool): default **true** here, so messages without a sample index are
+        stamped with the sim time of ``/clock`` (0 until the first ``/clock`` message).
+
+The bag is what rosbag2 Jazzy writes: ``<bag>/<bag>_0.mcap`` (or ``_0.db3``),
+``metadata.yaml`` version 9 with ``ros_distro: jazzy`` and each topic's
+``offered_qos_profiles`` (the QoS of the publishers the recorder matched). Every loop
+message (``sample:<n>`` in band) is stamped with its sample's sim time, n ms, so
+``ros2 bag play`` and plotting tools see the loop's own time base; a sample already written
+on a topic is not written again (the lockstep handshake re-offers sample 0), and is counted.
+
+Crash safety: a provisional ``metadata.yaml`` (``custom_data`` marks the recording open
+and holds the run record) is written when recording starts; MCAP chunks are closed and
+flushed at least every ``FLUSH_PERIOD_S`` and sqlite3 runs in write-ahead-log mode,
+committed at least every ``FLUSH_PERIOD_S`` and every ``COMMIT_EVERY`` messages. A killed
+recorder therefore leaves a bag that ``analyze`` reads up to its last flush
+(:mod:`hexapod_vibration.analysis.recovery`).
 
 Every second (wall time) it publishes its status on ``/diagnostics``: per recorded topic,
-the messages written (``<topic> messages``) and the publishers matched
-(``<topic> publishers``). A runner can wait for the publishers it needs to be matched on
-the recorder's side before starting the loop: a publisher's own subscription count can
-become non-zero before the recorder is ready to receive, and samples sent then may be lost.
+the messages written (``<topic> messages``), the publishers matched
+(``<topic> publishers``) and the duplicate samples dropped (``<topic> duplicates``). A
+runner waits for every publisher it needs to be matched on the recorder's side before
+starting the loop: a publisher's own subscription count can become non-zero before the
+recorder is ready to receive, and samples sent then are lost to the recording.
 
 SIGINT or SIGTERM stops it cleanly: messages already queued are written, then the bag is
 closed (``metadata.yaml`` written) and the message counts are logged.
@@ -43,18 +60,21 @@ from rclpy.qos import QoSProfile
 from rclpy.signals import SignalHandlerOptions
 from rclpy.subscription import Subscription
 from rosbags.interfaces import Connection
-from rosbags.rosbag2 import StoragePlugin, Writer
+from rosbags.rosbag2 import StoragePlugin
 from rosbags.rosbag2.errors import WriterError
 from rosgraph_msgs.msg import Clock as ClockMessage
 from std_msgs.msg import Float64MultiArray
 
 from hexapod_vibration import cli
 from hexapod_vibration.analysis.bag_io import (
-    BAG_VERSION,
+    RUN_RECORD_KEY,
     STORAGE_PLUGINS,
     STRUT_TOPICS,
+    WEIGHTS_TOPIC,
+    sample_index_of_cdr,
     typestore,
 )
+from hexapod_vibration.analysis.bag_writer import JazzyWriter, qos_from_rclpy, stamp_of_cdr
 from hexapod_vibration.parameter_specs import PPH_RECORDER
 from hexapod_vibration.ros.parameters import NodeParameters
 from hexapod_vibration.ros.qos import (
@@ -73,8 +93,15 @@ MAX_BATCH = 500
 DRAIN_IDLE_SPINS = 3
 """Consecutive idle spins (each up to DRAIN_SPIN_S) that end the drain at shutdown."""
 DRAIN_SPIN_S = 0.05
-DRAIN_MAX_S = 2.0
-"""Upper bound (s) of the drain at shutdown, reached only if publishers keep publishing."""
+DRAIN_MAX_S = 10.0
+"""Upper bound (s) of the drain at shutdown, reached only if publishers keep publishing
+(a recorder behind a fast lockstep loop may have a few seconds of messages queued)."""
+FLUSH_PERIOD_S = 0.25
+"""Longest time (s, wall) that written messages stay in memory before they are on disk."""
+COMMIT_EVERY = 2000
+"""sqlite3: messages per transaction at most (bounded loss and journal when killed)."""
+LOOP_TOPICS = frozenset((*STRUT_TOPICS, WEIGHTS_TOPIC))
+"""Topics whose messages carry ``sample:<n>``: stamped n ms, one message per sample."""
 
 
 @dataclass(frozen=True)
@@ -126,22 +153,26 @@ class BagRecorder(Node):
         """
         super().__init__(NODE_NAME, **kwargs)
         self._default_to_sim_time()
-        params = NodeParameters(self, PPH_RECORDER)   # parameter_specs: bag_path, storage
+        params = NodeParameters(self, PPH_RECORDER)   # parameter_specs: bag_path, storage, ...
         params.serve()
-        bag_path, storage = params['bag_path'], params['storage']
+        bag_path, storage, run_record = (params['bag_path'], params['storage'],
+                                         params['run_record'])
         self.bag_path = Path(bag_path or datetime.now().strftime('rosbag2_%Y_%m_%d-%H_%M_%S'))
-        self._writer = _open_writer(self.bag_path, STORAGE_PLUGINS[storage])
+        custom = {RUN_RECORD_KEY: run_record} if run_record else {}
+        self._writer = _open_writer(self.bag_path, STORAGE_PLUGINS[storage], custom)
         self._connections: dict[str, Connection] = {}
         self.counts: dict[str, int] = {t.name: 0 for t in RECORDED_TOPICS}
+        self.duplicates: dict[str, int] = dict.fromkeys(LOOP_TOPICS, 0)
+        self._seen: dict[str, bytearray] = {t: bytearray() for t in LOOP_TOPICS}
         self._subscriptions_by_topic: dict[str, Subscription] = {}
         for topic in RECORDED_TOPICS:
             self._subscribe(topic)
         self._status_publisher = self.create_publisher(
             DiagnosticArray, '/diagnostics', DIAGNOSTICS_QOS
         )
-        self.create_timer(
-            STATUS_PERIOD_S, self._publish_status, clock=Clock(clock_type=ClockType.STEADY_TIME)
-        )
+        steady = Clock(clock_type=ClockType.STEADY_TIME)
+        self.create_timer(STATUS_PERIOD_S, self._publish_status, clock=steady)
+        self.create_timer(FLUSH_PERIOD_S, self._flush, clock=steady)
         self.get_logger().info(f'recording {len(RECORDED_TOPICS)} topics into {self.bag_path}')
 
     def _default_to_sim_time(self) -> None:
@@ -174,17 +205,53 @@ class BagRecorder(Node):
             self._write(topic, data)
 
     def _write(self, topic: RecordedTopic, data: bytes) -> None:
-        """Write one serialized message, stamped with the node clock (sim time by default)."""
+        """Write one serialized message, stamped by :meth:`_stamp`."""
         if self._writer is None:
+            return
+        stamp = self._stamp(topic.name, data)
+        if stamp is None:
             return
         connection = self._connections.get(topic.name)
         if connection is None:  # created on the first message, like ros2 bag record
             connection = self._writer.add_connection(
-                topic.name, topic.msgtype, typestore=typestore()
+                topic.name, topic.msgtype, typestore=typestore(),
+                offered_qos_profiles=self._offered_qos(topic.name),
             )
             self._connections[topic.name] = connection
-        self._writer.write(connection, self.get_clock().now().nanoseconds, data)
+        self._writer.write(connection, stamp, data)
         self.counts[topic.name] += 1
+        self._writer.flush_if_due(FLUSH_PERIOD_S, COMMIT_EVERY)
+
+    def _stamp(self, topic: str, data: bytes) -> int | None:
+        """Timestamp (ns) of a message; None for a loop sample already written.
+
+        Loop topics: the sample's sim time (n ms); ``/clock`` and ``/diagnostics``: the sim
+        time they carry; anything else (and a zero stamp): the node clock (sim time).
+        """
+        if topic in LOOP_TOPICS:
+            sample = sample_index_of_cdr(data)
+            seen = None if sample is None else _seen_before(self._seen[topic], sample)
+            if seen:
+                self.duplicates[topic] += 1
+                return None
+            if seen is not None:
+                return sample * 1_000_000
+        carried = stamp_of_cdr(topic, data)
+        return carried if carried else self.get_clock().now().nanoseconds
+
+    def _offered_qos(self, topic: str) -> list:
+        """QoS profiles of the publishers matched on ``topic`` (rosbag2's offered profiles)."""
+        try:
+            infos = self.get_publishers_info_by_topic(topic)
+        except (RuntimeError, ValueError):
+            return []
+        return [qos_from_rclpy(info.qos_profile) for info in infos
+                if info.node_name != self.get_name()]
+
+    def _flush(self) -> None:
+        """Put the messages written so far on disk (a timer: also when nothing arrives)."""
+        if self._writer is not None:
+            self._writer.flush_if_due(FLUSH_PERIOD_S, COMMIT_EVERY)
 
     def status(self) -> DiagnosticStatus:
         """Health of the recording: per topic, messages written and publishers matched."""
@@ -194,7 +261,11 @@ class BagRecorder(Node):
             values.append(
                 KeyValue(key=f'{name} publishers', value=str(subscription.get_publisher_count()))
             )
+            if name in self.duplicates:
+                values.append(KeyValue(key=f'{name} duplicates', value=str(self.duplicates[name])))
         recording = self._writer is not None
+        if recording:
+            values.append(KeyValue(key='flushed messages', value=str(self._writer.flushed)))
         level = DiagnosticStatus.OK if recording else DiagnosticStatus.WARN
         state = 'recording' if recording else 'closed'
         return DiagnosticStatus(
@@ -228,14 +299,37 @@ class BagRecorder(Node):
         )
 
 
-def _open_writer(path: Path, plugin: StoragePlugin) -> Writer:
+SAMPLE_LOOKAHEAD = 10_000_000
+"""A sample index this far beyond the highest seen (10 000 s) is not a loop sample."""
+
+
+def _seen_before(seen: bytearray, sample: int) -> bool | None:
+    """Mark ``sample`` in the bit set ``seen``; True if it was marked already.
+
+    None (not marked) for an index so far ahead that it cannot be the loop's: such a
+    message is recorded as it is, stamped with the clock.
+    """
+    byte, bit = divmod(sample, 8)
+    if byte >= len(seen) + SAMPLE_LOOKAHEAD // 8:
+        return None
+    if byte >= len(seen):
+        seen.extend(bytes(byte + 1 - len(seen) + 4096))
+    if seen[byte] >> bit & 1:
+        return True
+    seen[byte] |= 1 << bit
+    return False
+
+
+def _open_writer(path: Path, plugin: StoragePlugin, custom_data: dict[str, str]) -> JazzyWriter:
     """Create and open the bag, refusing to overwrite anything."""
     if path.exists():
         raise RecorderError(
             f'bag directory {path} exists already; refusing to overwrite it '
             '(remove it or choose another bag_path)'
         )
-    writer = Writer(path, version=BAG_VERSION, storage_plugin=plugin)
+    writer = JazzyWriter(path, storage_plugin=plugin)
+    for key, value in custom_data.items():
+        writer.set_custom_data(key, value)
     try:
         writer.open()
     except (WriterError, OSError) as err:

@@ -28,7 +28,7 @@ before control-on and the last ``window_s``):
   2..8 dB in the 6-32 Hz bands, where lightly damped modes dominate); this is the
   "never worse than off" comparison. The reference is computed once per process for all
   points that share it (``seeds: common``).
-- ``convergence_s``: :func:`report.convergence_s` of the targeted lines.
+- ``convergence_s``: :func:`report.convergence_s` of the targeted lines (the report's).
 - ``diverged``: the loop went unstable: a non-finite value; or the canceller's command went
   past the actuator's dynamic rating in the controlled window (it asked for more than a
   strut can give; the weights then grow without bound); or the largest rise elsewhere is
@@ -144,7 +144,8 @@ def point_metrics(record: LoopRecord, scenario: Scenario, config: ModelConfig
         "tones_reduction_db": [r["reduction_db"] for r in rows],
         "tones_at_floor": list(levels["controlled"][2]),
         "attenuation_db": min(reductions) if reductions else None,
-        "convergence_s": _finite(report.convergence_s(z, before.stop, targeted))
+        "convergence_s": _finite(report.convergence_s(report.levels_over_time(
+            z, np.arange(z.size), before.stop, tones, targeted), targeted))
         if targeted else None,
     }
     out.update(_rise(z, before, after, rows, targeted, excluded))

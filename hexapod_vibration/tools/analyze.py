@@ -32,12 +32,15 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--control-on", type=cli.number(0.0, cli.MAX_RUN_S, "s"), metavar="S",
                         default=None, help="sim time (s) control went on (default: from the bag)")
     parser.add_argument("--window", type=cli.number(0.0, 3600.0, "s", low_open=True),
-                        default=DEFAULT_WINDOW_S, metavar="S",
-                        help="spectrum window length (s), at least 10 s recommended")
+                        default=None, metavar="S",
+                        help="spectrum window length (s; default: the run's, else "
+                             f"{DEFAULT_WINDOW_S:g} s)")
     parser.add_argument("--harmonics-of", type=cli.number(0.0, 500.0, "Hz", high_open=True),
-                        default=0.0, metavar="HZ",
-                        help="also report harmonic distortion of this fundamental (0: off)")
-    parser.add_argument("--scenario", default=None, help="name written into report.json")
+                        default=None, metavar="HZ",
+                        help="also report harmonic distortion of this fundamental")
+    parser.add_argument("--scenario", default=None,
+                        help="name written into report.json (default: the run's, else the "
+                             "bag directory's name)")
     parser.add_argument("--model", type=cli.existing_file, default=None,
                         help="physical model YAML for the Jacobian (default: packaged)")
     parser.add_argument("--no-plots", action="store_true", help="skip the PNG figures")
@@ -48,21 +51,29 @@ def main(argv: list[str] | None = None) -> int:
     """Entry point; returns the exit code (2 on bad input, with the reason on stderr)."""
     args = build_parser().parse_args(argv)
     from hexapod_vibration.analysis.bag_io import BagError
-    from hexapod_vibration.analysis.report import analyze_bag, format_table
+    from hexapod_vibration.analysis.report import (
+        Request,
+        WindowTooShort,
+        analyze_bag,
+        format_harmonics,
+        format_table,
+    )
     from hexapod_vibration.core.model.config import load_model_config
 
     try:
         model = load_model_config(args.model or config_path("pph_model.yaml"))
+        request = Request(args.tones, args.scenario, args.window, args.harmonics_of)
         with outputs.staged(args.out) as staging:     # every file complete, or none
-            result = analyze_bag(args.bag, staging, model, args.tones,
-                                 args.scenario or args.bag.resolve().name, args.window,
-                                 args.control_on, args.harmonics_of, plots=not args.no_plots)
-    except (BagError, ValueError, FileNotFoundError) as exc:
+            result = analyze_bag(args.bag, staging, model, request, args.control_on,
+                                 plots=not args.no_plots)
+    except (BagError, WindowTooShort, ValueError, FileNotFoundError) as exc:
         return cli.fail("analyze", exc)
     except KeyboardInterrupt as exc:
         print("analyze: interrupted; nothing written", file=sys.stderr, flush=True)
         return cli.interrupted_exit_code(exc)
-    print(format_table(result.report))
+    print(format_table(result.report, result.paper_reduction_db))
+    if result.harmonics is not None:
+        print(format_harmonics(result.harmonics, result.report["scenario"]))
     for note in result.details["notes"]:
         print(f"note: {note}")
     print(f"wrote {args.out / 'report.json'}")

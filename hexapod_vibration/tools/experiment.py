@@ -15,9 +15,15 @@
 4. Stops every process with SIGINT (the recorder closes the bag), analyses the bag into
    ``DIR/report.json``, ``DIR/details.json`` and PNG plots, and prints the table.
 
-Ctrl-C at any time stops all processes and leaves a readable bag. ``--demo`` runs the two
-tables of the paper (``single_tone_harmonic``, ``close_tones``) into ``DIR/<scenario>`` and
-prints them side by side with the paper's reductions.
+Ctrl-C at any time stops all processes and leaves a readable bag. ``--demo`` runs the
+paper's Tables 1 and 2 and Fig. 4 (``single_tone_harmonic``, ``close_tones``,
+``plant_response``) into ``DIR/<scenario>``, prints the three tables with the paper's
+reductions and writes ``DIR/summary.md``.
+
+The run record (scenario, tones, windows, planned identification, the paper's column) goes
+into the bag's ``metadata.yaml`` ``custom_data``, so ``analyze DIR/bag`` gives exactly this
+report. The runner releases the driver only when the recorder itself reports every loop
+publisher matched (its ``/diagnostics``), so the bag has every sample from 0.
 """
 
 from __future__ import annotations
@@ -38,14 +44,18 @@ from hexapod_vibration.tools import outputs
 from hexapod_vibration.tools.processes import Child, spawn_module, stop_all
 
 if TYPE_CHECKING:       # imported where used: ``experiment --help`` stays cheap
+    from hexapod_vibration.analysis.report import RunRecord
     from hexapod_vibration.core.sim.scenario import Scenario
 
 PAPER_REDUCTION_DB = {
     "single_tone_harmonic": {40.0: 66.4, 80.0: 40.2, 120.0: -10.0},
     "close_tones": {37.0: -8.0, 38.0: -11.6, 39.0: 60.1, 40.0: 59.1, 41.0: -1.0, 42.0: -4.8},
 }
-DEMO_SCENARIOS = ("single_tone_harmonic", "close_tones")
+DEMO_SCENARIOS = ("single_tone_harmonic", "close_tones", "plant_response")
 STOP_TIMEOUT_S = 15.0
+DRIVER_TOPICS = ("/pph/accel", "/pph/eddy", "/pph/actuator_force", "/clock")
+NOTCH_TOPICS = ("/pph/notch_command", "/pph/notch_weights")
+POINTING_TOPICS = ("/pph/pointing_command",)
 
 
 class ExperimentError(RuntimeError):
@@ -101,13 +111,43 @@ PARAMS_FILE_HEADER = """\
 
 
 def params_file_text(scenario: Scenario, mode: str) -> str:
-    """``params.yaml``: the nodes' parameters of a scenario, reusable with the launch file."""
+    """``params.yaml``: the nodes' parameters of a scenario, reusable with the launch file.
+
+    The recorder's section carries the run record (what ``analyze`` needs to report the run
+    as planned), so a launch-recorded bag is reported the same way.
+    """
     import yaml
 
     header = PARAMS_FILE_HEADER.format(
         scenario=scenario.name, mode=mode, control_on_s=scenario.control_on_s,
         duration_s=scenario.duration_s, control_on_sample=round(scenario.control_on_s * 1e3))
-    return header + yaml.safe_dump(node_parameters(scenario, mode), sort_keys=False)
+    params = node_parameters(scenario, mode)
+    params["pph_recorder"] = {"ros__parameters": {
+        "run_record": run_record(scenario, mode).to_json()}}
+    return header + yaml.safe_dump(params, sort_keys=False)
+
+
+def run_record(scenario: Scenario, mode: str) -> RunRecord:
+    """What the bag must say about this run so that ``analyze`` reports it as planned."""
+    from hexapod_vibration.analysis.report import RunRecord
+    from hexapod_vibration.core.control.adaptation import ToneResponseIdentifier
+
+    notch = [float(f) for f in scenario.notch.tone_frequencies_hz]
+    on = int(round(scenario.control_on_s * 1000)) if scenario.control_on_s < scenario.duration_s \
+        else -1
+    ident = (int(round(ToneResponseIdentifier(6, notch, 1000.0).duration_s * 1000))
+             if notch else 0)
+    return RunRecord(
+        scenario=scenario.name,
+        report_tones_hz=[float(f) for f in scenario.report_tones_hz] or notch,
+        notch_tones_hz=notch, window_s=float(scenario.window_s), samples=scenario.samples,
+        control_on_sample=on,
+        identify_at_sample=int(round(scenario.identify_at_s * 1000)) if notch else -1,
+        identification_samples=ident,
+        harmonics_of_hz=float(scenario.report_harmonics_of_hz),
+        paper_reduction_db={f"{f:g}": v for f, v in
+                            PAPER_REDUCTION_DB.get(scenario.name, {}).items()},
+        mode=mode)
 
 
 # ---------------------------------------------------------------------------- processes
@@ -149,6 +189,7 @@ class Supervisor:
         self.sim_time_s = -1.0
         self.driver: dict[str, str] = {}
         self.notch: dict[str, str] = {}
+        self.recorder: dict[str, str] = {}
         self._watch_clock = watch_clock
         if watch_clock:
             self.node.create_subscription(Clock, "/clock", self._on_clock, CLOCK_QOS)
@@ -169,6 +210,8 @@ class Supervisor:
                     self.sim_time_s = max(self.sim_time_s, int(values.get("sample", 0)) / 1e3)
             elif status.name == NOTCH_STATUS:
                 self.notch = values
+            elif status.name.startswith("pph_recorder"):
+                self.recorder = values
 
     def spin(self, seconds: float) -> None:
         """Process callbacks for ``seconds`` of wall time."""
@@ -187,6 +230,14 @@ class Supervisor:
         if with_notch:
             needed.append(n.count_publishers("/pph/notch_command") >= 1)
         return all(needed)
+
+    def recorder_behind(self, topics: list[str], samples: int) -> list[str]:
+        """Topics of which the recorder reports fewer than ``samples`` messages written."""
+        return [t for t in topics if int(self.recorder.get(f"{t} messages", "0")) < samples]
+
+    def recorder_unmatched(self, topics: list[str]) -> list[str]:
+        """Topics on which the recorder itself reports no matched publisher yet."""
+        return [t for t in topics if int(self.recorder.get(f"{t} publishers", "0")) < 1]
 
     def set_parameter(self, node: str, name: str, value: Any, timeout_s: float = 10.0) -> None:
         """Set a parameter through the node's parameter service; raise if rejected."""
@@ -227,6 +278,68 @@ class RunOptions:
     """Driver and controllers in one process (``pph_graph``) instead of three."""
 
 
+class Progress:
+    """Progress of a run: one updating line with an ETA on a terminal, plain lines otherwise.
+
+    The ETA extrapolates the sim time's rate over the run so far (wall s per sim s).
+    """
+
+    TTY_PERIOD_S = 0.5
+    PLAIN_PERIOD_S = 5.0
+
+    def __init__(self, name: str, duration_s: float, stream: Any = None) -> None:
+        """Report on ``stream`` (default stdout) for a run of ``duration_s`` sim seconds."""
+        self.name, self.duration_s = name, duration_s
+        self.stream = stream or sys.stdout
+        self.tty = bool(getattr(self.stream, "isatty", lambda: False)())
+        self._start: tuple[float, float] | None = None
+        self._last = -math.inf
+        self._shown = False
+
+    def line(self, sim_s: float, rate_hz: str | None, state: str, what: str, now: float
+             ) -> str:
+        """The progress text at wall time ``now`` (monotonic s)."""
+        if self._start is None or sim_s < self._start[1]:
+            self._start = (now, sim_s)
+        wall0, sim0 = self._start
+        speed = (sim_s - sim0) / (now - wall0) if now > wall0 and sim_s > sim0 else 0.0
+        eta = (f"ETA {_duration_text((self.duration_s - sim_s) / speed)}" if speed > 0
+               else "ETA -")
+        try:
+            rate = f"{float(rate_hz):.0f} samples/s"
+        except (TypeError, ValueError):
+            rate = "- samples/s"
+        return (f"  [{self.name}] sim {sim_s:5.1f} / {self.duration_s:g} s "
+                f"({100 * min(sim_s / self.duration_s, 1.0):3.0f} %), {eta}, loop {rate}, "
+                f"notch {state}: {what}")
+
+    def update(self, sim_s: float, rate_hz: str | None, state: str, what: str) -> None:
+        """Show the progress (rate-limited)."""
+        now = time.monotonic()
+        text = self.line(sim_s, rate_hz, state, what, now)
+        if now - self._last < (self.TTY_PERIOD_S if self.tty else self.PLAIN_PERIOD_S):
+            return
+        self._last = now
+        if self.tty:
+            self.stream.write(f"\r{text}\x1b[K")
+            self._shown = True
+        else:
+            self.stream.write(text + "\n")
+        self.stream.flush()
+
+    def clear(self) -> None:
+        """End the updating line (terminal only) so that other output starts clean."""
+        if self._shown:
+            self.stream.write("\r\x1b[K")
+            self.stream.flush()
+            self._shown = False
+
+
+def _duration_text(seconds: float) -> str:
+    seconds = max(0, int(round(seconds)))
+    return f"{seconds // 60}:{seconds % 60:02d}"
+
+
 class ExperimentRun:
     """One scenario through the ROS graph: start, drive the timeline, stop."""
 
@@ -239,6 +352,7 @@ class ExperimentRun:
         options.out.mkdir(parents=True, exist_ok=True)
         self.params_file = options.out / "params.yaml"
         outputs.write_text(self.params_file, params_file_text(options.scenario, options.mode))
+        self.record = run_record(options.scenario, options.mode)
         self.children: list[Child] = []
         self.sup: Supervisor | None = None
         sc = options.scenario
@@ -247,26 +361,33 @@ class ExperimentRun:
         self.n_end = sc.samples
         default_timeout = 60.0 + 10.0 * sc.duration_s
         self.deadline = time.monotonic() + (options.wall_timeout_s or default_timeout)
-        self._last_progress = 0.0
+        self.progress = Progress(sc.name, sc.duration_s)
 
     def start(self) -> None:
-        """Recorder first, then the controllers, the driver last."""
+        """Recorder first, then the controllers; the driver when the recorder matched them."""
         logs = self.o.out
         common = ["--params-file", str(self.params_file)]
         self.children.append(start_child("pph_recorder", "hexapod_vibration.nodes.recorder", [
-            "-p", f"bag_path:={self.bag}", "-p", f"storage:={self.o.storage}"], logs))
+            *common, "-p", f"bag_path:={self.bag}", "-p", f"storage:={self.o.storage}"], logs))
+        self.sup = Supervisor()
         if self.o.composed:
             self.children.append(start_child("pph_graph", "hexapod_vibration.nodes.pph_graph",
                                              common + self._breakpoint("pph_driver:"), logs))
-        else:
-            if self.has_notch:
-                self.children.append(start_child(
-                    "notch_controller", "hexapod_vibration.nodes.notch_controller", common, logs))
+            return
+        if self.has_notch:
             self.children.append(start_child(
-                "pointing_controller", "hexapod_vibration.nodes.pointing_controller", common, logs))
-            self.children.append(start_child("pph_driver", "hexapod_vibration.nodes.pph_driver",
-                                             common + self._breakpoint(), logs))
-        self.sup = Supervisor()
+                "notch_controller", "hexapod_vibration.nodes.notch_controller", common, logs))
+        self.children.append(start_child(
+            "pointing_controller", "hexapod_vibration.nodes.pointing_controller", common, logs))
+        controllers = [*POINTING_TOPICS, *(NOTCH_TOPICS if self.has_notch else ())]
+        self._wait(lambda: not self.sup.recorder_unmatched(controllers),
+                   "recorder matching the controllers")
+        self.children.append(start_child("pph_driver", "hexapod_vibration.nodes.pph_driver",
+                                         common + self._breakpoint(), logs))
+
+    def recorded_topics(self) -> list[str]:
+        """Every topic whose publishers the recorder must match before sample 0."""
+        return [*DRIVER_TOPICS, *POINTING_TOPICS, *(NOTCH_TOPICS if self.has_notch else ())]
 
     def _breakpoint(self, prefix: str = "") -> list[str]:
         """Lockstep: the driver starts held before sample 0 (after the params file: wins)."""
@@ -287,21 +408,23 @@ class ExperimentRun:
             self._progress(what)
 
     def _progress(self, what: str) -> None:
-        now = time.monotonic()
-        if now - self._last_progress < 2.0:
-            return
-        self._last_progress = now
-        rate = self.sup.driver.get("rate_hz", "?")
-        state = self.sup.notch.get("state", "-")
-        print(f"  [{self.o.scenario.name}] sim {max(self.sup.sim_time_s, 0.0):6.2f} / "
-              f"{self.o.scenario.duration_s:.1f} s  loop {rate} samples/s  notch {state}  "
-              f"({what})", flush=True)
+        sup = self.sup
+        self.progress.update(max(sup.sim_time_s, 0.0), sup.driver.get("rate_hz"),
+                             sup.notch.get("state", "-"), what)
+
+    def say(self, text: str) -> None:
+        """A line of its own (ends the progress line first)."""
+        self.progress.clear()
+        print(text, flush=True)
 
     def run(self) -> None:
         """Drive the timeline (see the module docstring)."""
         self.start()
         self._wait(lambda: self.sup.graph_ready(self.has_notch), "waiting for the graph")
-        self.sup.spin(1.0)       # discovery is not matching: let the readers settle
+        # Discovery is not matching: the recorder itself must report every publisher matched
+        # (lockstep: before the driver leaves its start breakpoint, so the bag has sample 0).
+        self._wait(lambda: not self.sup.recorder_unmatched(self.recorded_topics()),
+                   "recorder matching every publisher")
         if self.o.mode == "lockstep":
             self._run_lockstep()
         else:
@@ -315,21 +438,28 @@ class ExperimentRun:
             self.sup.set_parameter("pph_driver", "hold_at_time_s", sc.control_on_s)
             self._wait(lambda: self.sup.held_at(self.n_on), "running with control off")
             self.sup.set_parameter("notch_controller", "enabled", True)
-            print(f"  [{sc.name}] control on at {sc.control_on_s:.3f} s (sample {self.n_on})",
-                  flush=True)
+            self.say(f"  [{sc.name}] control on at {sc.control_on_s:.3f} s (sample {self.n_on})")
         self.sup.set_parameter("pph_driver", "hold_at_time_s", sc.duration_s)
         self._wait(lambda: self.sup.held_at(self.n_end), "running")
+        # The loop is held at its last sample: wait until the recorder wrote every sample
+        # (it may lag a fast lockstep loop by seconds; stopping it then would lose them).
+        from hexapod_vibration.analysis.bag_io import STRUT_TOPICS
+
+        loop = [t for t in STRUT_TOPICS if t != "/pph/notch_command" or self.has_notch]
+        self._wait(lambda: not self.sup.recorder_behind(loop, self.n_end),
+                   "recorder writing the last samples")
 
     def _run_realtime(self) -> None:
         sc = self.o.scenario
         if self.n_on > 0:
             self._wait(lambda: self.sup.sim_time_s >= sc.control_on_s, "running, control off")
             self.sup.set_parameter("notch_controller", "enabled", True)
-            print(f"  [{sc.name}] control on at sim {self.sup.sim_time_s:.3f} s", flush=True)
+            self.say(f"  [{sc.name}] control on at sim {self.sup.sim_time_s:.3f} s")
         self._wait(lambda: self.sup.sim_time_s >= sc.duration_s, "running")
 
     def stop(self) -> None:
         """Stop every process (recorder last, so the bag holds everything) and rclpy."""
+        self.progress.clear()
         order = sorted(self.children, key=lambda c: c.name == "pph_recorder")
         stop_children(order)
         if self.sup is not None:
@@ -337,8 +467,11 @@ class ExperimentRun:
             self.sup = None
 
 
-def run_scenario(options: RunOptions) -> dict[str, Any]:
-    """Run, stop, analyse; return the report. Ctrl-C stops cleanly and re-raises."""
+def run_scenario(options: RunOptions) -> Any:
+    """Run, stop, analyse; return the Analysis. Ctrl-C stops cleanly and re-raises.
+
+    The analysis is ``analyze DIR/bag``'s: everything comes from the run record in the bag.
+    """
     run = ExperimentRun(options)
     try:
         run.run()
@@ -347,12 +480,9 @@ def run_scenario(options: RunOptions) -> dict[str, Any]:
     from hexapod_vibration.analysis.report import analyze_bag
     from hexapod_vibration.core.model.config import load_model_config
 
-    sc = options.scenario
     model = load_model_config(config_path("pph_model.yaml"))
     with outputs.staged(options.out) as staging:     # every file complete, or none
-        result = analyze_bag(run.bag, staging, model, list(sc.report_tones_hz) or None,
-                             sc.name, sc.window_s, harmonics_of_hz=sc.report_harmonics_of_hz)
-    return result.report
+        return analyze_bag(run.bag, staging, model)
 
 
 # ---------------------------------------------------------------------------- CLI
@@ -378,7 +508,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--storage", choices=STORAGES, default="mcap",
                         help="rosbag2 storage of DIR/bag (default mcap, as Jazzy)")
     parser.add_argument("--demo", action="store_true",
-                        help="run the paper's Tables 1 and 2 into DIR/<scenario>")
+                        help="run the paper's Tables 1 and 2 and Fig. 4 into DIR/<scenario> "
+                             "and write DIR/summary.md")
     parser.set_defaults(mode="lockstep")
     return parser
 
@@ -419,16 +550,6 @@ def check_arguments(args: argparse.Namespace) -> list[Scenario]:
     return scenarios
 
 
-def side_by_side(left: str, right: str, gap: int = 4) -> str:
-    """Two text blocks next to each other."""
-    a, b = left.splitlines(), right.splitlines()
-    width = max(map(len, a)) + gap
-    rows = max(len(a), len(b))
-    a += [""] * (rows - len(a))
-    b += [""] * (rows - len(b))
-    return "\n".join(f"{x:<{width}}{y}" for x, y in zip(a, b, strict=True))
-
-
 def main(argv: list[str] | None = None) -> int:
     """Entry point: 0 success, 2 bad input, 1 the run failed, 130/143 on SIGINT/SIGTERM."""
     cli.install_stop_handlers()
@@ -445,29 +566,43 @@ def main(argv: list[str] | None = None) -> int:
 
 def _run_all(args: argparse.Namespace, scenarios: list[Scenario]) -> int:
     from hexapod_vibration.analysis.bag_io import BagError
-    from hexapod_vibration.analysis.report import format_table
+    from hexapod_vibration.analysis.report import WindowTooShort
+    from hexapod_vibration.analysis.summary import write_summary
 
-    tables = []
+    tables, results = [], []
     for sc in scenarios:
         out = args.out / sc.name if args.demo else args.out
         print(f"experiment {sc.name}: {sc.description} ({args.mode}, {sc.duration_s:g} s, "
               f"control on at {sc.control_on_s:g} s) -> {out}", flush=True)
         try:
-            report = run_scenario(RunOptions(sc, out, args.mode, args.storage,
+            result = run_scenario(RunOptions(sc, out, args.mode, args.storage,
                                              composed=args.composed))
         except KeyboardInterrupt as exc:
             print(f"\nexperiment: interrupted; processes stopped, bag in {out / 'bag'}",
                   file=sys.stderr, flush=True)
             return cli.interrupted_exit_code(exc)
-        except (ExperimentError, BagError) as exc:
+        except (ExperimentError, BagError, WindowTooShort) as exc:
             print(f"experiment: {exc}", file=sys.stderr)
             return 2 if isinstance(exc, ExperimentError) and "exists" in str(exc) else 1
-        tables.append(format_table(report, PAPER_REDUCTION_DB.get(sc.name)))
+        results.append(result)
+        tables.append(scenario_table(result))
         print(tables[-1], flush=True)
-    if len(tables) == 2:
-        print("\nPaper Tables 1 and 2 on the simulated hexapod (dB re 1 g):")
-        print(side_by_side(*tables))
+    if args.demo:
+        print("\nThe paper's Tables 1 and 2 and Fig. 4 on the simulated hexapod:\n")
+        print("\n\n".join(tables))
+        summary = write_summary(args.out / "summary.md", results, args.out)
+        print(f"\nwrote {summary}")
     return 0
+
+
+def scenario_table(result: Any) -> str:
+    """The printed table of one scenario: tones (with the paper's column) or harmonics."""
+    from hexapod_vibration.analysis.report import format_harmonics, format_table
+
+    if result.harmonics is not None and not any(
+            r["controlled"] for r in result.report["tones"]):
+        return format_harmonics(result.harmonics, result.report["scenario"])
+    return format_table(result.report, result.paper_reduction_db)
 
 
 if __name__ == "__main__":

@@ -107,14 +107,46 @@ def test_harmonics_above_nyquist_are_dropped():
     assert hd['frequencies_hz'] == [150.0, 300.0, 450.0]
 
 
-def test_tone_envelope_follows_amplitude_step():
+def test_tone_level_over_time_follows_amplitude_step():
     t = np.arange(int(10 * FS)) / FS
     amp = np.where(t < 5.0, 0.4, 0.04)
     x = amp * np.cos(2 * np.pi * 40.0 * t + 0.5) + 0.1 * np.cos(2 * np.pi * 55.0 * t)
-    t_env, rms = sp.tone_envelope(x, FS, 40.0, window_s=0.2)
-    assert t_env.size == t.size - 199
-    assert np.allclose(rms[t_env < 4.8], 0.4 / np.sqrt(2), rtol=1e-3)
-    assert np.allclose(rms[t_env > 5.2], 0.04 / np.sqrt(2), rtol=1e-2)
+    window = sp.level_window_s(40.0, [55.0])
+    assert window == pytest.approx(4.5 / 15.0)
+    t_lev, rms = sp.tone_level_over_time(x + sp.G0, FS, 40.0, window)
+    # only complete windows: the first centre is half a window in, none past the end
+    assert t_lev[0] == pytest.approx(0.5 * (window - 1 / FS), abs=1e-9)
+    assert t_lev[-1] <= t[-1] - 0.5 * window + 0.01
+    far = np.abs(t_lev - 5.0) > 0.5 * window + 0.01
+    assert np.allclose(rms[far & (t_lev < 5.0)], 0.4 / np.sqrt(2), rtol=1e-3)
+    assert np.allclose(rms[far & (t_lev > 5.0)], 0.04 / np.sqrt(2), rtol=1e-2)
+
+
+def test_tone_level_over_time_rejects_gravity_and_a_neighbour_1hz_away():
+    """Close tones: 39 Hz 73 dB below 40 Hz, with 1 g of gravity, measured within 1.1 dB.
+
+    A neighbour rejected by 92 dB leaves 19 dB below the weak tone: +-1.0 dB of ripple.
+    """
+    t = np.arange(int(20 * FS)) / FS
+    weak, strong = sp.G0 * 10 ** (-110 / 20), sp.G0 * 10 ** (-37 / 20)   # RMS (m/s^2)
+    x = (sp.G0 + np.sqrt(2) * weak * np.cos(2 * np.pi * 39.0 * t)
+         + np.sqrt(2) * strong * np.cos(2 * np.pi * 40.0 * t + 0.7))
+    window = sp.level_window_s(39.0, [37.0, 38.0, 40.0, 41.0, 42.0])
+    assert window == pytest.approx(4.5)
+    _, rms = sp.tone_level_over_time(x, FS, 39.0, window)
+    assert np.all(np.abs(sp.to_db_re_g(rms) - (-110.0)) < 1.1)
+
+
+def test_tone_level_over_time_never_spans_a_missing_sample():
+    t = np.arange(4000) / FS
+    x = np.cos(2 * np.pi * 40.0 * t)
+    index = np.delete(np.arange(4000), np.arange(2000, 2010))
+    t_lev, rms = sp.tone_level_over_time(x[index], FS, 40.0, 0.2, index=index)
+    half = 0.5 * (0.2 * FS - 1)          # samples either side of a window's centre
+    first, last = t_lev * FS - half, t_lev * FS + half
+    assert not np.any((first <= 2009) & (last >= 2000))
+    assert np.any(last == 1999) and np.any(first == 2010)   # but right up to the gap
+    assert np.allclose(rms, 1 / np.sqrt(2), rtol=1e-3)
 
 
 def test_convergence_time_on_exponential_within_one_step():
@@ -126,12 +158,58 @@ def test_convergence_time_on_exponential_within_one_step():
     assert abs(got - expected) <= dt
 
 
-def test_convergence_time_nan_when_never_settled():
+def test_convergence_time_is_first_passage_and_nan_without_data_after_control_on():
+    """The level fluctuating around a floor after it got there still converged then."""
     t = np.arange(0.0, 20.0, 0.01)
-    level = np.where(np.floor(t * 2) % 2 == 0, 10.0, -10.0)
-    level[-1] = 10.0
-    assert np.isnan(sp.convergence_time_s(t, level, 5.0))
+    rng = np.random.default_rng(4)
+    floor = 10 * np.log10(rng.exponential(size=t.size))       # Rayleigh level, 5.6 dB std
+    level = np.where(t < 8.0, 0.0, -60.0) + np.where(t < 8.0, 0.0, floor)
+    got = sp.convergence_time_s(t, level, 5.0)
+    assert 3.0 <= got <= 3.2
     assert np.isnan(sp.convergence_time_s(t, np.zeros_like(t), 25.0))
+
+
+def test_tone_convergence_is_the_one_definition():
+    """tone_convergence = level over time + convergence_time_s, on a decaying tone."""
+    t = np.arange(int(20 * FS)) / FS
+    on, tau = 5000, 0.5
+    amp = np.where(t < 5.0, 1.0, np.exp(-(t - 5.0) / tau) + 1e-4)
+    x = sp.G0 + amp * np.cos(2 * np.pi * 40.0 * t) + 0.3 * np.cos(2 * np.pi * 80.0 * t)
+    result = sp.tone_convergence(x, FS, 40.0, on, other_hz=[80.0])
+    t_lev, rms = sp.tone_level_over_time(x, FS, 40.0, result['window_s'])
+    assert result['window_s'] == pytest.approx(0.2)
+    np.testing.assert_allclose(result['t_s'], t_lev)
+    expected = sp.convergence_time_s(t_lev, sp.to_db_re_g(rms), on / FS)
+    assert result['convergence_s'] == expected
+    # amplitude exp(-t/tau) + 1e-4 is within 3 dB (x sqrt 2) of 1e-4 after
+    # tau ln(1 / (0.414e-4)) = 5.04 s; the 0.2 s window shifts that by less than 0.1 s
+    assert result['convergence_s'] == pytest.approx(0.5 * np.log(1 / (np.sqrt(2) - 1) / 1e-4),
+                                                    abs=0.1)
+    assert result['final_level_db'] == pytest.approx(sp.to_db_re_g(1e-4 / np.sqrt(2)),
+                                                     abs=0.3)
+
+
+def test_floor_and_level_do_not_depend_on_the_other_tones_requested():
+    rng = np.random.default_rng(9)
+    t = np.arange(int(30 * FS)) / FS
+    x = (1e-3 * rng.standard_normal(t.size) + 0.1 * np.cos(2 * np.pi * 39.0 * t)
+         + 0.1 * np.cos(2 * np.pi * 40.0 * t) + sp.G0)
+    alone = sp.tone_and_floor_db(x, FS, [38.0])
+    many = sp.tone_and_floor_db(x, FS, [37.0, 38.0, 39.0, 40.0, 41.0, 42.0])
+    assert alone[0][0] == many[0][1] and alone[1][0] == many[1][1]
+    assert sp.noise_floor_db(x, FS, 38.0) == pytest.approx(alone[1][0])
+
+
+def test_harmonic_distortion_counts_every_harmonic_below_nyquist():
+    t = np.arange(int(12 * FS)) / FS
+    amps = {40.0: 1.0, 80.0: 0.1, 280.0: 0.2, 480.0: 0.05}
+    x = sum(a * np.cos(2 * np.pi * f * t) for f, a in amps.items())
+    hd = sp.harmonic_distortion(x, FS, 40.0)
+    assert hd['harmonics'] == 11
+    assert hd['frequencies_hz'] == [40.0 * k for k in range(1, 13)]
+    expected = np.sqrt(0.1 ** 2 + 0.2 ** 2 + 0.05 ** 2)
+    assert hd['thd_ratio'] == pytest.approx(expected, rel=0.01)
+    assert hd['relative_db'][6] == pytest.approx(20 * np.log10(0.2), abs=0.1)
 
 
 def test_short_signal_warns_and_uses_one_segment():

@@ -60,6 +60,18 @@ def test_lockstep_run_records_a_bag_and_reports_the_reduction(ros_env, scenario_
         assert series[topic].missing_samples == 0, topic
         assert series[topic].index_source == "in-band"
     assert len(series["/pph/accel"]) == 9000
+    # The recorder matched every publisher before sample 0: every topic from sample 0.
+    for topic in ("/pph/accel", "/pph/eddy", "/pph/notch_command", "/pph/pointing_command",
+                  "/pph/actuator_force"):
+        assert series[topic].first_sample == 0 and len(series[topic]) == 9000, topic
+        assert series[topic].duplicate_samples == 0, topic
+    # analyze BAG gives exactly the experiment's report (the run record is in the bag)
+    analysed = subprocess.run([sys.executable, "-m", "hexapod_vibration.tools.analyze",
+                               str(out / "bag"), "--out", str(tmp_path / "analysed")],
+                              capture_output=True, text=True, timeout=300)
+    assert analysed.returncode == 0, analysed.stderr
+    assert json.loads((tmp_path / "analysed" / "report.json").read_text()) == report
+    assert report["scenario"] == "short_single_tone"
     for png in ("spectra.png", "convergence.png", "pointing.png", "plant_response.png"):
         assert (out / png).stat().st_size > 10_000
     params = yaml.safe_load((out / "params.yaml").read_text())
