@@ -15,8 +15,13 @@ their coefficients P_t and the set ``mu``:
 
 The canceller has one ``mu``; per-tone rates go into its coefficients as
 ``P_t mu_t / mu`` (:func:`~hexapod_vibration.core.control.sensitivity.per_tone_coefficients`).
-The rise is the largest ``20 log10 |S|`` over 0..fs/2 in the chosen view (default the
-6x6 loop's largest singular value, which bounds every disturbance direction).
+The rise is the largest ``20 log10 |S|`` over 0..fs/2 in the chosen view: by default
+the output the report measures (the top plate's z axis) under the disturbance measured
+before control, else the 6x6 loop's largest singular value (any disturbance direction).
+The rise right beside a notch is set by the weight loop's phase there, not by the rate;
+the rise far from the tones (where the plant is large, e.g. its resonances) scales with
+the rates. So ``auto`` can only lower the second; when the first alone breaks the limit
+it keeps ``mu`` and says so.
 """
 
 from __future__ import annotations
@@ -31,8 +36,8 @@ from hexapod_vibration.core.control.notch import validate_frequencies
 
 DEFAULT_MAX_RISE_DB = 3.0
 MU_POLICIES = ('manual', 'auto')
-BISECTION_STEPS = 24
-SMALLEST_SCALE = 1e-6
+RELATIVE_TOLERANCE = 0.02
+SMALLEST_SCALE = 1e-3
 
 
 @dataclass(frozen=True)
@@ -77,38 +82,32 @@ def validate_policy(policy: str, max_rise_db: float) -> tuple[str, float]:
 
 
 class _RiseEvaluator:
-    """Predicted rise (dB) and stability for candidate per-tone rates, on a fixed grid."""
+    """Predicted rise (dB) and stability for candidate per-tone rates.
+
+    The grid follows the candidate rates (the notches' widths), so each evaluation
+    builds it and evaluates G there.
+    """
 
     def __init__(self, plant: sensitivity.PlantResponse, tones: np.ndarray, fs: float,
-                 coefficients: np.ndarray, metric: str,
-                 frequencies_hz: np.ndarray | None) -> None:
+                 coefficients: np.ndarray, metric: str, output_weights: np.ndarray | None,
+                 disturbance_csd: sensitivity.PlantResponse | None) -> None:
         self._tones, self._fs, self._p, self._metric = tones, fs, coefficients, metric
-        self._plant = plant
-        self._f = (sensitivity.prediction_grid(tones, fs) if frequencies_hz is None
-                   else np.asarray(frequencies_hz, dtype=float))
-        self._g = np.asarray(plant(self._f), dtype=complex)
+        self._plant, self._c, self._phi = plant, output_weights, disturbance_csd
 
     def rise(self, rates: np.ndarray) -> tuple[float, float]:
         """(rise dB, at Hz); (inf, NaN) when the closed loop would be unstable."""
-        if not sensitivity.closed_loop_is_stable(self._plant, self._tones, self._fs,
-                                                 self._p, rates):
-            return float('inf'), float('nan')
-        k = sensitivity.canceller_frequency_response(self._tones, self._fs, self._p, rates,
-                                                     self._f)
-        s = sensitivity.sensitivity_matrix(self._g, k)
-        if self._metric == 'sigma_max':
-            mag = np.linalg.svd(s, compute_uv=False)[:, 0]
-        else:
-            mag = np.abs(sensitivity.strut_sensitivity(self._g, k)).max(axis=1)
-        i = int(np.argmax(mag))
-        return float(20.0 * np.log10(mag[i])), float(self._f[i])
+        prediction = sensitivity.predict_sensitivity(
+            self._plant, self._tones, self._fs, self._p, rates,
+            output_weights=self._c if self._metric == 'output' else None,
+            disturbance_csd=self._phi)
+        return prediction.largest_rise(self._metric)
 
 
 def _largest_within(ok, lo: float, hi: float) -> float:
-    """Largest x in [lo, hi] with ok(x), by bisection in log scale (ok(lo) assumed)."""
+    """Largest x in [lo, hi] with ok(x), to 2 %, by bisection in log scale (ok(lo) assumed)."""
     if ok(hi):
         return hi
-    for _ in range(BISECTION_STEPS):
+    while hi > lo * (1.0 + RELATIVE_TOLERANCE):
         mid = float(np.sqrt(lo * hi))
         lo, hi = (mid, hi) if ok(mid) else (lo, mid)
     return lo
@@ -117,8 +116,9 @@ def _largest_within(ok, lo: float, hi: float) -> float:
 def choose_tone_rates(plant: sensitivity.PlantResponse,
                       tone_frequencies_hz: Sequence[float] | np.ndarray, sample_rate_hz: float,
                       coefficients: np.ndarray, mu: float, policy: str = 'manual',
-                      max_rise_db: float = DEFAULT_MAX_RISE_DB, metric: str = 'sigma_max',
-                      frequencies_hz: np.ndarray | None = None) -> MuChoice:
+                      max_rise_db: float = DEFAULT_MAX_RISE_DB, metric: str | None = None,
+                      output_weights: np.ndarray | None = None,
+                      disturbance_csd: sensitivity.PlantResponse | None = None) -> MuChoice:
     """Per-tone rates for ``policy`` and the rise they predict (see the module).
 
     Args:
@@ -129,49 +129,71 @@ def choose_tone_rates(plant: sensitivity.PlantResponse,
         mu: the set rate, the ceiling of every tone's rate.
         policy: ``manual`` or ``auto``.
         max_rise_db: limit of the predicted rise (dB, > 0).
-        metric: ``sigma_max`` (default) or ``strut``.
-        frequencies_hz: grid of the prediction (default
-            :func:`~hexapod_vibration.core.control.sensitivity.prediction_grid`).
+        metric: the view of S bounded: ``output`` (the output ``output_weights`` under the
+            disturbance ``disturbance_csd``: what that output's spectrum will show; the
+            default when both are given), ``sigma_max`` (any disturbance direction: the
+            default otherwise) or ``strut``.
+        output_weights: c (C,) of the output view (e.g. the z row of ``J^-1``).
+        disturbance_csd: callable frequencies (Hz) -> CSD (F, C, C) of the error without
+            control (e.g. :meth:`~hexapod_vibration.core.control.plant_identification.DisturbanceSpectrum.at`).
 
     Raises:
         ValueError: a bad policy, limit, metric, rate or tone list.
     """
     policy, limit = validate_policy(policy, max_rise_db)
-    if metric not in ('sigma_max', 'strut'):
-        raise ValueError(f"metric must be 'sigma_max' or 'strut', got {metric!r}")
+    if metric is None:
+        metric = ('output' if output_weights is not None and disturbance_csd is not None
+                  else 'sigma_max')
+    if metric not in sensitivity.METRICS:
+        raise ValueError(f'metric must be one of {sensitivity.METRICS}, got {metric!r}')
+    if metric == 'output' and output_weights is None:
+        raise ValueError("metric 'output' needs output_weights")
     fs = float(sample_rate_hz)
     tones = validate_frequencies(tone_frequencies_hz, fs)
     p = np.asarray(coefficients, dtype=complex)
     rates = sensitivity.tone_rates(mu, tones.size)
-    evaluator = _RiseEvaluator(plant, tones, fs, p, metric, frequencies_hz)
     mu = float(mu)
-    if policy == 'auto' and mu > 0.0 and tones.size:
-        rates = _auto_rates(evaluator, mu, tones.size, limit)
-    rise_db, at_hz = evaluator.rise(rates) if tones.size else (0.0, float('nan'))
+    if tones.size == 0:
+        return MuChoice(policy, mu, rates, limit, 0.0, float('nan'), metric, None)
+    evaluator = _RiseEvaluator(plant, tones, fs, p, metric, output_weights, disturbance_csd)
+    floor_note = ''
+    if policy == 'auto' and mu > 0.0:
+        rates, floor_note = _auto_rates(evaluator, mu, tones.size, limit)
+    rise_db, at_hz = evaluator.rise(rates)
     warning = None
     if not np.isfinite(rise_db):
         warning = (f'the loop would be unstable with mu={mu:g} ({policy}): '
                    'lower mu or use mu_policy auto')
     elif rise_db > limit:
         warning = (f'mu={mu:g} predicts a rise of {rise_db:.1f} dB at {at_hz:.2f} Hz, '
-                   f'above max_rise_db={limit:g} ({policy})')
+                   f'above max_rise_db={limit:g} ({policy}{floor_note})')
     return MuChoice(policy, mu, rates, limit, rise_db, at_hz, metric, warning)
 
 
 def _auto_rates(evaluator: _RiseEvaluator, mu: float, n_tones: int, limit: float
-                ) -> np.ndarray:
-    """Common scale first, then each tone raised alone (see the module)."""
+                ) -> tuple[np.ndarray, str]:
+    """Common scale first, then each tone raised alone (see the module).
+
+    The rise right beside a notch does not shrink with the rate (its height is set by the
+    phase of the weight loop, its width by the rate), so a limit may be out of reach at
+    any rate: then the rates stay at ``mu`` and the returned note says why.
+    """
     def ok(rates: np.ndarray) -> bool:
         return evaluator.rise(rates)[0] <= limit
 
-    scale = _largest_within(lambda s: ok(np.full(n_tones, s * mu)), SMALLEST_SCALE, 1.0)
-    rates = np.full(n_tones, scale * mu)
-    if scale >= 1.0:
-        return rates
+    full = np.full(n_tones, mu)
+    if ok(full):
+        return full, ''
+    floor_db, floor_hz = evaluator.rise(full * SMALLEST_SCALE)
+    if floor_db > limit:
+        return full, (f'; {floor_db:.1f} dB at {floor_hz:.2f} Hz remain at any rate: '
+                      'a coefficient phase error, not the rate')
+    scale = _largest_within(lambda s: ok(full * s), SMALLEST_SCALE, 1.0)
+    rates = full * scale
     for t in range(n_tones):
         def ok_tone(x: float, t: int = t) -> bool:
             trial = rates.copy()
             trial[t] = x
             return ok(trial)
         rates[t] = _largest_within(ok_tone, rates[t], mu)
-    return rates
+    return rates, ''

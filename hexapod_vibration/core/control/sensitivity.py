@@ -33,12 +33,14 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
 from hexapod_vibration.core.control.notch import validate_frequencies
 
-DEFAULT_GRID_STEP_HZ = 0.05
+DEFAULT_GRID_STEP_HZ = 0.1
+REFERENCE_MU = 0.002
 NEAR_TONE_SPAN_HZ = 5.0
 METRICS = ('sigma_max', 'strut', 'output')
 POLE_GUARD = 1e-12
@@ -145,21 +147,32 @@ def output_sensitivity(sensitivity: np.ndarray, output_weights: np.ndarray,
 
 
 def prediction_grid(tone_frequencies_hz: Sequence[float] | np.ndarray, sample_rate_hz: float,
-                    step_hz: float = DEFAULT_GRID_STEP_HZ,
-                    near_tone_step_hz: float | None = None) -> np.ndarray:
-    """Frequencies (Hz) in [0, fs/2]: a uniform grid plus a finer one within 5 Hz of tones.
+                    mu: float | Sequence[float] | np.ndarray = REFERENCE_MU,
+                    step_hz: float = DEFAULT_GRID_STEP_HZ) -> np.ndarray:
+    """Frequencies (Hz) in [0, fs/2]: a uniform grid plus log-spaced points beside each tone.
 
-    The notch of a tone is about ``mu fs / (2 pi)`` Hz wide (0.3 Hz for mu = 0.002); the
-    fine grid (default step/10) resolves the rise beside it.
+    A tone's notch is about ``mu_t fs / (2 pi)`` Hz wide (0.3 Hz for mu = 0.002), and the
+    rise beside it peaks at a distance of that order whatever mu (its height depends on
+    the weight loop's phase, not on mu). Offsets from 1/100 of that width out to 5 Hz,
+    log-spaced (64 per decade) on both sides, resolve it at any rate.
+
+    Args:
+        tone_frequencies_hz: tones (Hz).
+        sample_rate_hz: loop rate (Hz).
+        mu: one rate or one per tone (sets the notches' widths; 0 counts as 1e-9).
+        step_hz: uniform step (Hz) over 0..fs/2.
     """
     fs = float(sample_rate_hz)
     tones = validate_frequencies(tone_frequencies_hz, fs)
+    rates = np.maximum(tone_rates(mu, tones.size), 1e-9)
     if not step_hz > 0.0:
         raise ValueError(f'step_hz must be > 0, got {step_hz!r}')
-    fine = step_hz / 10.0 if near_tone_step_hz is None else float(near_tone_step_hz)
     parts = [np.arange(0.0, 0.5 * fs, step_hz), [0.5 * fs]]
-    offsets = np.arange(-NEAR_TONE_SPAN_HZ, NEAR_TONE_SPAN_HZ + 0.5 * fine, fine)
-    parts += [t + offsets for t in tones]
+    for tone, rate in zip(tones, rates, strict=True):
+        smallest = min(0.01 * rate * fs / (2.0 * np.pi), 0.1 * NEAR_TONE_SPAN_HZ)
+        decades = np.log10(NEAR_TONE_SPAN_HZ / smallest)
+        offsets = np.geomspace(smallest, NEAR_TONE_SPAN_HZ, int(np.ceil(64 * decades)) + 1)
+        parts += [tone - offsets, tone + offsets, [tone]]
     f = np.unique(np.concatenate(parts))
     return f[(f >= 0.0) & (f <= 0.5 * fs)]
 
@@ -171,7 +184,7 @@ class SensitivityPrediction:
     Attributes:
         frequencies_hz: grid (F,) (Hz).
         tone_frequencies_hz: the canceller's tones (Hz).
-        sigma_max: largest singular value of S (F,).
+        matrix: S (F, C, C), complex.
         strut: |1 / (1 - G_ii K_ii)| (F, C).
         output: the output combination's spectrum ratio (F,), or None if not asked.
         stable: whether the closed loop is stable (Nyquist, :func:`closed_loop_is_stable`);
@@ -180,10 +193,15 @@ class SensitivityPrediction:
 
     frequencies_hz: np.ndarray
     tone_frequencies_hz: np.ndarray
-    sigma_max: np.ndarray
+    matrix: np.ndarray
     strut: np.ndarray
     output: np.ndarray | None
     stable: bool | None
+
+    @cached_property
+    def sigma_max(self) -> np.ndarray:
+        """Largest singular value of S (F,) (computed on first use)."""
+        return np.linalg.svd(self.matrix, compute_uv=False)[:, 0]
 
     def values(self, metric: str) -> np.ndarray:
         """|S| (F,) of ``metric`` (``sigma_max``, ``strut`` (worst strut) or ``output``)."""
@@ -236,7 +254,7 @@ def closed_loop_is_stable(plant: PlantResponse, tone_frequencies_hz: Sequence[fl
                           sample_rate_hz: float, coefficients: np.ndarray,
                           mu: float | Sequence[float] | np.ndarray,
                           frequencies_hz: np.ndarray | None = None,
-                          max_refinements: int = 12) -> bool:
+                          max_refinements: int = 60) -> bool:
     """Nyquist test of the loop G + canceller from G's frequency response (G stable).
 
     The closed-loop poles are the zeros of ``det(I - G(z) K(z))``. With G stable and
@@ -246,7 +264,8 @@ def closed_loop_is_stable(plant: PlantResponse, tone_frequencies_hz: Sequence[fl
     minus the number of closed-loop poles outside: the loop is stable iff it is 0. G is taken on the unit circle (it is smooth on the scale of
     eps); K exactly on the contour. The real system's symmetry halves the contour
     (0..fs/2, twice the phase change); the grid is refined where the determinant's phase
-    jumps by more than pi/4 between neighbours.
+    jumps by more than pi/4 between neighbours (a contour still unresolved after
+    ``max_refinements`` rounds counts as unstable).
 
     Args:
         plant: callable frequencies (Hz) -> G (F, C, C), e.g.
@@ -264,8 +283,15 @@ def closed_loop_is_stable(plant: PlantResponse, tone_frequencies_hz: Sequence[fl
     lam = np.linalg.eigvals(-0.5 * p @ _plant_at(plant, tones))          # (T, C)
     scale = np.abs(rates[:, None] * lam)
     radius = 1.0 + 1e-3 * max(float(np.min(scale[scale > 0.0], initial=1.0)), 1e-9)
-    f = prediction_grid(tones, fs) if frequencies_hz is None else np.unique(frequencies_hz)
-    f = np.unique(np.concatenate([f, [0.0, 0.5 * fs]]))
+    f = prediction_grid(tones, fs, rates) if frequencies_hz is None else np.unique(frequencies_hz)
+    # Within ~eps of a pole the determinant turns by up to C half-turns (a pole of order
+    # C): points log-spaced from eps/100 keep every step's turn well below pi, so no
+    # wrapped increment can hide a whole turn.
+    eps_hz = (radius - 1.0) * fs / (2.0 * np.pi)
+    close = eps_hz * np.geomspace(1e-2, 1e5, 281)
+    f = np.unique(np.concatenate([f, [0.0, 0.5 * fs], *[t + close for t in tones],
+                                  *[t - close for t in tones]]))
+    f = f[(f >= 0.0) & (f <= 0.5 * fs)]
 
     def det_on_contour(freqs: np.ndarray) -> np.ndarray:
         g = _plant_at(plant, freqs)
@@ -283,6 +309,8 @@ def closed_loop_is_stable(plant: PlantResponse, tone_frequencies_hz: Sequence[fl
         d = np.concatenate([d, det_on_contour(mid)])
         order = np.argsort(f)
         f, d = f[order], d[order]
+    else:
+        return False                                  # unresolved: not shown to be stable
     if np.any(d == 0.0):
         return False
     winding = np.sum(np.angle(d[1:] / d[:-1])) / np.pi    # 2 x (phase change 0..fs/2) / 2 pi
@@ -314,17 +342,47 @@ def predict_sensitivity(plant: PlantResponse, tone_frequencies_hz: Sequence[floa
     """
     fs = float(sample_rate_hz)
     tones = validate_frequencies(tone_frequencies_hz, fs)
-    f = prediction_grid(tones, fs) if frequencies_hz is None else np.asarray(
+    f = prediction_grid(tones, fs, mu) if frequencies_hz is None else np.asarray(
         frequencies_hz, dtype=float).reshape(-1)
     g = _plant_at(plant, f)
     k = canceller_frequency_response(tones, fs, coefficients, mu, f)
     s = sensitivity_matrix(g, k)
-    sigma = np.linalg.svd(s, compute_uv=False)[:, 0]
     out = None
     if output_weights is not None:
         phi = disturbance_csd(f) if callable(disturbance_csd) else disturbance_csd
         out = output_sensitivity(s, output_weights, phi)
     stable = (closed_loop_is_stable(plant, tones, fs, coefficients, mu)
               if check_stability else None)
-    return SensitivityPrediction(f, tones, sigma, np.abs(strut_sensitivity(g, k)), out,
-                                 stable)
+    return SensitivityPrediction(f, tones, s, np.abs(strut_sensitivity(g, k)), out, stable)
+
+
+def stable_mu_limit(plant: PlantResponse, tone_frequencies_hz: Sequence[float] | np.ndarray,
+                    sample_rate_hz: float, coefficients: np.ndarray, mu_max: float = 1.0,
+                    rtol: float = 0.01) -> float:
+    """Largest common rate (to ``rtol``) the Nyquist test finds stable, from G's response.
+
+    The exact counterpart, for a measured G, of
+    :func:`~hexapod_vibration.core.control.adaptation.exact_mu_bound` (which needs a state
+    space model): the averaged bound of eq. 18 looks only at the tones, this one at the
+    whole loop (the canceller's gain far from its tones meets the plant's resonances).
+    Scans a log grid from ``mu_max * 1e-6`` up, then bisects the first unstable interval;
+    0.0 if even the smallest rate is unstable, ``mu_max`` if all are stable.
+    """
+    def stable(mu: float) -> bool:
+        return closed_loop_is_stable(plant, tone_frequencies_hz, sample_rate_hz,
+                                     coefficients, mu)
+
+    grid = np.geomspace(mu_max * 1e-6, mu_max, 25)
+    if not stable(grid[0]):
+        return 0.0
+    lo = grid[0]
+    for hi in grid[1:]:
+        if not stable(hi):
+            break
+        lo = hi
+    else:
+        return float(mu_max)
+    while hi > lo * (1.0 + rtol):
+        mid = float(np.sqrt(lo * hi))
+        lo, hi = (mid, hi) if stable(mid) else (lo, mid)
+    return float(lo)
