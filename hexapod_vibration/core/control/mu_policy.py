@@ -135,7 +135,7 @@ def choose_tone_rates(plant: sensitivity.PlantResponse,
             default otherwise) or ``strut``.
         output_weights: c (C,) of the output view (e.g. the z row of ``J^-1``).
         disturbance_csd: callable frequencies (Hz) -> CSD (F, C, C) of the error without
-            control (e.g. :meth:`~hexapod_vibration.core.control.plant_identification.DisturbanceSpectrum.at`).
+            control (e.g. ``DisturbanceSpectrum.at`` of the broadband identification).
 
     Raises:
         ValueError: a bad policy, limit, metric, rate or tone list.

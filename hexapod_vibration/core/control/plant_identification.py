@@ -49,7 +49,7 @@ DEFAULT_PERIODS = 1
 DEFAULT_AMPLITUDE_RMS_N = 2.0
 DEFAULT_MAX_RELATIVE_ERROR = 0.1
 DETECTION_NEIGHBOURS = 4
-DEFAULT_SMOOTHING_HZ = 2.0
+DEFAULT_SMOOTHING_HZ = 4.0
 DEFAULT_LINE_FACTOR = 10.0
 
 
@@ -106,7 +106,8 @@ def zippered_odd_multisine(n_channels: int, sample_rate_hz: float,
         period_s: period (s); the grid is 1/period_s Hz and each channel gets a line every
             2 C / period_s Hz.
         amplitude_rms_n: RMS command of each channel (N); its lines share it equally.
-        min_frequency_hz, max_frequency_hz: excited band (Hz); default 0..fs/2.
+        min_frequency_hz: lowest excited line (Hz).
+        max_frequency_hz: highest excited line (Hz); default fs/2.
 
     Raises:
         ValueError: a bad argument, or fewer than 2 lines per channel.
@@ -188,18 +189,24 @@ def detection_line_noise(spectrum: np.ndarray, bins: np.ndarray,
     ``spectrum`` (P, C) holds the phasors of the averaged period. An even bin carries no
     excitation, only what is not periodic in the excitation (noise, disturbances, leakage
     of a tone off the even grid), so ``|E(k')|^2`` there estimates the noise power at the
-    odd bins next to it. The median over ``neighbours`` even bins on each side, divided by
-    ln 2 (the median of an exponential variable), estimates its mean robustly (a
-    disturbance tone exactly on one even bin does not inflate it).
+    odd bins next to it. Two estimates, the larger one kept:
+
+    - the broadband level: the median over ``neighbours`` even bins on each side, divided
+      by ln 2 (the median of an exponential variable): robust to a disturbance line;
+    - the local level: the smaller of the two adjacent even bins. A tone off the even grid
+      leaks into both (and into the odd bin between them); a tone on the grid sits in one
+      and leaks into none, and the smaller one ignores it.
     """
     half = spectrum.shape[0] // 2
-    even = np.arange(2, half, 2)
+    even = np.arange(0, half + 1, 2)
     power = np.abs(spectrum[even]) ** 2                                   # (E, C)
-    pos = np.searchsorted(even, bins)
+    pos = np.searchsorted(even, bins)                                     # even[pos] = k + 1
     out = np.empty((bins.size, spectrum.shape[1]))
     for n, k in enumerate(pos):
-        lo, hi = max(k - neighbours, 0), min(k + neighbours, even.size)
-        out[n] = np.sqrt(np.median(power[lo:hi], axis=0) / np.log(2.0))
+        lo, hi = max(k - neighbours, 1), min(k + neighbours, even.size)
+        broad = np.median(power[lo:hi], axis=0) / np.log(2.0)
+        local = np.minimum(power[k - 1], power[min(k, even.size - 1)])
+        out[n] = np.sqrt(np.maximum(broad, local))
     return out
 
 
@@ -283,11 +290,10 @@ def disturbance_from_periods(design: MultisineDesign, error_periods: np.ndarray,
     """
     e = np.asarray(error_periods, dtype=float)
     p = design.period_samples
-    spectrum = np.fft.fft(e.mean(axis=0), axis=0) * (2.0 / p)
     even = np.arange(2, (p + 1) // 2, 2)
-    a = spectrum[even]                                                    # (K, C)
-    snap = a[:, :, None] * np.conj(a)[:, None, :] * (p / (2.0 * design.sample_rate_hz)
-                                                      * e.shape[0])
+    a = np.fft.fft(e, axis=1)[:, even, :] * (2.0 / p)                     # (M, K, C)
+    snap = (np.einsum('mki,mkj->kij', a, np.conj(a)) / e.shape[0]
+            * (p / (2.0 * design.sample_rate_hz)))
     power = np.einsum('kii->k', snap).real
     df = 2.0 * design.sample_rate_hz / p
     half = max(1, int(round(0.5 * smoothing_hz / df)))
@@ -296,7 +302,8 @@ def disturbance_from_periods(design: MultisineDesign, error_periods: np.ndarray,
         lo, hi = max(0, k - 4 * half), min(even.size, k + 4 * half + 1)
         keep[k] = power[k] <= line_factor * np.median(power[lo:hi])
     weights = keep.astype(float)
-    csum = np.cumsum(np.concatenate([np.zeros((1,) + snap.shape[1:]), snap * weights[:, None, None]]), axis=0)
+    kept = snap * weights[:, None, None]
+    csum = np.cumsum(np.concatenate([np.zeros((1,) + snap.shape[1:]), kept]), axis=0)
     wsum = np.cumsum(np.concatenate([[0.0], weights]))
     idx = np.arange(even.size)
     lo, hi = np.maximum(idx - half, 0), np.minimum(idx + half + 1, even.size)

@@ -261,16 +261,19 @@ def closed_loop_is_stable(plant: PlantResponse, tone_frequencies_hz: Sequence[fl
     strictly proper and K's poles on the unit circle, the contour ``|z| = 1 + eps`` (eps =
     1e-3 of the slowest weight mode's rate ``|mu_t lambda|``, far inside the notches) has
     every open-loop pole inside, and the winding number of the determinant along it is
-    minus the number of closed-loop poles outside: the loop is stable iff it is 0. G is taken on the unit circle (it is smooth on the scale of
-    eps); K exactly on the contour. The real system's symmetry halves the contour
-    (0..fs/2, twice the phase change); the grid is refined where the determinant's phase
+    minus the number of closed-loop poles outside: the loop is stable iff it is 0. G is
+    taken on the unit circle (it is smooth on the scale of eps); K exactly on the contour.
+    The real system's symmetry halves the contour (0..fs/2, twice the phase change); the grid is refined where the determinant's phase
     jumps by more than pi/4 between neighbours (a contour still unresolved after
     ``max_refinements`` rounds counts as unstable).
 
     Args:
-        plant: callable frequencies (Hz) -> G (F, C, C), e.g.
-            :meth:`~hexapod_vibration.core.control.plant_identification.PlantFrequencyResponse.at`.
-        tone_frequencies_hz, sample_rate_hz, coefficients, mu: the canceller.
+        plant: callable frequencies (Hz) -> G (F, C, C), e.g. the ``at`` of an identified
+            ``PlantFrequencyResponse``.
+        tone_frequencies_hz: the canceller's tones (Hz).
+        sample_rate_hz: loop rate (Hz).
+        coefficients: complex (T, C, C) P_t.
+        mu: one rate or one per tone (T,).
         frequencies_hz: starting grid (default :func:`prediction_grid`).
         max_refinements: bisection rounds of the grid.
     """
