@@ -263,9 +263,10 @@ def closed_loop_is_stable(plant: PlantResponse, tone_frequencies_hz: Sequence[fl
     every open-loop pole inside, and the winding number of the determinant along it is
     minus the number of closed-loop poles outside: the loop is stable iff it is 0. G is
     taken on the unit circle (it is smooth on the scale of eps); K exactly on the contour.
-    The real system's symmetry halves the contour (0..fs/2, twice the phase change); the grid is refined where the determinant's phase
-    jumps by more than pi/4 between neighbours (a contour still unresolved after
-    ``max_refinements`` rounds counts as unstable).
+    The real system's symmetry halves the contour (0..fs/2, twice the phase change); the
+    grid is refined where the determinant's phase jumps by more than pi/4 between
+    neighbours (a contour still unresolved after ``max_refinements`` rounds counts as
+    unstable).
 
     Args:
         plant: callable frequencies (Hz) -> G (F, C, C), e.g. the ``at`` of an identified
