@@ -71,6 +71,7 @@ class IdentifyingLoop(CoreLoop):
         response = self.identifier.result()
         sc = self.scenario
         coefficients, bound = coefficients_for(response, sc.notch.adaptation, sc.notch.mu)
+        self.record_coefficients = coefficients             # normalised, before the policy
         self.choice = mu_policy.choose_tone_rates(
             self.response.at, sc.notch.tone_frequencies_hz, FS, coefficients, sc.notch.mu,
             policy=self.policy, max_rise_db=self.max_rise_db, output_weights=self.z_row,
