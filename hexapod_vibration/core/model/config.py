@@ -58,12 +58,28 @@ class MountConfig:
     lateral_damping_n_s_per_m: float
 
 
+SHAKER_BODIES = ("bottom_plate", "top_plate")
+
+
 @dataclass(frozen=True)
 class ShakerMountConfig:
-    """Where the shaker pushes (m, from the cube centre) and its force limit (N)."""
+    """Where the shaker pushes: on which body, at which point (m, from the cube centre).
+
+    ``mounted_on`` is ``"bottom_plate"`` (the paper's bracket under the base: the
+    disturbance comes through the struts) or ``"top_plate"`` (the paper's second shaker on
+    top of the platform, or a payload's own cryocooler: the struts must react it). Force
+    along z, limited to ``force_limit_n`` (N).
+    """
 
     position_m: tuple[float, float, float]
     force_limit_n: float
+    mounted_on: str = "bottom_plate"
+
+    def __post_init__(self) -> None:
+        """Check ``mounted_on``."""
+        if self.mounted_on not in SHAKER_BODIES:
+            raise ValueError(f"shaker.mounted_on must be one of {SHAKER_BODIES}, "
+                             f"got {self.mounted_on!r}")
 
 
 @dataclass(frozen=True)
@@ -188,14 +204,23 @@ def _build_section(cls: type, values: Any, where: str) -> Any:
     if not isinstance(values, dict):
         raise ValueError(f"{where}: expected a mapping")
     names = {f.name for f in fields(cls) if f.init}
-    missing, unknown = names - set(values), set(values) - names
+    required = names - _OPTIONAL
+    missing, unknown = required - set(values), set(values) - names
     if missing or unknown:
         raise ValueError(f"{where}: missing {sorted(missing)}, unknown {sorted(unknown)}")
     clean = {key: _check_value(key, value, where) for key, value in values.items()}
     return cls(**clean)
 
 
+_CHOICES = {"mounted_on": SHAKER_BODIES}
+_OPTIONAL = {"mounted_on"}      # added later: older model files without it keep working
+
+
 def _check_value(key: str, value: Any, where: str) -> Any:
+    if key in _CHOICES:
+        if value not in _CHOICES[key]:
+            raise ValueError(f"{where}.{key}: expected one of {_CHOICES[key]}, got {value!r}")
+        return value
     if isinstance(value, list):
         checked = tuple(_check_value(key, v, where) for v in value)
         if len(checked) != 3:

@@ -127,7 +127,8 @@ class LinearHexapodModel:
         bq[:, IN_JOINT] = self.joint_map.T
         ez = np.array([0.0, 0.0, 1.0])
         shaker_point = np.asarray(cfg.shaker.position_m)
-        bq[6:12, IN_SHAKER] = np.concatenate([ez, np.cross(shaker_point, ez)])
+        shaker_rows = slice(0, 6) if cfg.shaker.mounted_on == "top_plate" else slice(6, 12)
+        bq[shaker_rows, IN_SHAKER] = np.concatenate([ez, np.cross(shaker_point, ez)])
         for rows, body in ((slice(0, 6), cfg.top_plate), (slice(6, 12), cfg.bottom_plate)):
             weight = -body.mass_kg * g * ez
             bq[rows, IN_GRAVITY] = np.concatenate([weight, np.cross(body.com_offset_m, weight)])

@@ -1,0 +1,147 @@
+"""Broadband identification of G(f): the excitation, a coupled test plant, the PPH loop."""
+
+import dataclasses
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from hexapod_vibration.core.control.plant_identification import (
+    BroadbandIdentifier,
+    zippered_odd_multisine,
+)
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from linear_plants import FS, frequency_response, resonance_bank, simulate  # noqa: E402
+
+
+def _coupled_plant(seed=1):
+    a, b, c = resonance_bank([30.0, 55.0, 90.0], 0.1, 1.0)
+    mix = np.eye(3) + 0.3 * np.random.default_rng(seed).normal(size=(3, 3))
+    return a, b @ mix, c
+
+
+def test_design_excites_odd_bins_once_each_with_the_asked_rms():
+    design = zippered_odd_multisine(6, FS, period_s=8.0, amplitude_rms_n=2.0)
+    assert np.all(design.bins % 2 == 1)
+    assert np.unique(design.bins).size == design.bins.size
+    table = design.period_table()
+    assert table.shape == (8000, 6)
+    assert np.allclose(np.sqrt(np.mean(table ** 2, axis=0)), 2.0, rtol=1e-9)
+    spectrum = np.abs(np.fft.rfft(table, axis=0))
+    assert np.max(spectrum[0::2]) < 1e-9 * np.max(spectrum)     # nothing on even bins
+    for j in range(6):                                           # channel j: its lines only
+        own = design.bins[design.channel_of_bin == j]
+        others = np.setdiff1d(design.bins, own)
+        assert np.max(spectrum[others, j]) < 1e-9 * np.max(spectrum[own, j])
+
+
+def test_bad_designs_are_refused():
+    with pytest.raises(ValueError, match='n_channels'):
+        zippered_odd_multisine(0, FS)
+    with pytest.raises(ValueError, match='period_s'):
+        zippered_odd_multisine(6, FS, period_s=0.0105)
+    with pytest.raises(ValueError, match='amplitude_rms_n'):
+        zippered_odd_multisine(6, FS, amplitude_rms_n=-1.0)
+    with pytest.raises(ValueError, match='fewer than 2 lines'):
+        zippered_odd_multisine(6, FS, period_s=1.0, min_frequency_hz=490.0)
+
+
+@pytest.fixture(scope='module')
+def coupled_run():
+    """The coupled plant under noise, a tone on the even grid and one off it."""
+    plant = _coupled_plant()
+    ident = BroadbandIdentifier(3, FS, period_s=4.0, settle_s=1.0, periods=2)
+    n = int(round(ident.duration_s * FS))
+    t = np.arange(n) / FS
+    rng = np.random.default_rng(2)
+    dist = (1e-3 * rng.normal(size=(n, 3)) + 0.5 * np.sin(2 * np.pi * 40.0 * t)[:, None]
+            + 0.2 * np.sin(2 * np.pi * 63.3 * t)[:, None])
+    simulate(plant, ident, dist)
+    return plant, ident
+
+
+def test_response_matches_the_exact_one_despite_the_tones(coupled_run):
+    plant, ident = coupled_run
+    f = np.arange(20.0, 300.0, 0.37)
+    f = f[np.abs(f - 63.3) > 4.0]          # the gap left by the dropped lines (below)
+    exact = frequency_response(plant, f)
+    error = (np.linalg.norm(ident.result().at(f) - exact, axis=(1, 2))
+             / np.linalg.norm(exact, axis=(1, 2)))
+    assert np.median(error) < 0.005
+    assert np.max(error) < 0.02
+
+
+def test_lines_next_to_an_off_grid_tone_are_dropped(coupled_run):
+    _, ident = coupled_run
+    response = ident.result()
+    kept = np.concatenate(response.line_frequencies_hz)
+    excited = ident.design.frequencies_hz
+    assert np.min(np.abs(kept - 63.3)) > 0.3                    # leakage lines dropped
+    band = (excited > 20.0) & (excited < 300.0)                 # where the SNR is good,
+    kept_band = (kept > 20.0) & (kept < 300.0)                  # few others are dropped
+    assert np.count_nonzero(kept_band) >= np.count_nonzero(band) - 3
+    assert np.any(np.abs(excited - 40.0) < 0.3)                 # the on-grid tone: no harm
+    assert np.count_nonzero(np.abs(kept - 40.0) < 0.3) == 2    # both lines beside it kept
+
+
+def test_disturbance_spectrum_measures_the_noise_and_leaves_the_lines_out():
+    """White noise and a line on the even grid (a tone off it leaks everywhere: no window)."""
+    plant = _coupled_plant()
+    ident = BroadbandIdentifier(3, FS, period_s=4.0, settle_s=1.0, periods=2)
+    n = int(round(ident.duration_s * FS))
+    t = np.arange(n) / FS
+    rng = np.random.default_rng(3)
+    dist = 1e-3 * rng.normal(size=(n, 3)) + 0.5 * np.sin(2 * np.pi * 40.0 * t)[:, None]
+    simulate(plant, ident, dist)
+    spectrum = ident.disturbance(smoothing_hz=8.0)
+    csd = spectrum.at([100.0, 200.0, 300.0])
+    expected = 2.0 * 1e-6 / FS                                  # white, sigma 1e-3, one-sided
+    diag = np.real(np.diagonal(csd, axis1=1, axis2=2))
+    assert np.allclose(diag, expected, rtol=0.35)
+    assert np.max(np.abs(csd - diag[:, :, None] * np.eye(3))) < 0.6 * expected
+    assert np.real(spectrum.at([40.0])[0, 0, 0]) < 2.0 * expected   # the 40 Hz line left out
+
+
+def test_result_before_the_end_is_refused():
+    ident = BroadbandIdentifier(2, FS, period_s=1.0, settle_s=0.0)
+    ident.step(np.zeros(2))
+    with pytest.raises(RuntimeError, match='not finished'):
+        ident.result()
+    with pytest.raises(ValueError, match='shape'):
+        ident.step(np.zeros(3))
+
+
+def test_pph_loop_response_matches_its_impulse_response():
+    """The running PPH (linear, shaker on) against the quiet plant's impulse response."""
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+    from sensitivity_loop import IdentifyingLoop, ImpulseIdentifier
+
+    from hexapod_vibration.core.model.config import load_model_config
+    from hexapod_vibration.core.sim.scenario import ShakerSettings, load_scenario
+
+    root = Path(__file__).resolve().parents[2]
+    scenario = load_scenario(root / 'config' / 'scenarios' / 'close_tones.yaml')
+    scenario = dataclasses.replace(scenario, nonlinear=False, identify_at_s=6.0,
+                                   window_s=0.5)
+    quiet = load_model_config(root / 'config' / 'pph_model.yaml', {
+        'accelerometer': {'noise_density_g_per_sqrt_hz': 0.0, 'bits': 24},
+        'eddy': {'noise_rms_m': 0.0}})
+    impulse = ImpulseIdentifier(record_s=10.0)
+    end = 6.0 + impulse.duration_s + 0.5
+    IdentifyingLoop(quiet, dataclasses.replace(scenario, shaker=ShakerSettings(),
+                                               duration_s=end, control_on_s=end),
+                    enable_control=False, identifier=impulse).run()
+    f_ref, g_ref = impulse.result()
+    running = IdentifyingLoop(load_model_config(root / 'config' / 'pph_model.yaml'),
+                              dataclasses.replace(scenario, duration_s=17.0,
+                                                  control_on_s=17.0),
+                              enable_control=False)
+    running.run()
+    for lo, hi, median, worst in ((35.0, 45.0, 0.005, 0.01), (45.0, 450.0, 0.003, 0.01)):
+        sel = (f_ref >= lo) & (f_ref < hi)
+        error = (np.linalg.norm(running.response.at(f_ref[sel]) - g_ref[sel], axis=(1, 2))
+                 / np.linalg.norm(g_ref[sel], axis=(1, 2)))
+        assert np.median(error) < median, (lo, hi)
+        assert np.max(error) < worst, (lo, hi)
