@@ -193,6 +193,20 @@ def test_readme_ros2_run_commands_work_from_another_folder(install, colcon_env, 
                                     capture_output=True, text=True, timeout=HANG_GUARD_S)
             assert result.returncode == 2 and 'exists' in result.stderr, result.stderr
             (out / 'bag').rmdir()
+        elif exe == 'sweep':
+            # A dry run: the grid is found (shipped by name in the share directory, or the
+            # user's file) and checked, the points listed, nothing run (no cluster needed).
+            if args[0] == 'my_grid.yaml':             # the README's placeholder
+                grid = tmp_path / 'my_grid.yaml'
+                grid.write_text((install / 'share' / PACKAGE / 'config' / 'sweeps' /
+                                 'mu_bound.yaml').read_text())
+                args[0] = str(grid)
+            out = args.index('--out') + 1
+            args[out] = str(tmp_path / 'sweeps' / Path(args[out]).name)
+            result = subprocess.run([path, *args, '--dry-run'], env=colcon_env, cwd=work,
+                                    capture_output=True, text=True, timeout=HANG_GUARD_S)
+            assert result.returncode == 0 and 'points' in result.stdout, (command,
+                                                                         result.stderr)
         else:
             raise AssertionError(f'no check for {command}')
         ran.add(exe)

@@ -198,15 +198,18 @@ def test_hostile_accelerations_never_reach_the_notch_weights(ros_context, node_p
         return '\n'.join(p.output() for p in processes)
 
     def send_hostile() -> None:
-        for raw in _hostile_eddy(max(accel.last_index, 0), next(rounds)):
-            to_notch.publish(raw)
+        """One round every 5 spins: refusal is tested here, floods in test_flood.py."""
+        round_ = next(rounds)
+        if round_ % 5 == 0:
+            for raw in _hostile_eddy(max(accel.last_index, 0), round_ // 5):
+                to_notch.publish(raw)
 
     def counted() -> bool:
         values = diagnostics.values(NOTCH_STATUS)
         return all(int(values.get(k, 0)) > 0 for k in ('malformed', 'out_of_range'))
 
     assert wait_until(ros_context, lambda: not all(p.running() for p in processes) or (
-        counted() and command.last_index > 3000), step=send_hostile), logs()
+        counted() and command.last_index > 2000), step=send_hostile), logs()
     assert all(p.running() for p in processes), logs()
     # The raw canceller (P = I, mu = 1e-5) on the real +-2 g accelerations: its commands stay
     # of the order of mu * n * a (a few N); one 1e300 sample would have made them ~1e295.

@@ -20,13 +20,13 @@ from node_graph import HANG_GUARD_S, StrutTopic, wait_until
 from hexapod_vibration.analysis.bag_io import read_strut_topics
 
 SCENARIO = {
-    'name': 'params_reuse', 'seed': 7, 'duration_s': 5.0, 'identify_at_s': 0.2,
-    'control_on_s': 4.0, 'window_s': 1.0,
+    'name': 'params_reuse', 'seed': 7, 'duration_s': 6.5, 'identify_at_s': 0.2,
+    'control_on_s': 5.5, 'window_s': 1.0,
     'shaker': {'frequencies_hz': [40.0, 80.0], 'amplitudes_n': [80.0, 16.0],
                'noise_rms_n': 0.5},
     'notch': {'tone_frequencies_hz': [40.0], 'mu': 0.01, 'adaptation': 'decentralized'},
 }
-COMPARED = 3000     # samples before control-on (4000)
+COMPARED = 3000     # samples before control-on (5500)
 
 
 def test_params_yaml_starts_the_same_run(ros_env, ros_context, node_processes, tmp_path):
