@@ -30,6 +30,8 @@ CLOCK_MODES = ("lockstep", "realtime")
 LOCKSTEP_STREAMS = ("notch", "pointing")
 ADAPTATION_MODES = ("centralized", "decentralized", "raw")
 """Same as ``core.control.adaptation.COEFFICIENT_MODES`` (tested), kept here import-free."""
+MU_POLICIES = ("manual", "auto")
+"""Same as ``core.control.mu_policy.MU_POLICIES`` (tested)."""
 STORAGES = ("mcap", "sqlite3")
 TYPES = ("bool", "int", "double", "string", "double[]", "string[]")
 
@@ -367,6 +369,30 @@ NOTCH_CONTROLLER = NodeSpec("notch_controller", summary="six decentralized Adapt
                   low=0.0, high=20.0, read_only=True),
     ParameterSpec("ramp_s", "double", 0.05, "enable/disable and removed-tone fade time",
                   unit="s", low=0.0, high=5.0),
+    ParameterSpec("frequency_tracking", "bool", False, "estimate each tone's frequency "
+                  "online; the oscillators follow it (estimates on /pph/notch_frequencies)"),
+    ParameterSpec("tracking_range_hz", "double", 2.0, "largest deviation of a tracked tone "
+                  "from its nominal frequency", unit="Hz", low=0.0, high=50.0,
+                  low_open=True),
+    ParameterSpec("reference_harmonics", "double[]", [], "one order per tone: tone k "
+                  "follows order_k x /pph/reference_frequency while it arrives; empty = "
+                  "no reference", low=0.0, low_open=True, max_length=MAX_NOTCH_TONES,
+                  constraints="empty or one order per tone"),
+    ParameterSpec("reference_timeout_s", "double", 0.1, "a reference older than this is "
+                  "stale: the tones fall back to tracking or their nominal frequencies",
+                  unit="s", low=0.002, high=10.0),
+    ParameterSpec("harmonics", "int", 0, "also cancel orders 2..harmonics+1 of every "
+                  "tone, following it", low=0, high=7,
+                  constraints=f"tones x (harmonics + 1) <= {MAX_NOTCH_TONES}"),
+    ParameterSpec("mu_policy", "string", "manual", "manual = every tone at mu, a warning "
+                  "when the predicted rise exceeds max_rise_db; auto = per tone the largest "
+                  "rate within it", choices=MU_POLICIES),
+    ParameterSpec("max_rise_db", "double", 3.0, "largest predicted rise of "
+                  "the vibration off the tones", unit="dB", low=0.1, high=20.0),
+    ParameterSpec("divergence_guard", "bool", True, "back off (freeze, lower mu, fade out) "
+                  "when control makes a band worse than its level before control"),
+    ParameterSpec("guard_margin_db", "double", 1.0, "rise over the level before control "
+                  "that counts as worse", unit="dB", low=0.1, high=10.0),
     EXECUTOR,
 ))
 

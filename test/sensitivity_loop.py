@@ -24,7 +24,8 @@ from hexapod_vibration.core.control.plant_identification import (
     PlantFrequencyResponse,
 )
 from hexapod_vibration.core.model.config import ModelConfig
-from hexapod_vibration.core.sim.closed_loop import CoreLoop, LoopRecord, coefficients_for
+from hexapod_vibration.core.control.filters import DCBlocker
+from hexapod_vibration.core.sim.closed_loop import CoreLoop, LoopRecord
 from hexapod_vibration.core.sim.scenario import Scenario
 
 FS = 1000.0
@@ -52,35 +53,39 @@ class IdentifyingLoop(CoreLoop):
         self.disturbance: DisturbanceSpectrum | None = None
         self.choice: mu_policy.MuChoice | None = None
         self.z_row = np.linalg.inv(self.config.geometry.top_jacobian)[2]
+        self._dc = DCBlocker(6, FS, self.notch.config.dc_cutoff_hz)
 
-    def _notch_step(self, n: int, error: np.ndarray, record: LoopRecord) -> np.ndarray:
+    def _controller_step(self, n: int, accel_m_s2: np.ndarray,
+                         record: LoopRecord) -> np.ndarray:
         if self.notch is not None and not self.broadband.done and n >= self.broadband_start:
-            self.notch.step(error)                          # keeps its phase running
-            command = self.broadband.step(error)
+            self.notch.step(n, accel_m_s2)                  # keeps its phase running
+            command = self.broadband.step(self._dc.step(accel_m_s2))
             if self.broadband.done:
                 self.response = self.broadband.result()
                 if hasattr(self.broadband, 'disturbance'):
                     self.disturbance = self.broadband.disturbance()
             return command
-        if (not self.enable_control and self.identifier is None
-                and n >= record.control_on_sample):
-            return self.notch.step(error)                   # stays disabled: output 0
-        return super()._notch_step(n, error, record)
+        self._dc.step(accel_m_s2)
+        if not self.enable_control and n == record.control_on_sample:
+            command = self.notch.step(n, accel_m_s2)        # stays disabled: output 0
+        else:
+            command = super()._controller_step(n, accel_m_s2, record)
+        if self.choice is None and self.notch.plant_response is not None:
+            self._install_policy()
+        return command
 
-    def _install_coefficients(self, record: LoopRecord) -> None:
-        response = self.identifier.result()
+    def _install_policy(self) -> None:
+        """Fold the mu policy's per-tone rates into the supervisor's normalised P."""
         sc = self.scenario
-        coefficients, bound = coefficients_for(response, sc.notch.adaptation, sc.notch.mu)
-        self.record_coefficients = coefficients             # normalised, before the policy
+        coefficients = self.notch.canceller.coefficients      # normalised, before the policy
+        self.record_coefficients = coefficients
         self.choice = mu_policy.choose_tone_rates(
             self.response.at, sc.notch.tone_frequencies_hz, FS, coefficients, sc.notch.mu,
             policy=self.policy, max_rise_db=self.max_rise_db, output_weights=self.z_row,
             disturbance_csd=self.disturbance.at)
         folded = sensitivity.per_tone_coefficients(coefficients, sc.notch.mu,
                                                    self.choice.tone_mu)
-        self.notch.set_coefficients(folded)
-        record.plant_response, record.coefficients, record.mu_bound = response, folded, bound
-        self.identifier = None
+        self.notch.canceller.set_coefficients(folded)
 
     def predict(self, disturbance_csd=None, frequencies_hz=None
                 ) -> sensitivity.SensitivityPrediction:
@@ -92,7 +97,8 @@ class IdentifyingLoop(CoreLoop):
             disturbance_csd = self.disturbance.at
         return sensitivity.predict_sensitivity(
             self.response.at, self.scenario.notch.tone_frequencies_hz, FS,
-            self.notch.coefficients, self.notch.mu, frequencies_hz=frequencies_hz,
+            self.notch.canceller.coefficients, self.notch.canceller.mu,
+            frequencies_hz=frequencies_hz,
             output_weights=self.z_row, disturbance_csd=disturbance_csd)
 
 

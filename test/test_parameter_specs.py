@@ -36,9 +36,16 @@ def test_readme_parameter_table_is_generated_from_the_specs():
 def test_spec_constants_are_the_cores():
     from hexapod_vibration.analysis.report import DEFAULT_WINDOW_S
     from hexapod_vibration.core.control.adaptation import COEFFICIENT_MODES
+    from hexapod_vibration.core.control.mu_policy import MU_POLICIES
+    from hexapod_vibration.core.control.notch_supervisor import NotchConfig
     from hexapod_vibration.tools import analyze
 
     assert set(specs.ADAPTATION_MODES) == set(COEFFICIENT_MODES)
+    assert set(specs.MU_POLICIES) == set(MU_POLICIES)
+    notch = specs.NOTCH_CONTROLLER.defaults()
+    for name, value in vars(NotchConfig()).items():
+        expected = list(value) if isinstance(value, tuple) else value
+        assert notch[name] == expected, name
     assert analyze.DEFAULT_WINDOW_S == DEFAULT_WINDOW_S
 
 

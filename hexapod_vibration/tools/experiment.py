@@ -91,6 +91,7 @@ def node_parameters(scenario: Scenario, mode: str) -> dict[str, dict[str, Any]]:
     }
     if has_notch:
         params["notch_controller"] = {
+            **{k: list(v) if isinstance(v, tuple) else v for k, v in notch.settings.items()},
             "tone_frequencies_hz": list(notch.tone_frequencies_hz), "mu": notch.mu,
             "adaptation": notch.adaptation, "enabled": False,
             "identify_delay_s": scenario.identify_at_s,

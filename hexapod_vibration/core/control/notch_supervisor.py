@@ -42,6 +42,7 @@ import numpy as np
 from hexapod_vibration.contract import SAMPLE_RATE_HZ, STRUT_COUNT, NotchState
 from hexapod_vibration.core.control import adaptation
 from hexapod_vibration.core.control.filters import DCBlocker
+from hexapod_vibration.core.control.mu_policy import DEFAULT_MAX_RISE_DB
 from hexapod_vibration.core.control.notch import (
     AdaptiveNotchCanceller,
     validate_frequencies,
@@ -70,6 +71,21 @@ class NotchConfig:
         dc_cutoff_hz: corner of the DC blocker before the canceller (Hz).
         loop_delay_samples: loop delay used in the stability bound (samples).
         ramp_s: enable/disable fade time (s).
+        frequency_tracking: estimate each tone's frequency online and let the
+            canceller's oscillators follow it (issue 11).
+        tracking_range_hz: largest deviation of a tracked tone from its nominal (Hz).
+        reference_harmonics: one order per tone (may be non-integer): tone k follows
+            order_k x the reference frequency (tachometer, Hz) while it arrives; empty:
+            no reference.
+        reference_timeout_s: a reference older than this is stale: the tones fall back to
+            tracking or their nominal frequencies (s).
+        harmonics: also cancel orders 2..harmonics+1 of every tone, following it.
+        mu_policy: ``manual`` (every tone at ``mu``, a warning when the predicted rise
+            exceeds ``max_rise_db``) or ``auto`` (per tone the largest rate within it).
+        max_rise_db: the largest predicted rise of the vibration off the tones (dB).
+        divergence_guard: watch every controlled band against its level before control
+            and back off (freeze, lower mu, fade out) when control makes it worse.
+        guard_margin_db: rise over the level before control that counts as worse (dB).
     """
 
     mu: float = 0.002
@@ -84,6 +100,15 @@ class NotchConfig:
     dc_cutoff_hz: float = 0.5
     loop_delay_samples: float = 2.0
     ramp_s: float = 0.05
+    frequency_tracking: bool = False
+    tracking_range_hz: float = 2.0
+    reference_harmonics: tuple[float, ...] = ()
+    reference_timeout_s: float = 0.1
+    harmonics: int = 0
+    mu_policy: str = "manual"
+    max_rise_db: float = DEFAULT_MAX_RISE_DB
+    divergence_guard: bool = True
+    guard_margin_db: float = 1.0
 
     def replaced(self, changes: Mapping[str, Any]) -> NotchConfig:
         """A copy with ``changes`` (parameter name -> value); unknown names raise KeyError."""
@@ -91,9 +116,9 @@ class NotchConfig:
         if unknown:
             raise KeyError(f"not a notch setting: {', '.join(sorted(unknown))}")
         values = dict(changes)
-        if "tone_frequencies_hz" in values:
-            values["tone_frequencies_hz"] = tuple(float(f) for f in
-                                                  values["tone_frequencies_hz"] or ())
+        for name in ("tone_frequencies_hz", "reference_harmonics"):
+            if name in values:
+                values[name] = tuple(float(f) for f in values[name] or ())
         return dataclasses.replace(self, **values)
 
 

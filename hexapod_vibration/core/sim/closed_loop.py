@@ -68,9 +68,10 @@ def notch_config(scenario: Scenario) -> NotchConfig:
     ``identify_at_s`` after the first sample.
     """
     notch = scenario.notch
-    return NotchConfig(mu=notch.mu, tone_frequencies_hz=tuple(notch.tone_frequencies_hz),
-                       adaptation=notch.adaptation, enabled=False,
-                       identify_delay_s=scenario.identify_at_s)
+    return NotchConfig().replaced({
+        **notch.settings, "mu": notch.mu, "tone_frequencies_hz": notch.tone_frequencies_hz,
+        "adaptation": notch.adaptation, "enabled": False,
+        "identify_delay_s": scenario.identify_at_s})
 
 
 class CoreLoop:

@@ -39,13 +39,41 @@ class ShakerSettings:
                                  self.drift_hz, self.drift_period_s)
 
 
+RUNNER_NOTCH_SETTINGS = frozenset({"enabled", "identify_delay_s"})
+"""Notch settings the timeline sets (``control_on_s``, ``identify_at_s``), not the YAML."""
+
+
 @dataclass(frozen=True)
 class NotchSettings:
-    """Notch controller: tones (Hz), normalised rate mu (-), adaptation mode."""
+    """Notch controller: tones (Hz), normalised rate mu (-), adaptation mode, the rest.
+
+    ``settings`` holds any other notch parameter by its own name (``frequency_tracking``,
+    ``harmonics``, ``mu_policy``, ...: the fields of
+    :class:`~hexapod_vibration.core.control.notch_supervisor.NotchConfig`), checked there.
+    """
 
     tone_frequencies_hz: tuple[float, ...] = ()
     mu: float = 0.002
     adaptation: str = "decentralized"
+    settings: dict[str, Any] = field(default_factory=dict)
+
+    @classmethod
+    def from_yaml(cls, values: dict[str, Any]) -> NotchSettings:
+        """Split the YAML's ``notch:`` mapping; a name that is no notch setting raises."""
+        from hexapod_vibration.core.control.notch_supervisor import NotchConfig
+
+        values = _tuples(values)
+        own = {k: values.pop(k) for k in ("tone_frequencies_hz", "mu", "adaptation")
+               if k in values}
+        unknown = set(values) - set(NotchConfig.__dataclass_fields__)
+        if unknown:
+            raise ValueError(f"notch: not a notch parameter: {', '.join(sorted(unknown))}")
+        timeline = set(values) & RUNNER_NOTCH_SETTINGS
+        if timeline:
+            raise ValueError(f"notch: {', '.join(sorted(timeline))} is set by the timeline "
+                             "(identify_at_s, control_on_s)")
+        NotchConfig().replaced(values)
+        return cls(**own, settings=values)
 
 
 @dataclass(frozen=True)
@@ -125,10 +153,12 @@ def scenario_from_dict(data: dict[str, Any]) -> Scenario:
     if not isinstance(data, dict) or "name" not in data:
         raise ValueError("a scenario is a mapping with at least a 'name'")
     values = dict(data)
-    sections = {"shaker": ShakerSettings, "notch": NotchSettings, "test_sine": TestSineSettings}
-    for key, cls in sections.items():
+    sections = {"shaker": ShakerSettings, "notch": NotchSettings.from_yaml,
+                "test_sine": TestSineSettings}
+    for key, make in sections.items():
         if key in values:
-            values[key] = cls(**_tuples(values[key]))
+            section = values[key]
+            values[key] = (make(section) if key == "notch" else make(**_tuples(section)))
     return Scenario(**_tuples(values))
 
 
