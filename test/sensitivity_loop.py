@@ -18,13 +18,13 @@ import numpy as np
 from scipy import signal
 
 from hexapod_vibration.core.control import mu_policy, sensitivity
+from hexapod_vibration.core.control.filters import DCBlocker
 from hexapod_vibration.core.control.plant_identification import (
     BroadbandIdentifier,
     DisturbanceSpectrum,
     PlantFrequencyResponse,
 )
 from hexapod_vibration.core.model.config import ModelConfig
-from hexapod_vibration.core.control.filters import DCBlocker
 from hexapod_vibration.core.sim.closed_loop import CoreLoop, LoopRecord
 from hexapod_vibration.core.sim.scenario import Scenario
 
