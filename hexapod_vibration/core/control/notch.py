@@ -433,6 +433,20 @@ class AdaptiveNotchCanceller:
         """Freeze (True) or resume (False) adaptation; the output keeps running."""
         self._frozen = bool(flag)
 
+    def limit_weights(self, limit_n: float) -> bool:
+        """Anti-windup: scale each channel's weights so that sum_t |W[t, i]| <= limit_n (N).
+
+        The sum is the largest output the channel's tones can add up to, so after the
+        clamp the canceller never asks for more than ``limit_n``. Returns True if a weight
+        was scaled.
+        """
+        peak = np.abs(self._v).sum(axis=1)                   # (C,) largest output (N)
+        over = peak > limit_n
+        if not over.any():
+            return False
+        self._v[over] *= (limit_n / peak[over])[:, None]
+        return True
+
     # ------------------------------------------------------------------ read-only views
     @property
     def weights(self) -> np.ndarray:

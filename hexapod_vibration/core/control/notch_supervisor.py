@@ -40,7 +40,17 @@ from typing import Any
 import numpy as np
 
 from hexapod_vibration.contract import SAMPLE_RATE_HZ, STRUT_COUNT, NotchState
-from hexapod_vibration.core.control import adaptation
+from hexapod_vibration.core.control import adaptation, mu_policy, sensitivity
+from hexapod_vibration.core.control.divergence_guard import (
+    GUARD_BACKED_OFF,
+    GUARD_DISABLED,
+    GUARD_OFF,
+    GUARD_REFERENCING,
+    GUARD_WATCHING,
+    MU_DIVISOR,
+    DivergenceGuard,
+    GuardVerdict,
+)
 from hexapod_vibration.core.control.filters import DCBlocker
 from hexapod_vibration.core.control.mu_policy import DEFAULT_MAX_RISE_DB
 from hexapod_vibration.core.control.notch import (
@@ -48,9 +58,23 @@ from hexapod_vibration.core.control.notch import (
     validate_frequencies,
     validate_mu,
 )
+from hexapod_vibration.core.control.plant_identification import (
+    BroadbandIdentifier,
+    DisturbanceSpectrum,
+    PlantFrequencyResponse,
+)
 
 MAX_TONES = 16
 """Largest number of tones the controller accepts."""
+IDENTIFICATION_METHODS = ("tones", "broadband")
+MAX_IDENTIFICATION_UNCERTAINTY = 0.1
+"""An identification whose relative uncertainty at a tone exceeds this is refused (10 %:
+a gain within 10 % and a phase within ~6 degrees)."""
+GUARD_SETTLE_S = 0.5
+"""After the first sample (DC blocker) and after an identification (the excitation's
+decay) the guard waits this long before the error counts as the level without control (s)."""
+DEFAULT_WEIGHT_LIMIT_N = 40.0
+"""The model's strut dynamic force limit (config/pph_model.yaml force_limit_dynamic_n)."""
 
 
 @dataclass(frozen=True)
@@ -84,8 +108,15 @@ class NotchConfig:
             exceeds ``max_rise_db``) or ``auto`` (per tone the largest rate within it).
         max_rise_db: the largest predicted rise of the vibration off the tones (dB).
         divergence_guard: watch every controlled band against its level before control
-            and back off (freeze, lower mu, fade out) when control makes it worse.
+            and back off (roll back and lower mu, then fade out) when control makes it
+            worse (:mod:`~hexapod_vibration.core.control.divergence_guard`).
         guard_margin_db: rise over the level before control that counts as worse (dB).
+        weight_limit_n: anti-windup: each strut's weights never add up to more than this
+            (N), the actuator's dynamic rating.
+        identification: ``tones`` (test tones at the tones, 3.2 s with one or two tones;
+            eq. 18 bound) or ``broadband`` (a 10 s multisine over 0..fs/2 that survives a
+            disturbance a fraction of a hertz from a tone; the Nyquist bound on the
+            identified G(f), the mu policy and the predicted sensitivity).
     """
 
     mu: float = 0.002
@@ -109,6 +140,8 @@ class NotchConfig:
     max_rise_db: float = DEFAULT_MAX_RISE_DB
     divergence_guard: bool = True
     guard_margin_db: float = 1.0
+    weight_limit_n: float = DEFAULT_WEIGHT_LIMIT_N
+    identification: str = "tones"
 
     def replaced(self, changes: Mapping[str, Any]) -> NotchConfig:
         """A copy with ``changes`` (parameter name -> value); unknown names raise KeyError."""
@@ -212,7 +245,22 @@ class NotchSupervisor:
         self.identification_end_sample = -1
         self.refusal = ""
         self.counters = {"gaps": 0, "missed_samples": 0, "duplicates": 0}
+        self.weight_clamps = 0
         self._events: list[SupervisorEvent] = []
+        self._identifying_tones: list[float] = []
+        self.plant_frequency_response: PlantFrequencyResponse | None = None
+        self.disturbance_spectrum: DisturbanceSpectrum | None = None
+        self.sensitivity: sensitivity.SensitivityPrediction | None = None
+        self.mu_choice: mu_policy.MuChoice | None = None
+        self.mu_limit = float("nan")
+        self.identification_confidence = float("nan")
+        self.guard = DivergenceGuard(self.channels, self.fs, tones, config.guard_margin_db)
+        self.guard_action = ""
+        self._guard_backed_off = False
+        self._guard_gave_up = False
+        self._last_good_weights = self.canceller.weights
+        self._quiet_from_sample = -1
+        self._last_clamp_event = -10**9
         self.bound = self._plan({"mu": config.mu, "tone_frequencies_hz": tones,
                                  "adaptation": config.adaptation}).bound
         if raw or not config.auto_identify:
@@ -250,6 +298,12 @@ class NotchSupervisor:
             self.canceller.set_mu(changes["mu"])
         tones_changed = "tone_frequencies_hz" in changes
         mode_changed = "adaptation" in changes
+        if "guard_margin_db" in changes:
+            self.guard.margin_db = float(changes["guard_margin_db"])
+        if tones_changed:
+            self.guard.set_tones(plan.tones)
+        if tones_changed or mode_changed or "mu" in changes:
+            self._clear_guard_refusal()
         if tones_changed:
             self.canceller.set_tone_frequencies(plan.tones, coefficients=plan.coefficients,
                                                 ramp_samples=self.ramp_samples)
@@ -262,6 +316,16 @@ class NotchSupervisor:
         if tones_changed or mode_changed:
             self._after_tone_or_mode_change(plan, mode_changed)
 
+    def _clear_guard_refusal(self) -> None:
+        """New settings: the guard's fade-out no longer holds; control may try again."""
+        if not self._guard_gave_up:
+            return
+        self._guard_restart()
+        self.refusal = ""
+        if self.identifier is None and self.plant_response is not None:
+            self.canceller.set_frozen(False)
+            self.canceller.set_enabled(self._config.enabled, self.ramp_samples)
+
     def _check_tones(self, changes: Mapping[str, Any]) -> None:
         if "tone_frequencies_hz" not in changes:
             return
@@ -272,6 +336,21 @@ class NotchSupervisor:
             validate_frequencies(tones, self.fs)
         except ValueError as exc:
             raise ValueError(f"tone_frequencies_hz rejected: {exc}") from None
+
+    @staticmethod
+    def _check_guard_settings(changes: Mapping[str, Any]) -> None:
+        """Refuse bad identification, policy, guard and weight-limit settings."""
+        method = changes.get("identification", IDENTIFICATION_METHODS[0])
+        if method not in IDENTIFICATION_METHODS:
+            raise ValueError(f"identification must be one of {IDENTIFICATION_METHODS}, "
+                             f"got {method!r}")
+        if "mu_policy" in changes or "max_rise_db" in changes:
+            mu_policy.validate_policy(changes.get("mu_policy", "manual"),
+                                      changes.get("max_rise_db", DEFAULT_MAX_RISE_DB))
+        for name in ("weight_limit_n", "guard_margin_db"):
+            value = changes.get(name, 1.0)
+            if not np.isfinite(value) or value <= 0.0:
+                raise ValueError(f"{name} must be finite and > 0, got {value!r}")
 
     def _plan(self, changes: Mapping[str, Any]) -> _Plan:
         """Check a set of changes as a whole, changing nothing.
@@ -285,6 +364,7 @@ class NotchSupervisor:
             ValueError: the reason to refuse the changes.
         """
         self._check_tones(changes)
+        self._check_guard_settings(changes)
         if "tone_frequencies_hz" in changes:
             tones = [float(f) for f in changes["tone_frequencies_hz"] or []]
         else:
@@ -323,7 +403,7 @@ class NotchSupervisor:
         if mode_changed:      # a normalised mode must not adapt with another mode's P
             self.canceller.set_frozen(True)
         running = self.identifier is not None and np.array_equal(
-            self.identifier.tone_frequencies_hz, plan.tones)
+            self._identifying_tones, plan.tones)
         if self._config.auto_identify and self.first_sample >= 0 and not running:
             self.start_identification(plan.tones)
 
@@ -340,6 +420,8 @@ class NotchSupervisor:
 
     def _known_response(self, tones: list[float]) -> np.ndarray | None:
         """Identified G (T, C, C) at ``tones``, or None if a tone was never identified."""
+        if self.plant_frequency_response is not None and tones:
+            return self.plant_frequency_response.at(tones)
         rows = [self._responses.get(_tone_key(f)) for f in tones]
         if not rows or any(r is None for r in rows):
             return None
@@ -348,6 +430,9 @@ class NotchSupervisor:
     def _coefficients_for(self, tones: list[float], response: np.ndarray | None,
                           mode: str) -> tuple[np.ndarray | None, float]:
         """Coefficients for the canceller (None: new tones wait) and the mu bound."""
+        if response is not None and self.plant_frequency_response is not None:
+            coefficients = adaptation.normalized_coefficients(response, mode)
+            return coefficients, self._nyquist_limit(tones, coefficients)
         if response is not None:
             return coefficients_and_bound(response, mode, self._config.loop_delay_samples)
         if mode == "raw":
@@ -377,40 +462,78 @@ class NotchSupervisor:
         if not tones:
             raise ValueError("no tones to identify")
         cfg = self._config
-        self.identifier = adaptation.ToneResponseIdentifier(
-            self.channels, tones, self.fs, cfg.identification_amplitude_n,
-            cfg.identification_settle_s, cfg.identification_measure_s)
+        if cfg.identification == "broadband":
+            self.identifier = BroadbandIdentifier(self.channels, self.fs)
+            what = "over 0..fs/2 (multisine)"
+        else:
+            self.identifier = adaptation.ToneResponseIdentifier(
+                self.channels, tones, self.fs, cfg.identification_amplitude_n,
+                cfg.identification_settle_s, cfg.identification_measure_s)
+            what = f"at {tones} Hz"
+        self._identifying_tones = tones
         self.canceller.set_frozen(True)
         self.identification_start_sample = first_sample
         self.identification_end_sample = -1
-        text = (f"identifying the plant at {tones} Hz "
-                f"({self.identifier.duration_s:.1f} s of samples)")
+        text = f"identifying the plant {what} ({self.identifier.duration_s:.1f} s of samples)"
         self._event("info", text)
         return text
 
-    def _finish_identification(self) -> None:
+    def _nyquist_limit(self, tones: list[float], coefficients: np.ndarray) -> float:
+        """Largest common rate the Nyquist test finds stable on the identified G(f)."""
+        return sensitivity.stable_mu_limit(self.plant_frequency_response.at, tones, self.fs,
+                                           coefficients)
+
+    def _measured_response(self) -> tuple[np.ndarray, float, str]:
+        """G at the tones from the finished identifier, its uncertainty and what it is."""
+        tones = self._identifying_tones
+        if isinstance(self.identifier, BroadbandIdentifier):
+            pfr = self.identifier.result()
+            self.plant_frequency_response = pfr
+            self.disturbance_spectrum = self.identifier.disturbance()
+            uncertainty = float(np.max(pfr.uncertainty_at(tones)))
+            return pfr.at(tones), uncertainty, "relative uncertainty of G(f) at the tones"
         response = self.identifier.result()
-        for f, g in zip(self.identifier.tone_frequencies_hz, response, strict=True):
+        self.plant_frequency_response = None
+        self.disturbance_spectrum = None
+        change = self.identifier.baseline_change()
+        for f, g in zip(tones, response, strict=True):
             self._responses[_tone_key(f)] = g
+        return response, float(np.max(change)), ("change of the disturbance at the tones "
+                                                  "during the identification")
+
+    def _finish_identification(self) -> None:
+        response, uncertainty, what = self._measured_response()
         self.identifier = None
         self.identification_end_sample = self.last_sample
+        self._quiet_from_sample = self.last_sample + int(round(GUARD_SETTLE_S * self.fs))
+        self.identification_confidence = float(max(0.0, 1.0 - uncertainty))
         self.canceller.set_frozen(False)
+        self.sensitivity = self.mu_choice = None
         tones = [float(f) for f in self.canceller.tone_frequencies_hz]
         mode = self._config.adaptation
-        current = self._known_response(tones)
+        if uncertainty > MAX_IDENTIFICATION_UNCERTAINTY:
+            self.plant_response, self.identified_tones = None, []
+            self._refuse(f"identification failed: {what} {100 * uncertainty:.0f} % > "
+                         f"{100 * MAX_IDENTIFICATION_UNCERTAINTY:.0f} % (a disturbance "
+                         "next to a tone?); control stays off")
+            return
+        current = response if tones == self._identifying_tones else self._known_response(
+            tones)
         try:
             if current is None:
                 raise ValueError(f"no identified response at {tones} Hz")
-            coefficients, bound = coefficients_and_bound(current, mode,
-                                                         self._config.loop_delay_samples)
+            coefficients, bound = self._coefficients_for(tones, current, mode)
         except ValueError as exc:
             self._refuse(f"identification unusable for {mode}: {exc}; not adapting")
             return
         self.plant_response, self.identified_tones, self.bound = current, tones, bound
+        self.mu_limit = bound
         self.canceller.set_coefficients(coefficients)
         gains = np.abs(np.diagonal(current, axis1=1, axis2=2)).mean(axis=1)
-        self._event("info", f"identified: |G_ii| {np.round(gains, 4)} (m/s^2)/N, mu bound "
-                            f"{bound:.4g}")
+        source = "Nyquist on G(f)" if self.plant_frequency_response is not None else "eq. 18"
+        self._event("info", f"identified: |G_ii| {np.round(gains, 4)} (m/s^2)/N, confidence "
+                            f"{self.identification_confidence:.3f}, mu bound {bound:.4g} "
+                            f"({source})")
         if bound <= 0.0:
             self._clamp_mu(0.0)
             self._refuse(f"identified mu bound is 0 ({mode} adaptation at {tones} Hz): no "
@@ -418,9 +541,30 @@ class NotchSupervisor:
             return
         self.refusal = ""
         self._clamp_mu(bound)
+        if self.plant_frequency_response is not None:
+            self._apply_mu_policy(tones, coefficients)
+        self._guard_restart()
         self.canceller.set_enabled(self._config.enabled, self.ramp_samples)
         if self._config.enabled and self.enabled_since_sample < 0:
             self.enabled_since_sample = self.last_sample + 1
+
+    def _apply_mu_policy(self, tones: list[float], coefficients: np.ndarray) -> None:
+        """Per-tone rates of ``mu_policy`` folded into P; the predicted sensitivity."""
+        cfg, mu = self._config, self.canceller.mu
+        pfr, phi = self.plant_frequency_response, self.disturbance_spectrum
+        choice = mu_policy.choose_tone_rates(pfr.at, tones, self.fs, coefficients, mu,
+                                             policy=cfg.mu_policy,
+                                             max_rise_db=cfg.max_rise_db,
+                                             disturbance_csd=phi.at)
+        self.mu_choice = choice
+        folded = sensitivity.per_tone_coefficients(coefficients, mu, choice.tone_mu)
+        self.canceller.set_coefficients(folded)
+        self.sensitivity = sensitivity.predict_sensitivity(pfr.at, tones, self.fs, folded, mu,
+                                                           check_stability=False)
+        self._event("warn" if choice.warning else "info",
+                    choice.warning or f"mu_policy {choice.policy}: tone rates "
+                    f"{np.round(choice.tone_mu, 6).tolist()}, predicted rise "
+                    f"{choice.predicted_rise_db:.2f} dB at {choice.rise_at_hz:.2f} Hz")
 
     def _refuse(self, reason: str) -> None:
         """Keep control off (frozen, faded out) and say why."""
@@ -455,8 +599,7 @@ class NotchSupervisor:
         self._event("warn", f"new run of the loop from sample {first_index}: sequence "
                             "restarted, identification and weights kept")
         if self.identifier is not None:
-            self._start_identification(list(self.identifier.tone_frequencies_hz),
-                                       int(first_index))
+            self._start_identification(list(self._identifying_tones), int(first_index))
 
     def step(self, index: int | None, accel_m_s2: np.ndarray) -> np.ndarray | None:
         """Take the raw accelerations of sample ``index``; the command (N) for that sample.
@@ -475,7 +618,11 @@ class NotchSupervisor:
             return None
         self._catch_up(index)
         error = self.dc_blocker.step(accel_m_s2)
+        if self.canceller.enabled and not self.canceller.frozen:
+            self._limit_weights()
         command = self.canceller.step(error, out=self._command)
+        if self._config.divergence_guard:
+            self._guard_step(error)
         if self.identifier is not None:
             command += self.identifier.step(error)
             if self.identifier.done:
@@ -494,13 +641,79 @@ class NotchSupervisor:
             self._event("warn", f"/pph/accel: {gap} samples missing before {index}")
             if self.identifier is not None:
                 self._event("warn", "samples missed during identification: restarting it")
-                self._start_identification(list(self.identifier.tone_frequencies_hz), index)
+                self._start_identification(list(self._identifying_tones), index)
         self.last_sample = index
         delay = int(round(self._config.identify_delay_s * self.fs))
         if (index - self.first_sample == delay and self.plant_response is None
                 and self.identifier is None and self._config.auto_identify
                 and self.canceller.tone_frequencies_hz.size):
             self._start_identification(None, index)
+
+    # ------------------------------------------------------------------ guard
+    def _limit_weights(self) -> None:
+        """Anti-windup: the weights never ask more than ``weight_limit_n`` of a strut."""
+        if not self.canceller.limit_weights(self._config.weight_limit_n):
+            return
+        self.weight_clamps += 1
+        if self.last_sample - self._last_clamp_event >= self.fs:      # one line a second
+            self._last_clamp_event = self.last_sample
+            self._event("warn", f"weights clamped to the actuator rating "
+                                f"{self._config.weight_limit_n:g} N (anti-windup)")
+
+    def _guard_step(self, error: np.ndarray) -> None:
+        """Feed the guard; act on its verdict (see divergence_guard for the order)."""
+        n = self.last_sample
+        quiet = (self.identifier is None and n >= self._quiet_from_sample
+                 and n - self.first_sample >= GUARD_SETTLE_S * self.fs)
+        off = not self.canceller.enabled and self.canceller.output_gain == 0.0
+        controlling = (self.canceller.enabled and self.canceller.output_gain == 1.0
+                       and not self.canceller.frozen and self.identifier is None
+                       and self.plant_response is not None)
+        verdict = self.guard.step(error, recording=quiet and off,
+                                  judging=controlling and not self._guard_gave_up)
+        if verdict is None:
+            return
+        if verdict.action is None:
+            if self.guard.within_margin():
+                self._last_good_weights = self.canceller.weights
+            return
+        self._guard_act(verdict)
+
+    def _guard_act(self, verdict: GuardVerdict) -> None:
+        """Roll back and lower mu, or fade out; say what and why."""
+        self.guard_action = verdict.text
+        if verdict.action == "rollback":
+            mu = self.canceller.mu / MU_DIVISOR
+            self.canceller.set_weights(self._last_good_weights)
+            self.canceller.set_mu(mu)
+            self._config = self._config.replaced({"mu": mu})
+            self._guard_backed_off = True
+            self._event("warn", f"divergence guard: {verdict.text}: weights rolled back, "
+                                f"mu lowered to {mu:.4g}", ("mu", mu))
+            return
+        self._guard_gave_up = True
+        self.refusal = (f"divergence guard: {verdict.text}: control faded out (worse than "
+                        "off at any rate tried)")
+        self.canceller.set_frozen(True)
+        self.canceller.set_enabled(False, self.ramp_samples)
+        self._event("error", self.refusal)
+
+    def _guard_restart(self) -> None:
+        """New coefficients or settings: the guard's action sequence starts again."""
+        self.guard.restart()
+        self._guard_backed_off = self._guard_gave_up = False
+        self._last_good_weights = self.canceller.weights
+
+    @property
+    def guard_state(self) -> str:
+        """The guard's state: disabled, referencing, watching, backed_off or off."""
+        if not self._config.divergence_guard:
+            return GUARD_DISABLED
+        if self._guard_gave_up:
+            return GUARD_OFF
+        if self.state != NotchState.ADAPTING:
+            return GUARD_REFERENCING
+        return GUARD_BACKED_OFF if self._guard_backed_off else GUARD_WATCHING
 
     # ------------------------------------------------------------------ reporting
     @property
@@ -528,12 +741,29 @@ class NotchSupervisor:
             **self.counters}
         if self.refusal:
             values["refusal"] = self.refusal
+        values.update(self._guard_status())
         if self.plant_response is not None:
             diag = np.diagonal(self.plant_response, axis1=1, axis2=2)
             values["plant_gain_m_s2_per_n"] = np.round(np.abs(diag).mean(axis=1), 6).tolist()
             values["plant_phase_deg"] = np.round(np.rad2deg(np.angle(diag.mean(axis=1))),
                                                  2).tolist()
         return values
+
+    def _guard_status(self) -> dict[str, Any]:
+        """The status keys of the identification, the mu policy and the guard."""
+        choice = self.mu_choice
+        rise, at_hz = ((choice.predicted_rise_db, choice.rise_at_hz) if choice is not None
+                       else (float("nan"), float("nan")))
+        return {"identification": self._config.identification,
+                "identification_confidence": round(self.identification_confidence, 4),
+                "mu_limit": self.mu_limit, "mu_policy": self._config.mu_policy,
+                "tone_mu": ([] if choice is None
+                            else np.round(choice.tone_mu, 8).tolist()),
+                "predicted_rise_db": round(float(rise), 3),
+                "predicted_rise_at_hz": round(float(at_hz), 3),
+                "guard": self.guard_state, "guard_action": self.guard_action,
+                "guard_reference_blocks": self.guard.reference_blocks,
+                "weight_clamps": self.weight_clamps}
 
     def _event(self, level: str, message: str,
                parameter: tuple[str, Any] | None = None) -> None:

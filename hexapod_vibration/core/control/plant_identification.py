@@ -182,6 +182,34 @@ class PlantFrequencyResponse:
         return out
 
 
+    def uncertainty_at(self, frequencies_hz: Sequence[float] | np.ndarray) -> np.ndarray:
+        """Relative uncertainty of G at ``frequencies_hz`` (F,): the worst column's.
+
+        Two figures per column, the larger kept: the standard error of the lines there
+        (``line_relative_error``, interpolated linearly) and the interpolation's own
+        error, estimated by leaving out the measured line nearest to f and comparing the
+        two splines (``|G - G_loo| / |G|``, column norms). A disturbance that corrupts the
+        lines next to a tone removes them; the wider gap shows up in the second figure.
+        """
+        f = np.asarray(frequencies_hz, dtype=float).reshape(-1)
+        full = self.at(f)
+        out = np.zeros(f.size)
+        for j in range(self.n_channels):
+            lines = self.line_frequencies_hz[j]
+            err = np.interp(f, lines, self.line_relative_error[j])
+            loo = np.empty((f.size, self.n_channels), dtype=complex)
+            for m, fm in enumerate(f):
+                keep = np.ones(lines.size, bool)
+                keep[int(np.argmin(np.abs(lines - fm)))] = False
+                spline = CubicSpline(lines[keep], self.line_response[j][keep], axis=0)
+                loo[m] = spline(np.clip(fm, lines[keep][0], lines[keep][-1]))
+            col = full[:, :, j]
+            interp = (np.linalg.norm(col - loo, axis=1)
+                      / np.maximum(np.linalg.norm(col, axis=1), 1e-300))
+            out = np.maximum(out, np.maximum(err, interp))
+        return out
+
+
 def detection_line_noise(spectrum: np.ndarray, bins: np.ndarray,
                          neighbours: int = DETECTION_NEIGHBOURS) -> np.ndarray:
     """Noise magnitude (L, C) at each excited bin from the unexcited even bins around it.
