@@ -40,6 +40,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.interpolate import CubicSpline
+from scipy.optimize import minimize_scalar
 
 from hexapod_vibration.core.control.adaptation import SampledRun, schroeder_phases
 
@@ -51,6 +52,10 @@ DEFAULT_MAX_RELATIVE_ERROR = 0.1
 DETECTION_NEIGHBOURS = 4
 DEFAULT_SMOOTHING_HZ = 4.0
 DEFAULT_LINE_FACTOR = 10.0
+STRONG_LINE_FACTOR = 30.0
+"""A spectral peak this many times the median power is a disturbance line, removed."""
+MAX_REMOVED_LINES = 6
+ZERO_PADDING = 8
 
 
 @dataclass(frozen=True)
@@ -210,6 +215,75 @@ class PlantFrequencyResponse:
         return out
 
 
+@dataclass(frozen=True)
+class RemovedLine:
+    """A disturbance sinusoid fitted in the record and subtracted before the DFT.
+
+    Attributes:
+        frequency_hz: its frequency (Hz), fitted to a small fraction of a bin.
+        amplitude: (C,) peak amplitude per channel (m/s^2).
+    """
+
+    frequency_hz: float
+    amplitude: np.ndarray
+
+
+def _sinusoid_fit(record: np.ndarray, frequency_hz: float, fs: float
+                  ) -> tuple[np.ndarray, float]:
+    """Least-squares cos/sin fit (2, C) at one frequency and the residual power."""
+    n = np.arange(record.shape[0])
+    basis = np.stack([np.cos(2 * np.pi * frequency_hz * n / fs),
+                      np.sin(2 * np.pi * frequency_hz * n / fs)], axis=1)
+    coef, *_ = np.linalg.lstsq(basis, record, rcond=None)
+    residual = record - basis @ coef
+    return basis @ coef, float(np.sum(residual ** 2))
+
+
+def remove_strong_lines(record: np.ndarray, fs: float, design: MultisineDesign
+                        ) -> tuple[np.ndarray, list[RemovedLine]]:
+    """Subtract the disturbance lines that would leak over the excitation (N, C) -> (N, C).
+
+    A disturbance line off the ``fs/P`` grid (a tone a fraction of a hertz from the told
+    one) is not periodic in the record: its DFT leaks, as ``1/distance``, over every line
+    around it (an 80 N shaker line at 40.4 Hz spoils every line from 30 to 50 Hz). The
+    local maxima of the Hann-windowed, zero-padded spectrum (channels summed) above
+    ``STRONG_LINE_FACTOR`` times its median are candidates, strongest first; each is
+    fitted as a sinusoid (frequency by a bounded 1-D search on the residual, amplitude and
+    phase by least squares per channel). One that lies on the period's grid (an excitation
+    line, or a disturbance that does not leak) is left alone; one off it is subtracted, up
+    to ``MAX_REMOVED_LINES``. The excitation lines within a bin of a removed line are
+    partly absorbed by the fit: :func:`response_from_periods` drops them.
+    """
+    x = np.asarray(record, dtype=float).copy()
+    n = x.shape[0]
+    bin_hz = fs / n
+    grid_hz = fs / design.period_samples
+    spec = np.sum(np.abs(np.fft.rfft(x * np.hanning(n)[:, None], ZERO_PADDING * n,
+                                     axis=0)) ** 2, axis=1)
+    freqs = np.fft.rfftfreq(ZERO_PADDING * n, 1.0 / fs)
+    spec[freqs < 2.0 * bin_hz] = 0.0
+    peaks = np.flatnonzero((spec[1:-1] > spec[:-2]) & (spec[1:-1] >= spec[2:])) + 1
+    peaks = peaks[spec[peaks] > STRONG_LINE_FACTOR * np.median(spec)]
+    removed: list[RemovedLine] = []
+    for k in peaks[np.argsort(spec[peaks])[::-1]][:4 * MAX_REMOVED_LINES]:
+        f0 = float(freqs[k])
+        if any(abs(f0 - line.frequency_hz) < 2.0 * bin_hz for line in removed):
+            continue
+        fit = minimize_scalar(lambda f: _sinusoid_fit(x, f, fs)[1],
+                              bounds=(f0 - bin_hz, f0 + bin_hz), method='bounded',
+                              options={'xatol': 1e-7})
+        f_line = float(fit.x)
+        off_grid = abs(f_line / grid_hz - round(f_line / grid_hz))
+        if off_grid < 0.02:
+            continue
+        line, _ = _sinusoid_fit(x, f_line, fs)
+        x -= line
+        removed.append(RemovedLine(f_line, np.max(np.abs(line), axis=0)))
+        if len(removed) >= MAX_REMOVED_LINES:
+            break
+    return x, removed
+
+
 def detection_line_noise(spectrum: np.ndarray, bins: np.ndarray,
                          neighbours: int = DETECTION_NEIGHBOURS) -> np.ndarray:
     """Noise magnitude (L, C) at each excited bin from the unexcited even bins around it.
@@ -239,8 +313,8 @@ def detection_line_noise(spectrum: np.ndarray, bins: np.ndarray,
 
 
 def response_from_periods(design: MultisineDesign, error_periods: np.ndarray,
-                          max_relative_error: float = DEFAULT_MAX_RELATIVE_ERROR
-                          ) -> PlantFrequencyResponse:
+                          max_relative_error: float = DEFAULT_MAX_RELATIVE_ERROR,
+                          removed_hz: Sequence[float] = ()) -> PlantFrequencyResponse:
     """G from the errors of M whole periods of steady-state excitation.
 
     Args:
@@ -252,6 +326,8 @@ def response_from_periods(design: MultisineDesign, error_periods: np.ndarray,
             remain per column (the best ones are kept otherwise). The standard error comes
             from the detection lines (:func:`detection_line_noise`), so it works with one
             period too.
+        removed_hz: disturbance lines subtracted from the record
+            (:func:`remove_strong_lines`): the lines within 1.5 bins of them are dropped.
 
     Returns:
         The response at the kept lines of every column.
@@ -267,6 +343,10 @@ def response_from_periods(design: MultisineDesign, error_periods: np.ndarray,
     rel = (np.linalg.norm(noise, axis=1)
            / np.maximum(np.linalg.norm(mean, axis=1), 1e-300))
     freqs = design.frequencies_hz
+    record_bin_hz = design.sample_rate_hz / (design.period_samples * m)
+    for f_line in removed_hz:
+        rel[np.abs(freqs - f_line) <= 1.5 * max(record_bin_hz, design.sample_rate_hz / p)
+            ] = np.inf
     lines_f, lines_g, lines_e = [], [], []
     for j in range(c):
         idx = np.flatnonzero(design.channel_of_bin == j)
@@ -409,7 +489,9 @@ class BroadbandIdentifier(SampledRun):
         """
         if not self.done:
             raise RuntimeError(f'identification not finished ({100 * self.progress:.0f} %)')
-        return response_from_periods(self.design, self._aligned_periods(), self._max_rel)
+        periods, removed = self._cleaned_periods()
+        return response_from_periods(self.design, periods, self._max_rel,
+                                     [line.frequency_hz for line in removed])
 
     def disturbance(self, smoothing_hz: float = DEFAULT_SMOOTHING_HZ) -> DisturbanceSpectrum:
         """The disturbance's CSD from the same record (:func:`disturbance_from_periods`).
@@ -419,7 +501,22 @@ class BroadbandIdentifier(SampledRun):
         """
         if not self.done:
             raise RuntimeError(f'identification not finished ({100 * self.progress:.0f} %)')
-        return disturbance_from_periods(self.design, self._aligned_periods(), smoothing_hz)
+        return disturbance_from_periods(self.design, self._cleaned_periods()[0], smoothing_hz)
+
+    def removed_lines(self) -> list[RemovedLine]:
+        """The disturbance lines subtracted before the DFT (:func:`remove_strong_lines`)."""
+        return self._cleaned_periods()[1]
+
+    def _cleaned_periods(self) -> tuple[np.ndarray, list[RemovedLine]]:
+        """The aligned periods with the strong disturbance lines removed (cached)."""
+        if getattr(self, '_cleaned', None) is None:
+            record, removed = remove_strong_lines(self._record, self._fs, self.design)
+            self._cleaned = (self._align(record), removed)
+        return self._cleaned
+
+    def _align(self, record: np.ndarray) -> np.ndarray:
+        periods = record.reshape(self._periods, self._p, self._c)
+        return np.roll(periods, self._settle % self._p, axis=1)
 
     def _aligned_periods(self) -> np.ndarray:
         """The measured periods (M, P, C), row n of each paired with table row n.
