@@ -269,7 +269,7 @@ def remove_strong_lines(record: np.ndarray, fs: float, design: MultisineDesign
         f0 = float(freqs[k])
         if any(abs(f0 - line.frequency_hz) < 2.0 * bin_hz for line in removed):
             continue
-        fit = minimize_scalar(lambda f: _sinusoid_fit(x, f, fs)[1],
+        fit = minimize_scalar(lambda f, x=x: _sinusoid_fit(x, f, fs)[1],
                               bounds=(f0 - bin_hz, f0 + bin_hz), method='bounded',
                               options={'xatol': 1e-7})
         f_line = float(fit.x)
