@@ -231,6 +231,7 @@ class NotchSupervisor:
         if not raw:
             self.canceller.set_tone_frequencies(tones, ramp_samples=0)
         self.canceller.set_enabled(False, ramp_samples=0)
+        self.canceller.set_weight_limit(config.weight_limit_n)
         self.dc_blocker = DCBlocker(self.channels, self.fs, config.dc_cutoff_hz)
         self._command = np.zeros(self.channels)
         self.identifier: adaptation.ToneResponseIdentifier | None = None
@@ -298,6 +299,8 @@ class NotchSupervisor:
             self.canceller.set_mu(changes["mu"])
         tones_changed = "tone_frequencies_hz" in changes
         mode_changed = "adaptation" in changes
+        if "weight_limit_n" in changes:
+            self.canceller.set_weight_limit(float(changes["weight_limit_n"]))
         if "guard_margin_db" in changes:
             self.guard.margin_db = float(changes["guard_margin_db"])
         if tones_changed:
@@ -618,9 +621,10 @@ class NotchSupervisor:
             return None
         self._catch_up(index)
         error = self.dc_blocker.step(accel_m_s2)
-        if self.canceller.enabled and not self.canceller.frozen:
-            self._limit_weights()
+        clamped = self.canceller.clamped_samples
         command = self.canceller.step(error, out=self._command)
+        if self.canceller.clamped_samples != clamped:
+            self._weights_clamped()
         if self._config.divergence_guard:
             self._guard_step(error)
         if self.identifier is not None:
@@ -650,10 +654,8 @@ class NotchSupervisor:
             self._start_identification(None, index)
 
     # ------------------------------------------------------------------ guard
-    def _limit_weights(self) -> None:
-        """Anti-windup: the weights never ask more than ``weight_limit_n`` of a strut."""
-        if not self.canceller.limit_weights(self._config.weight_limit_n):
-            return
+    def _weights_clamped(self) -> None:
+        """Anti-windup took effect (the canceller's limit, ``weight_limit_n``): say so."""
         self.weight_clamps += 1
         if self.last_sample - self._last_clamp_event >= self.fs:      # one line a second
             self._last_clamp_event = self.last_sample
