@@ -214,13 +214,20 @@ class NotchSupervisor:
         config: initial settings (checked as a whole; ValueError with the reason).
         sample_rate_hz: loop rate fs (Hz).
         channels: number of struts C.
+        output_weights: c (C,): the output whose rise ``mu_policy`` bounds and the
+            prediction reports, ``c^T e`` (e.g. the top plate's z axis, the z row of
+            ``J^-1``, what the report measures); None: the 6x6 loop's largest singular
+            value (any disturbance direction).
     """
 
     def __init__(self, config: NotchConfig, sample_rate_hz: float = SAMPLE_RATE_HZ,
-                 channels: int = STRUT_COUNT) -> None:
+                 channels: int = STRUT_COUNT,
+                 output_weights: np.ndarray | None = None) -> None:
         """Build the canceller and the DC blocker; identification waits for the first sample."""
         self.fs = float(sample_rate_hz)
         self.channels = int(channels)
+        self.output_weights = (None if output_weights is None
+                               else np.asarray(output_weights, dtype=float))
         self._config = config
         tones = list(config.tone_frequencies_hz)
         raw = config.adaptation == "raw"
@@ -558,12 +565,14 @@ class NotchSupervisor:
         choice = mu_policy.choose_tone_rates(pfr.at, tones, self.fs, coefficients, mu,
                                              policy=cfg.mu_policy,
                                              max_rise_db=cfg.max_rise_db,
+                                             output_weights=self.output_weights,
                                              disturbance_csd=phi.at)
         self.mu_choice = choice
         folded = sensitivity.per_tone_coefficients(coefficients, mu, choice.tone_mu)
         self.canceller.set_coefficients(folded)
-        self.sensitivity = sensitivity.predict_sensitivity(pfr.at, tones, self.fs, folded, mu,
-                                                           check_stability=False)
+        self.sensitivity = sensitivity.predict_sensitivity(
+            pfr.at, tones, self.fs, folded, mu, output_weights=self.output_weights,
+            disturbance_csd=phi.at, check_stability=False)
         self._event("warn" if choice.warning else "info",
                     choice.warning or f"mu_policy {choice.policy}: tone rates "
                     f"{np.round(choice.tone_mu, 6).tolist()}, predicted rise "

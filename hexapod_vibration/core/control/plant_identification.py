@@ -52,10 +52,13 @@ DEFAULT_MAX_RELATIVE_ERROR = 0.1
 DETECTION_NEIGHBOURS = 4
 DEFAULT_SMOOTHING_HZ = 4.0
 DEFAULT_LINE_FACTOR = 10.0
-STRONG_LINE_FACTOR = 30.0
+STRONG_LINE_FACTOR = 100.0
 """A spectral peak this many times the median power is a disturbance line, removed."""
 MAX_REMOVED_LINES = 6
 ZERO_PADDING = 8
+ON_GRID_TOLERANCE = 0.05
+"""A fitted line closer than this (in record bins) to the DFT grid is on it: it does not
+leak, and is left alone."""
 
 
 @dataclass(frozen=True)
@@ -228,59 +231,71 @@ class RemovedLine:
     amplitude: np.ndarray
 
 
-def _sinusoid_fit(record: np.ndarray, frequency_hz: float, fs: float
-                  ) -> tuple[np.ndarray, float]:
-    """Least-squares cos/sin fit (2, C) at one frequency and the residual power."""
-    n = np.arange(record.shape[0])
-    basis = np.stack([np.cos(2 * np.pi * frequency_hz * n / fs),
-                      np.sin(2 * np.pi * frequency_hz * n / fs)], axis=1)
-    coef, *_ = np.linalg.lstsq(basis, record, rcond=None)
-    residual = record - basis @ coef
-    return basis @ coef, float(np.sum(residual ** 2))
+def _dirichlet(offset_bins: np.ndarray, n: int) -> np.ndarray:
+    """DFT at bin k of ``e^{j 2 pi nu m / n}``, m = 0..n-1, as a function of k - nu."""
+    x = np.asarray(offset_bins, dtype=float)
+    den = np.sin(np.pi * x / n)
+    small = np.abs(den) < 1e-12
+    ratio = np.where(small, n, np.sin(np.pi * x) / np.where(small, 1.0, den))
+    return np.exp(-1j * np.pi * x * (n - 1) / n) * ratio
 
 
-def remove_strong_lines(record: np.ndarray, fs: float, design: MultisineDesign
-                        ) -> tuple[np.ndarray, list[RemovedLine]]:
+def _kernel_fit(spectrum: np.ndarray, bins: np.ndarray, nu: float, n: int
+                ) -> tuple[np.ndarray, float]:
+    """Least-squares phasors A (C,) of a line at bin ``nu`` on ``bins``, residual power."""
+    kernel = _dirichlet(bins - nu, n)                                   # (S,)
+    amp = kernel.conj() @ spectrum[bins] / np.vdot(kernel, kernel).real  # (C,)
+    residual = spectrum[bins] - kernel[:, None] * amp[None, :]
+    return amp, float(np.sum(np.abs(residual) ** 2))
+
+
+def remove_strong_lines(record: np.ndarray, fs: float, design: MultisineDesign,
+                        span_hz: float = 8.0) -> tuple[np.ndarray, list[RemovedLine]]:
     """Subtract the disturbance lines that would leak over the excitation (N, C) -> (N, C).
 
-    A disturbance line off the ``fs/P`` grid (a tone a fraction of a hertz from the told
-    one) is not periodic in the record: its DFT leaks, as ``1/distance``, over every line
-    around it (an 80 N shaker line at 40.4 Hz spoils every line from 30 to 50 Hz). The
-    local maxima of the Hann-windowed, zero-padded spectrum (channels summed) above
-    ``STRONG_LINE_FACTOR`` times its median are candidates, strongest first; each is
-    fitted as a sinusoid (frequency by a bounded 1-D search on the residual, amplitude and
-    phase by least squares per channel). One that lies on the period's grid (an excitation
-    line, or a disturbance that does not leak) is left alone; one off it is subtracted, up
-    to ``MAX_REMOVED_LINES``. The excitation lines within a bin of a removed line are
-    partly absorbed by the fit: :func:`response_from_periods` drops them.
+    A disturbance line off the record's DFT grid (a tone a fraction of a hertz from the
+    told one) is not periodic in the record: its DFT leaks, as ``1/distance``, over every
+    line around it (an 80 N shaker line at 40.4 Hz spoils every line from 30 to 50 Hz).
+    The bins the excitation does not use (all but the odd multiples of the period's grid)
+    hold only the disturbance and noise, so there its leakage is known exactly: the
+    Dirichlet kernel of the record. The strongest local maxima of those bins (channels
+    summed) above ``STRONG_LINE_FACTOR`` times their median are candidates; each is fitted
+    on the unexcited bins within ``span_hz`` (frequency by a bounded 1-D search, phasor
+    per channel by least squares) and, if it lies off the DFT grid, subtracted from the
+    record as a sinusoid, up to ``MAX_REMOVED_LINES``. A line on the grid does not leak
+    and is left alone. The excitation lines next to a removed line are dropped by
+    :func:`response_from_periods`.
     """
     x = np.asarray(record, dtype=float).copy()
     n = x.shape[0]
-    bin_hz = fs / n
-    grid_hz = fs / design.period_samples
-    spec = np.sum(np.abs(np.fft.rfft(x * np.hanning(n)[:, None], ZERO_PADDING * n,
-                                     axis=0)) ** 2, axis=1)
-    freqs = np.fft.rfftfreq(ZERO_PADDING * n, 1.0 / fs)
-    spec[freqs < 2.0 * bin_hz] = 0.0
-    peaks = np.flatnonzero((spec[1:-1] > spec[:-2]) & (spec[1:-1] >= spec[2:])) + 1
-    peaks = peaks[spec[peaks] > STRONG_LINE_FACTOR * np.median(spec)]
+    periods = n // design.period_samples
+    k = np.arange(n // 2 + 1)
+    excited = (k % periods == 0) & ((k // periods) % 2 == 1)
+    free = np.flatnonzero(~excited & (k > 1))
+    span = int(round(span_hz * n / fs))
     removed: list[RemovedLine] = []
-    for k in peaks[np.argsort(spec[peaks])[::-1]][:4 * MAX_REMOVED_LINES]:
-        f0 = float(freqs[k])
-        if any(abs(f0 - line.frequency_hz) < 2.0 * bin_hz for line in removed):
-            continue
-        fit = minimize_scalar(lambda f, x=x: _sinusoid_fit(x, f, fs)[1],
-                              bounds=(f0 - bin_hz, f0 + bin_hz), method='bounded',
-                              options={'xatol': 1e-7})
-        f_line = float(fit.x)
-        off_grid = abs(f_line / grid_hz - round(f_line / grid_hz))
-        if off_grid < 0.02:
-            continue
-        line, _ = _sinusoid_fit(x, f_line, fs)
-        x -= line
-        removed.append(RemovedLine(f_line, np.max(np.abs(line), axis=0)))
-        if len(removed) >= MAX_REMOVED_LINES:
+    skipped: set[int] = set()
+    t = np.arange(n)
+    while len(removed) < MAX_REMOVED_LINES:
+        spectrum = np.fft.fft(x, axis=0)
+        power = np.sum(np.abs(spectrum[free]) ** 2, axis=1)
+        local = np.flatnonzero((power[1:-1] > power[:-2]) & (power[1:-1] >= power[2:])) + 1
+        local = [int(c) for c in local[np.argsort(power[local])[::-1]]
+                 if power[c] > STRONG_LINE_FACTOR * np.median(power) and int(c) not in skipped]
+        if not local:
             break
+        k0 = int(free[local[0]])
+        near = free[np.abs(free - k0) <= span]
+        fit = minimize_scalar(lambda nu, near=near, sp=spectrum: _kernel_fit(sp, near, nu, n)[1],
+                              bounds=(k0 - 1.0, k0 + 1.0), method='bounded',
+                              options={'xatol': 1e-6})
+        nu = float(fit.x)
+        if abs(nu - round(nu)) < ON_GRID_TOLERANCE:
+            skipped.add(local[0])                      # on the DFT grid: does not leak
+            continue
+        amp, _ = _kernel_fit(spectrum, near, nu, n)
+        x -= (2.0 * amp[None, :] * np.exp(2j * np.pi * nu * t / n)[:, None]).real
+        removed.append(RemovedLine(nu * fs / n, 2.0 * np.abs(amp)))
     return x, removed
 
 

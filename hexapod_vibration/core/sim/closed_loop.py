@@ -91,7 +91,9 @@ class CoreLoop:
         self.pointing.set_target(np.asarray(scenario.target_pose),
                                  self.config.strut.stroke_limit_m)
         tones = scenario.notch.tone_frequencies_hz
-        self.notch = NotchSupervisor(notch_config(scenario), fs) if tones else None
+        z_row = np.linalg.inv(self.config.geometry.top_jacobian)[2]     # the report's z axis
+        self.notch = (NotchSupervisor(notch_config(scenario), fs, output_weights=z_row)
+                      if tones else None)
 
     def _controller_step(self, n: int, accel_m_s2: np.ndarray,
                          record: LoopRecord) -> np.ndarray:
