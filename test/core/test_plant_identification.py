@@ -117,7 +117,7 @@ def test_result_before_the_end_is_refused():
 def test_pph_loop_response_matches_its_impulse_response():
     """The running PPH (linear, shaker on) against the quiet plant's impulse response."""
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-    from sensitivity_loop import IdentifyingLoop, ImpulseIdentifier
+    from sensitivity_loop import IdentifyingLoop, ImpulseIdentifier, ImpulseLoop
 
     from hexapod_vibration.core.model.config import load_model_config
     from hexapod_vibration.core.sim.scenario import ShakerSettings, load_scenario
@@ -131,9 +131,8 @@ def test_pph_loop_response_matches_its_impulse_response():
         'eddy': {'noise_rms_m': 0.0}})
     impulse = ImpulseIdentifier(record_s=10.0)
     end = 6.0 + impulse.duration_s + 0.5
-    IdentifyingLoop(quiet, dataclasses.replace(scenario, shaker=ShakerSettings(),
-                                               duration_s=end, control_on_s=end),
-                    enable_control=False, identifier=impulse).run()
+    ImpulseLoop(quiet, dataclasses.replace(scenario, shaker=ShakerSettings(),
+                                           duration_s=end, control_on_s=end), impulse).run()
     f_ref, g_ref = impulse.result()
     running = IdentifyingLoop(load_model_config(root / 'config' / 'pph_model.yaml'),
                               dataclasses.replace(scenario, duration_s=17.0,
