@@ -54,6 +54,12 @@ MIN_REFERENCE_BLOCKS = 4
 DEFAULT_SCATTER_DB = 1.0
 """Block-to-block scatter assumed until MIN_REFERENCE_BLOCKS reference blocks exist (dB)."""
 MU_DIVISOR = 4.0
+GRACE_BLOCKS = 2
+"""After an action the fast detector waits this many blocks (0.5 s: four time constants of
+the lowered rate's transient); the slow one keeps watching."""
+ROLLBACK_BLOCKS = 4
+"""The rollback restores the weights of the oldest of the last this many good blocks (1 s
+before the divergence: an instability grows unseen for a while before a band shows it)."""
 ACTIONS = ("rollback", "fade_out")
 
 GUARD_DISABLED = "disabled"
@@ -121,6 +127,7 @@ class DivergenceGuard:
         self._n = 0
         self.set_tones(tone_frequencies_hz)
         self.action_count = 0
+        self._grace = 0
 
     # ------------------------------------------------------------------ bands
     def set_tones(self, tone_frequencies_hz: Sequence[float]) -> None:
@@ -216,13 +223,18 @@ class DivergenceGuard:
             self._slow = (1.0 - alpha) * self._slow + alpha * power
         slow = 10.0 * np.log10(np.maximum(self._slow, 1e-300) / np.maximum(ref, 1e-300))
         fast_th, slow_th = self.thresholds_db()
-        for detector, rise, th in (("fast", level, fast_th), ("slow", slow, slow_th)):
+        detectors = [("fast", level, fast_th), ("slow", slow, slow_th)]
+        if self._grace > 0:
+            self._grace -= 1
+            detectors = detectors[1:]
+        for detector, rise, th in detectors:
             over = np.flatnonzero(rise > th)
             if over.size:
                 b = int(over[np.argmax(rise[over] - th[over])])
                 action = ACTIONS[min(self.action_count, len(ACTIONS) - 1)]
                 self.action_count += 1
                 self._slow = None                      # judge the next state afresh
+                self._grace = GRACE_BLOCKS
                 return GuardVerdict(action, self.band_names[b], float(rise[b]),
                                     float(th[b]), detector)
         return GuardVerdict(None)
@@ -235,3 +247,4 @@ class DivergenceGuard:
         """Control starts again from scratch (new settings): the action sequence restarts."""
         self.action_count = 0
         self._slow = None
+        self._grace = 0

@@ -32,6 +32,7 @@ the ROS parameter must mirror) is queued as :class:`SupervisorEvent` for
 
 from __future__ import annotations
 
+import collections
 import dataclasses
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -48,6 +49,7 @@ from hexapod_vibration.core.control.divergence_guard import (
     GUARD_REFERENCING,
     GUARD_WATCHING,
     MU_DIVISOR,
+    ROLLBACK_BLOCKS,
     DivergenceGuard,
     GuardVerdict,
 )
@@ -266,7 +268,8 @@ class NotchSupervisor:
         self.guard_action = ""
         self._guard_backed_off = False
         self._guard_gave_up = False
-        self._last_good_weights = self.canceller.weights
+        self._good_weights: collections.deque[np.ndarray] = collections.deque(
+            [self.canceller.weights], maxlen=ROLLBACK_BLOCKS)
         self._quiet_from_sample = -1
         self._last_clamp_event = -10**9
         self.bound = self._plan({"mu": config.mu, "tone_frequencies_hz": tones,
@@ -686,7 +689,7 @@ class NotchSupervisor:
             return
         if verdict.action is None:
             if self.guard.within_margin():
-                self._last_good_weights = self.canceller.weights
+                self._good_weights.append(self.canceller.weights)
             return
         self._guard_act(verdict)
 
@@ -695,7 +698,9 @@ class NotchSupervisor:
         self.guard_action = verdict.text
         if verdict.action == "rollback":
             mu = self.canceller.mu / MU_DIVISOR
-            self.canceller.set_weights(self._last_good_weights)
+            self.canceller.set_weights(self._good_weights[0])
+            self._good_weights = collections.deque([self._good_weights[0]],
+                                                   maxlen=ROLLBACK_BLOCKS)
             self.canceller.set_mu(mu)
             self._config = self._config.replaced({"mu": mu})
             self._guard_backed_off = True
@@ -713,7 +718,7 @@ class NotchSupervisor:
         """New coefficients or settings: the guard's action sequence starts again."""
         self.guard.restart()
         self._guard_backed_off = self._guard_gave_up = False
-        self._last_good_weights = self.canceller.weights
+        self._good_weights = collections.deque([self.canceller.weights], maxlen=ROLLBACK_BLOCKS)
 
     @property
     def guard_state(self) -> str:
