@@ -56,6 +56,9 @@ STRONG_LINE_FACTOR = 100.0
 """A spectral peak this many times the median power is a disturbance line, removed."""
 MAX_REMOVED_LINES = 6
 ZERO_PADDING = 8
+OFF_GRID_GAIN = 0.1
+"""A line counts as off the grid only if the off-grid fit leaves less than this fraction of
+the residual the on-grid one leaves (a leaking line: most of its power is leakage)."""
 ON_GRID_TOLERANCE = 0.05
 """A fitted line closer than this (in record bins) to the DFT grid is on it: it does not
 leak, and is left alone."""
@@ -260,10 +263,11 @@ def remove_strong_lines(record: np.ndarray, fs: float, design: MultisineDesign,
     hold only the disturbance and noise, so there its leakage is known exactly: the
     Dirichlet kernel of the record. The strongest local maxima of those bins (channels
     summed) above ``STRONG_LINE_FACTOR`` times their median are candidates; each is fitted
-    on the unexcited bins within ``span_hz`` (frequency by a bounded 1-D search, phasor
-    per channel by least squares) and, if it lies off the DFT grid, subtracted from the
-    record as a sinusoid, up to ``MAX_REMOVED_LINES``. A line on the grid does not leak
-    and is left alone. The excitation lines next to a removed line are dropped by
+    on the unexcited bins within ``span_hz`` but those of the other strong lines (frequency
+    by a bounded 1-D search, phasor per channel by least squares) and, if it lies off the
+    DFT grid (and fits there far better than on it, ``OFF_GRID_GAIN``), subtracted from
+    the record as a sinusoid, up to ``MAX_REMOVED_LINES``. A line on the grid does not
+    leak and is left alone. The excitation lines next to a removed line are dropped by
     :func:`response_from_periods`.
     """
     x = np.asarray(record, dtype=float).copy()
@@ -285,12 +289,15 @@ def remove_strong_lines(record: np.ndarray, fs: float, design: MultisineDesign,
         if not local:
             break
         k0 = int(free[local[0]])
-        near = free[np.abs(free - k0) <= span]
+        strong = free[power > STRONG_LINE_FACTOR * np.median(power)]
+        others = strong[np.abs(strong - k0) > 2]
+        near = free[(np.abs(free - k0) <= span) & ~np.isin(free, others)]
         fit = minimize_scalar(lambda nu, near=near, sp=spectrum: _kernel_fit(sp, near, nu, n)[1],
                               bounds=(k0 - 1.0, k0 + 1.0), method='bounded',
                               options={'xatol': 1e-6})
         nu = float(fit.x)
-        if abs(nu - round(nu)) < ON_GRID_TOLERANCE:
+        if (abs(nu - round(nu)) < ON_GRID_TOLERANCE
+                or fit.fun > OFF_GRID_GAIN * _kernel_fit(spectrum, near, round(nu), n)[1]):
             skipped.add(local[0])                      # on the DFT grid: does not leak
             continue
         amp, _ = _kernel_fit(spectrum, near, nu, n)
