@@ -22,8 +22,10 @@ scatter (dB). While control is on each block is judged against it:
 The guard decides, the supervisor acts (:class:`GuardVerdict`). The order of the actions
 (:data:`ACTIONS`), one step per divergence:
 
-1. ``rollback``: the weights go back to the last ones under which every band was within
-   ``reference + margin`` and ``mu`` is divided by ``MU_DIVISOR``. A rate too high for the
+1. ``rollback``: the weights go back to those of about 1 s before (the oldest of the last
+   ``ROLLBACK_BLOCKS`` blocks under which every band was within ``reference + margin``)
+   and ``mu`` is divided by ``MU_DIVISOR``; the fast detector then waits
+   ``GRACE_BLOCKS`` for the restored weights' transient. A rate too high for the
    loop (the identified bound was optimistic or the plant changed) is cured by a lower
    rate, and the benefit of control is kept; the rollback removes the excess at once, so
    trying costs one detection time. Freezing alone is not an action: weights frozen at a

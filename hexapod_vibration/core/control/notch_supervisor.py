@@ -21,6 +21,20 @@ the supervisor finds it):
   off;
 - ``raw`` (the paper as printed, ``P = I``) adapts from the first sample; its
   identification only measures G and the bound (and freezes the weights meanwhile).
+- ``identification: broadband`` measures G(f) over 0..fs/2 instead (10 s multisine,
+  :class:`~hexapod_vibration.core.control.plant_identification.BroadbandIdentifier`,
+  off-grid disturbance lines fitted and removed): G at the tones comes from it, the bound
+  is the Nyquist limit on G(f) (eq. 18 is 15-50x optimistic on the PPH), ``mu_policy``
+  folds its per-tone rates into P and :attr:`NotchSupervisor.sensitivity` holds the
+  predicted |S(f)| before control goes on;
+- every identification carries a confidence figure (1 - its relative uncertainty at the
+  tones: the broadband lines' standard error and interpolation error, or how far the
+  disturbance moved between the tone identification's two baselines); above 10 %
+  uncertainty control is refused (state ``refused``, the reason in ``refusal``);
+- the divergence guard (:mod:`~hexapod_vibration.core.control.divergence_guard`) records
+  the error's band levels while control is off and nothing is injected, and under control
+  rolls back and lowers ``mu``, then fades out, when a band rises above that level; the
+  canceller clamps its weights to ``weight_limit_n`` after every update (anti-windup).
 
 Missing samples (a gap in the indices) move the phases on as if the samples had been
 there (:meth:`AdaptiveNotchCanceller.advance`); a gap during an identification restarts it.
