@@ -391,8 +391,8 @@ NOTCH_CONTROLLER = NodeSpec("notch_controller", summary="six decentralized Adapt
                   "rate within it", choices=MU_POLICIES),
     ParameterSpec("max_rise_db", "double", 3.0, "largest predicted rise of "
                   "the vibration off the tones", unit="dB", low=0.1, high=20.0),
-    ParameterSpec("divergence_guard", "bool", True, "back off (roll back and lower mu, then "
-                  "fade out) when control makes a band worse than its level before control"),
+    ParameterSpec("divergence_guard", "bool", True, "back off (lower mu, then fade out) "
+                  "when control makes a band worse than its level before control"),
     ParameterSpec("guard_margin_db", "double", 1.0, "rise over the level before control "
                   "that counts as worse", unit="dB", low=0.1, high=10.0),
     ParameterSpec("weight_limit_n", "double", 40.0, "anti-windup: each strut's weights "

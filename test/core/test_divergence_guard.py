@@ -1,10 +1,10 @@
 """The divergence guard alone (synthetic, seeded signals) and inside the supervisor.
 
 Alone: a 40 Hz line plus white noise on six channels as the level without control; then the
-same statistics (no verdict), a rise (a verdict within one 0.25 s block, rollback first,
+same statistics (no verdict), a rise (a verdict within one 0.25 s block, lower mu first,
 fade-out second), a small steady rise (the slow detector), a fall (control working: none).
 In the supervisor (the static plant of test_notch_supervisor): a plant whose sign flips
-after the identification makes the canceller diverge; the guard rolls back, lowers mu, then
+after the identification makes the canceller diverge; the guard lowers mu, then
 fades out within 0.5 s of each divergence, and the weights never exceed the actuator rating.
 """
 
@@ -59,13 +59,13 @@ def test_the_same_statistics_under_control_give_no_verdict(referenced):
     assert all(v.action is None for _, v in verdicts)
 
 
-def test_a_rise_is_caught_within_one_block_rollback_first_then_fade_out(referenced):
+def test_a_rise_is_caught_within_one_block_lower_mu_first_then_fade_out(referenced):
     guard, rng = referenced
     worse = _signal(rng, 3 * BLOCK, 4000, tone_amp=0.05 * 10 ** (6 / 20))   # +6 dB
     verdicts = _feed(guard, worse, recording=False, judging=True)
     first, verdict = verdicts[0]
     assert first == BLOCK - 1                      # at the end of the first block: 0.25 s
-    assert verdict.action == "rollback" and verdict.band == "tone 40 Hz"
+    assert verdict.action == "lower_mu" and verdict.band == "tone 40 Hz"
     assert verdict.detector == "fast" and 5.0 < verdict.rise_db < 7.0
     assert verdicts[1][1].action == "fade_out"
 
@@ -154,8 +154,8 @@ def test_supervisor_backs_off_a_diverging_canceller_and_clamps_the_weights():
     assert peak <= 5.0 + 1e-9                     # anti-windup: never above the rating
     assert sup.weight_clamps > 0
     events = [e.message for e in sup.drain_events()]
-    rollback = [m for m in events if "rolled back" in m]
-    assert rollback and sup.config.mu == pytest.approx(0.01 / 4)
+    lowered = [m for m in events if "mu lowered" in m]
+    assert lowered and sup.config.mu == pytest.approx(0.01 / 4)
     assert sup.guard_state == GUARD_OFF and sup.state == NotchState.REFUSED
     status = sup.status()
     assert status["guard"] == "off" and "faded out" in status["refusal"]

@@ -33,7 +33,7 @@ the supervisor finds it):
   uncertainty control is refused (state ``refused``, the reason in ``refusal``);
 - the divergence guard (:mod:`~hexapod_vibration.core.control.divergence_guard`) records
   the error's band levels while control is off and nothing is injected, and under control
-  rolls back and lowers ``mu``, then fades out, when a band rises above that level; the
+  lowers ``mu``, then fades out, when a band rises above that level; the
   canceller clamps its weights to ``weight_limit_n`` after every update (anti-windup).
 
 Missing samples (a gap in the indices) move the phases on as if the samples had been
@@ -46,7 +46,6 @@ the ROS parameter must mirror) is queued as :class:`SupervisorEvent` for
 
 from __future__ import annotations
 
-import collections
 import dataclasses
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -57,13 +56,13 @@ import numpy as np
 from hexapod_vibration.contract import SAMPLE_RATE_HZ, STRUT_COUNT, NotchState
 from hexapod_vibration.core.control import adaptation, mu_policy, sensitivity
 from hexapod_vibration.core.control.divergence_guard import (
+    FADE_S,
     GUARD_BACKED_OFF,
     GUARD_DISABLED,
     GUARD_OFF,
     GUARD_REFERENCING,
     GUARD_WATCHING,
     MU_DIVISOR,
-    ROLLBACK_BLOCKS,
     DivergenceGuard,
     GuardVerdict,
 )
@@ -124,7 +123,7 @@ class NotchConfig:
             exceeds ``max_rise_db``) or ``auto`` (per tone the largest rate within it).
         max_rise_db: the largest predicted rise of the vibration off the tones (dB).
         divergence_guard: watch every controlled band against its level before control
-            and back off (roll back and lower mu, then fade out) when control makes it
+            and back off (lower mu, then fade out) when control makes it
             worse (:mod:`~hexapod_vibration.core.control.divergence_guard`).
         guard_margin_db: rise over the level before control that counts as worse (dB).
         weight_limit_n: anti-windup: each strut's weights never add up to more than this
@@ -282,8 +281,6 @@ class NotchSupervisor:
         self.guard_action = ""
         self._guard_backed_off = False
         self._guard_gave_up = False
-        self._good_weights: collections.deque[np.ndarray] = collections.deque(
-            [self.canceller.weights], maxlen=ROLLBACK_BLOCKS)
         self._quiet_from_sample = -1
         self._last_clamp_event = -10**9
         self.bound = self._plan({"mu": config.mu, "tone_frequencies_hz": tones,
@@ -701,38 +698,31 @@ class NotchSupervisor:
                                   judging=controlling and not self._guard_gave_up)
         if verdict is None:
             return
-        if verdict.action is None:
-            if self.guard.within_margin():
-                self._good_weights.append(self.canceller.weights)
-            return
-        self._guard_act(verdict)
+        if verdict.action is not None:
+            self._guard_act(verdict)
 
     def _guard_act(self, verdict: GuardVerdict) -> None:
-        """Roll back and lower mu, or fade out; say what and why."""
-        self.guard_action = verdict.text
-        if verdict.action == "rollback":
+        """Lower mu, or fade out; say what and why."""
+        self.guard_action = f"{verdict.text} at sample {self.last_sample}"
+        if verdict.action == "lower_mu":
             mu = self.canceller.mu / MU_DIVISOR
-            self.canceller.set_weights(self._good_weights[0])
-            self._good_weights = collections.deque([self._good_weights[0]],
-                                                   maxlen=ROLLBACK_BLOCKS)
             self.canceller.set_mu(mu)
             self._config = self._config.replaced({"mu": mu})
             self._guard_backed_off = True
-            self._event("warn", f"divergence guard: {verdict.text}: weights rolled back, "
-                                f"mu lowered to {mu:.4g}", ("mu", mu))
+            self._event("warn", f"divergence guard: {self.guard_action}: mu lowered to "
+                                f"{mu:.4g}", ("mu", mu))
             return
         self._guard_gave_up = True
-        self.refusal = (f"divergence guard: {verdict.text}: control faded out (worse than "
-                        "off at any rate tried)")
+        self.refusal = (f"divergence guard: {self.guard_action}: control faded out "
+                        "(worse than off at any rate tried)")
         self.canceller.set_frozen(True)
-        self.canceller.set_enabled(False, self.ramp_samples)
+        self.canceller.set_enabled(False, int(round(FADE_S * self.fs)))
         self._event("error", self.refusal)
 
     def _guard_restart(self) -> None:
         """New coefficients or settings: the guard's action sequence starts again."""
         self.guard.restart()
         self._guard_backed_off = self._guard_gave_up = False
-        self._good_weights = collections.deque([self.canceller.weights], maxlen=ROLLBACK_BLOCKS)
 
     @property
     def guard_state(self) -> str:
