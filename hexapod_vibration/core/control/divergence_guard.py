@@ -34,7 +34,10 @@ The guard decides, the supervisor acts (:class:`GuardVerdict`). The order of the
    kept. No weight is set back: a jump of the output splatters over every band (measured
    on ``drift``: +25 dB in 44.7-56.2 Hz for 2 s after a rollback to older weights), and
    freezing alone leaves weights tuned to a tone the disturbance has left beating
-   against it. The fast detector then waits ``GRACE_BLOCKS`` blocks.
+   against it. The fast detector then waits ``GRACE_BLOCKS`` blocks. Only for a tone's
+   band or the broadband: a band off the tones that rises (a harmonic the nonlinear plant
+   makes of a line the canceller moves) says the model is wrong, not the rate, and goes
+   straight to 2.
 2. ``fade_out``: the output fades to 0 over ``FADE_S`` (0.25 s: a fade that keeps the
    splatter within the tone's own band) and adaptation stops: a canceller whose model of
    the disturbance is wrong (frequency mismatch or drift, a plant response that no longer
@@ -263,6 +266,8 @@ class DivergenceGuard:
             if over.size:
                 b = int(over[np.argmax(rise[over] - th[over])])
                 action = ACTIONS[min(self.action_count, len(ACTIONS) - 1)]
+                if b >= self._n_main:          # off the tones: a wrong model, not a rate
+                    action = ACTIONS[-1]
                 self.action_count += 1
                 self._slow = None                      # judge the next state afresh
                 self._grace = GRACE_BLOCKS
