@@ -172,3 +172,18 @@ def test_supervisor_does_not_act_while_control_works():
     _run(sup, lambda n: good, 5000, sup.last_sample + 1)
     assert sup.guard_state == "watching" and sup.guard_action == ""
     assert sup.state == NotchState.ADAPTING
+
+
+def test_a_faded_out_canceller_stays_off_until_a_new_mu_and_the_mirror_changes_nothing():
+    sup = NotchSupervisor(NotchConfig(tone_frequencies_hz=(TONE,), enabled=False,
+                                      identify_delay_s=0.5, mu=0.01))
+    good = 0.1 * np.eye(6)
+    _run(sup, lambda n: good, 500 + 3200 + 2000)
+    sup.apply({"enabled": True})
+    _run(sup, lambda n: -good, 3000, sup.last_sample + 1)
+    assert sup.guard_state == GUARD_OFF
+    sup.apply({"mu": sup.canceller.mu})           # the node mirroring the lowered mu
+    assert sup.guard_state == GUARD_OFF and sup.canceller.output_gain == 0.0
+    sup.apply({"mu": 0.001})                      # the user's new rate: control tries again
+    assert sup.guard_state == "watching" and sup.state == NotchState.ADAPTING
+    assert "refusal" not in sup.status()

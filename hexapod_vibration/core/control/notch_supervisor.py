@@ -316,6 +316,9 @@ class NotchSupervisor:
         plan = self._plan(changes)
         old = self._config
         self._config = old.replaced(changes)
+        # The node mirrors a mu the supervisor lowered into its ROS parameter, which comes
+        # back here: only a different mu is the user's new choice.
+        new_mu = "mu" in changes and float(changes["mu"]) != self.canceller.mu
         if "mu" in changes:
             self.canceller.set_mu(changes["mu"])
         tones_changed = "tone_frequencies_hz" in changes
@@ -326,7 +329,7 @@ class NotchSupervisor:
             self.guard.margin_db = float(changes["guard_margin_db"])
         if tones_changed:
             self.guard.set_tones(plan.tones)
-        if tones_changed or mode_changed or "mu" in changes:
+        if tones_changed or mode_changed or new_mu:
             self._clear_guard_refusal()
         if tones_changed:
             self.canceller.set_tone_frequencies(plan.tones, coefficients=plan.coefficients,
