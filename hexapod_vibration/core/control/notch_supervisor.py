@@ -29,8 +29,8 @@ the supervisor finds it):
   predicted |S(f)| before control goes on;
 - every identification carries a confidence figure (1 - its relative uncertainty at the
   tones: the broadband lines' standard error and interpolation error, or how far the
-  disturbance moved between the tone identification's two baselines); above 10 %
-  uncertainty control is refused (state ``refused``, the reason in ``refusal``);
+  disturbance moved between the tone identification's two baselines); above 10 % (G(f))
+  or 25 % (baselines) control is refused (state ``refused``, the reason in ``refusal``);
 - the divergence guard (:mod:`~hexapod_vibration.core.control.divergence_guard`) records
   the error's band levels while control is off and nothing is injected, and under control
   lowers ``mu``, then fades out, when a band rises above that level; the
@@ -85,6 +85,10 @@ IDENTIFICATION_METHODS = ("tones", "broadband")
 MAX_IDENTIFICATION_UNCERTAINTY = 0.1
 """An identification whose relative uncertainty at a tone exceeds this is refused (10 %:
 a gain within 10 % and a phase within ~6 degrees)."""
+MAX_BASELINE_CHANGE = 0.25
+"""The tone identification is refused when the disturbance at a tone moved by more than
+this fraction of the response between its two baselines (0.4 Hz off the tone: 48 %; a plant
+still settling 0.2 s after start-up: 12 %, whose G is still within 3 %)."""
 GUARD_SETTLE_S = 0.5
 """After the first sample (DC blocker) and after an identification (the excitation's
 decay) the guard waits this long before the error counts as the level without control (s)."""
@@ -510,26 +514,27 @@ class NotchSupervisor:
         return sensitivity.stable_mu_limit(self.plant_frequency_response.at, tones, self.fs,
                                            coefficients)
 
-    def _measured_response(self) -> tuple[np.ndarray, float, str]:
-        """G at the tones from the finished identifier, its uncertainty and what it is."""
+    def _measured_response(self) -> tuple[np.ndarray, float, float, str]:
+        """G at the tones from the finished identifier, its uncertainty, limit, what it is."""
         tones = self._identifying_tones
         if isinstance(self.identifier, BroadbandIdentifier):
             pfr = self.identifier.result()
             self.plant_frequency_response = pfr
             self.disturbance_spectrum = self.identifier.disturbance()
             uncertainty = float(np.max(pfr.uncertainty_at(tones)))
-            return pfr.at(tones), uncertainty, "relative uncertainty of G(f) at the tones"
+            return (pfr.at(tones), uncertainty, MAX_IDENTIFICATION_UNCERTAINTY,
+                    "relative uncertainty of G(f) at the tones")
         response = self.identifier.result()
         self.plant_frequency_response = None
         self.disturbance_spectrum = None
         change = self.identifier.baseline_change()
         for f, g in zip(tones, response, strict=True):
             self._responses[_tone_key(f)] = g
-        return response, float(np.max(change)), ("change of the disturbance at the tones "
-                                                  "during the identification")
+        return response, float(np.max(change)), MAX_BASELINE_CHANGE, (
+            "change of the disturbance at the tones during the identification")
 
     def _finish_identification(self) -> None:
-        response, uncertainty, what = self._measured_response()
+        response, uncertainty, limit, what = self._measured_response()
         self.identifier = None
         self.identification_end_sample = self.last_sample
         self._quiet_from_sample = self.last_sample + int(round(GUARD_SETTLE_S * self.fs))
@@ -538,10 +543,10 @@ class NotchSupervisor:
         self.sensitivity = self.mu_choice = None
         tones = [float(f) for f in self.canceller.tone_frequencies_hz]
         mode = self._config.adaptation
-        if uncertainty > MAX_IDENTIFICATION_UNCERTAINTY:
+        if uncertainty > limit:
             self.plant_response, self.identified_tones = None, []
             self._refuse(f"identification failed: {what} {100 * uncertainty:.0f} % > "
-                         f"{100 * MAX_IDENTIFICATION_UNCERTAINTY:.0f} % (a disturbance "
+                         f"{100 * limit:.0f} % (a disturbance "
                          "next to a tone?); control stays off")
             return
         current = response if tones == self._identifying_tones else self._known_response(
