@@ -47,7 +47,7 @@ the ROS parameter must mirror) is queued as :class:`SupervisorEvent` for
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Mapping
+from collections.abc import Generator, Iterator, Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -275,6 +275,7 @@ class NotchSupervisor:
         self.weight_clamps = 0
         self._events: list[SupervisorEvent] = []
         self._identifying_tones: list[float] = []
+        self._analysis: Iterator[None] | None = None
         self.plant_frequency_response: PlantFrequencyResponse | None = None
         self.disturbance_spectrum: DisturbanceSpectrum | None = None
         self.sensitivity: sensitivity.SensitivityPrediction | None = None
@@ -353,7 +354,8 @@ class NotchSupervisor:
             return
         self._guard_restart()
         self.refusal = ""
-        if self.identifier is None and self.plant_response is not None:
+        if (self.identifier is None and self._analysis is None
+                and self.plant_response is not None):
             self.canceller.set_frozen(False)
             self.canceller.set_enabled(self._config.enabled, self.ramp_samples)
 
@@ -439,7 +441,7 @@ class NotchSupervisor:
             self.start_identification(plan.tones)
 
     def _set_enabled(self, flag: bool) -> None:
-        if self.identifier is None and not (flag and self.refusal):
+        if self.identifier is None and self._analysis is None and not (flag and self.refusal):
             self.canceller.set_enabled(flag, self.ramp_samples)
         self.enabled_since_sample = self.last_sample + 1 if flag else -1
         self._event("info", f"control {'on' if flag else 'off'} from sample "
@@ -533,14 +535,23 @@ class NotchSupervisor:
         return response, float(np.max(change)), MAX_BASELINE_CHANGE, (
             "change of the disturbance at the tones during the identification")
 
-    def _finish_identification(self) -> None:
+    def _finish_identification(self) -> Iterator[None]:
+        """The analysis of a finished identification, one piece per sample (a generator).
+
+        G, its confidence, the coefficients, the bound, the policy and the prediction: with
+        a broadband G(f) the Nyquist tests of the bound take ~0.1 s each, so :meth:`step`
+        runs one per sample (the lockstep driver waits at most ``lockstep_timeout_s`` for
+        a sample's command). The canceller stays frozen and off meanwhile (state
+        ``identifying``).
+        """
         response, uncertainty, limit, what = self._measured_response()
         self.identifier = None
         self.identification_end_sample = self.last_sample
         self._quiet_from_sample = self.last_sample + int(round(GUARD_SETTLE_S * self.fs))
         self.identification_confidence = float(max(0.0, 1.0 - uncertainty))
-        self.canceller.set_frozen(False)
         self.sensitivity = self.mu_choice = None
+        if self.plant_frequency_response is not None:
+            yield                          # the tone identification's analysis is quick
         tones = [float(f) for f in self.canceller.tone_frequencies_hz]
         mode = self._config.adaptation
         if uncertainty > limit:
@@ -554,10 +565,15 @@ class NotchSupervisor:
         try:
             if current is None:
                 raise ValueError(f"no identified response at {tones} Hz")
-            coefficients, bound = self._coefficients_for(tones, current, mode)
+            if self.plant_frequency_response is not None:
+                coefficients = adaptation.normalized_coefficients(current, mode)
+            else:
+                coefficients, bound = self._coefficients_for(tones, current, mode)
         except ValueError as exc:
             self._refuse(f"identification unusable for {mode}: {exc}; not adapting")
             return
+        if self.plant_frequency_response is not None:
+            bound = yield from self._mu_limit_steps(tones, coefficients)
         self.plant_response, self.identified_tones, self.bound = current, tones, bound
         self.mu_limit = bound
         self.canceller.set_coefficients(coefficients)
@@ -574,11 +590,42 @@ class NotchSupervisor:
         self.refusal = ""
         self._clamp_mu(bound)
         if self.plant_frequency_response is not None:
+            yield
             self._apply_mu_policy(tones, coefficients)
+        self.canceller.set_frozen(False)
         self._guard_restart()
         self.canceller.set_enabled(self._config.enabled, self.ramp_samples)
         if self._config.enabled and self.enabled_since_sample < 0:
             self.enabled_since_sample = self.last_sample + 1
+
+    def _mu_limit_steps(self, tones: list[float], coefficients: np.ndarray
+                        ) -> Generator[None, None, float]:
+        """The Nyquist limit on G(f), one stability test per ``yield`` (a generator).
+
+        As :func:`~hexapod_vibration.core.control.sensitivity.stable_mu_limit` (the
+        largest stable common rate), found by doubling from 1e-5 and bisecting to 2 %.
+        """
+        def stable(mu: float) -> bool:
+            return sensitivity.closed_loop_is_stable(self.plant_frequency_response.at,
+                                                     tones, self.fs, coefficients, mu)
+
+        lo = 1e-5
+        if not stable(lo):
+            return 0.0
+        hi = lo
+        while True:
+            yield
+            hi = min(2.0 * hi, 1.0)
+            if not stable(hi):
+                break
+            lo = hi
+            if hi >= 1.0:
+                return 1.0
+        while hi > lo * 1.02:
+            yield
+            mid = float(np.sqrt(lo * hi))
+            lo, hi = (mid, hi) if stable(mid) else (lo, mid)
+        return lo
 
     def _apply_mu_policy(self, tones: list[float], coefficients: np.ndarray) -> None:
         """Per-tone rates of ``mu_policy`` folded into P; the predicted sensitivity."""
@@ -661,8 +708,18 @@ class NotchSupervisor:
         if self.identifier is not None:
             command += self.identifier.step(error)
             if self.identifier.done:
-                self._finish_identification()
+                self._analysis = self._finish_identification()
+                self._advance_analysis()
+        elif self._analysis is not None:
+            self._advance_analysis()
         return command
+
+    def _advance_analysis(self) -> None:
+        """One piece of the running identification analysis."""
+        try:
+            next(self._analysis)
+        except StopIteration:
+            self._analysis = None
 
     def _catch_up(self, index: int) -> None:
         """Keep the phase references on the sample grid across missing samples."""
@@ -747,7 +804,7 @@ class NotchSupervisor:
     @property
     def state(self) -> str:
         """One of :class:`NotchState`'s names."""
-        if self.identifier is not None:
+        if self.identifier is not None or self._analysis is not None:
             return NotchState.IDENTIFYING
         if self.refusal:
             return NotchState.REFUSED

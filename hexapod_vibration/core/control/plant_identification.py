@@ -186,11 +186,19 @@ class PlantFrequencyResponse:
             raise ValueError(f'frequencies must be in [0, {0.5 * self.sample_rate_hz:g}] Hz')
         c = self.n_channels
         out = np.empty((f.size, c, c), dtype=complex)
-        for j in range(c):
+        for j, spline in enumerate(self._splines()):
             lines = self.line_frequencies_hz[j]
-            spline = CubicSpline(lines, self.line_response[j], axis=0)
             out[:, :, j] = spline(np.clip(f, lines[0], lines[-1]))
         return out
+
+    def _splines(self) -> list[CubicSpline]:
+        """One cubic spline per column, built once (the response is immutable)."""
+        cached = self.__dict__.get('_spline_cache')
+        if cached is None:
+            cached = [CubicSpline(lines, g, axis=0) for lines, g in
+                      zip(self.line_frequencies_hz, self.line_response, strict=True)]
+            object.__setattr__(self, '_spline_cache', cached)
+        return cached
 
 
     def uncertainty_at(self, frequencies_hz: Sequence[float] | np.ndarray) -> np.ndarray:
