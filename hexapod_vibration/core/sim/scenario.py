@@ -88,16 +88,12 @@ class NotchSettings:
 
     @classmethod
     def from_yaml(cls, values: dict[str, Any]) -> NotchSettings:
-        """Split the YAML's ``notch:`` mapping; a name that is no notch setting raises.
-
-        A ``settings`` mapping (what ``dataclasses.asdict`` of these settings holds, as the
-        sweeps write them) is read as if its keys were at the top.
-        """
+        """Split the YAML's ``notch:`` mapping; a name that is no notch setting raises."""
         from hexapod_vibration.core.control.notch_supervisor import NotchConfig
 
-        values = dict(_tuples(values))
-        nested = values.pop("settings", None) or {}
-        values = _tuples({**_tuples(nested), **values})
+        values = _tuples(values)
+        nested = values.pop("settings", None) or {}       # a dataclasses.asdict() round trip
+        values = {**_tuples(nested), **values}
         own = {k: values.pop(k) for k in ("tone_frequencies_hz", "mu", "adaptation")
                if k in values}
         unknown = set(values) - set(NotchConfig.__dataclass_fields__)
