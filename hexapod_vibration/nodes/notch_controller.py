@@ -18,6 +18,8 @@ now (``supervisor.tone_estimates_hz``) goes out on ``/pph/notch_frequencies`` ev
 
 from __future__ import annotations
 
+import inspect
+
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.node import Node
@@ -74,10 +76,14 @@ class NotchControllerNode(Node):
         self.params = NodeParameters(self, NOTCH_CONTROLLER)
         self.fs = SAMPLE_RATE_HZ
         values = self.params.values()
-        self.supervisor = NotchSupervisor(
-            NotchConfig().replaced({k: v for k, v in values.items() if k in SETTINGS}), self.fs)
-        accel_range = SignalRanges.from_model(load_model_config(config_path(
-            "pph_model.yaml"))).accel_m_s2      # the accelerometers' +-2 g
+        model = load_model_config(config_path("pph_model.yaml"))
+        config = NotchConfig().replaced({k: v for k, v in values.items() if k in SETTINGS})
+        if "output_weights" in inspect.signature(NotchSupervisor).parameters:   # guard branch
+            z_row = np.linalg.inv(model.geometry.top_jacobian)[2]   # the z axis, as CoreLoop
+            self.supervisor = NotchSupervisor(config, self.fs, output_weights=z_row)
+        else:
+            self.supervisor = NotchSupervisor(config, self.fs)
+        accel_range = SignalRanges.from_model(model).accel_m_s2      # the accelerometers' +-2 g
         self.port = ControllerLoopPort("/pph/accel", accel_range, StrutArrayPublisher(
             self.create_publisher(Float64MultiArray, "/pph/notch_command", LOOP_PUBLISHER_QOS)),
             self.get_logger())
