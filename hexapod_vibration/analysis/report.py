@@ -753,6 +753,30 @@ def format_table(report: dict[str, Any], paper_reduction_db: dict[float, float] 
     return "\n".join(lines)
 
 
+def format_following(report: dict[str, Any]) -> str:
+    """The following bands (``following_tones``) as a table; "" when no controlled tone moved.
+
+    A tone whose track stayed at one frequency in both windows has its fixed-band row in
+    the main table already.
+    """
+    rows = report.get("following_tones") or []
+    moved = [r for r in rows if any(hi - lo > 1e-6 for lo, hi in
+                                    r["frequency_span_hz"].values())]
+    if not moved:
+        return ""
+    lines = [f"{report['scenario']}  (bands following the tones; tracks from the bag)",
+             f"{'tone':>10} {'non-controlled':>17} {'controlled':>17} {'reduction':>10}"
+             f"  {'track (Hz), uncontrolled -> controlled'}"]
+    for row in moved:
+        floor = row.get("at_noise_floor", {})
+        spans = " -> ".join(f"{lo:.2f}-{hi:.2f}" for lo, hi in row["frequency_span_hz"].values())
+        lines.append(f"{row['frequency_hz']:>8.1f}Hz"
+                     f"{level_text(row['uncontrolled_db'], floor.get('uncontrolled')):>18} "
+                     f"{level_text(row.get('controlled_db'), floor.get('controlled')):>17} "
+                     f"{reduction_text(row):>10}  {spans}")
+    return "\n".join(lines)
+
+
 def format_harmonics(harmonics: dict[str, Any], scenario: str) -> str:
     """Fig. 4's numbers: each harmonic's level relative to the fundamental, and the THD."""
     lines = [f"{scenario}  (harmonics of {harmonics['frequencies_hz'][0]:g} Hz, z-axis)",

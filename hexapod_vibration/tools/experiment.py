@@ -623,12 +623,18 @@ def _run_all(args: argparse.Namespace, scenarios: list[Scenario]) -> int:
 
 def scenario_table(result: Any) -> str:
     """The printed table of one scenario: tones (with the paper's column) or harmonics."""
-    from hexapod_vibration.analysis.report import format_harmonics, format_table
+    from hexapod_vibration.analysis.report import (
+        format_following,
+        format_harmonics,
+        format_table,
+    )
 
     if result.harmonics is not None and not any(
             r["controlled"] for r in result.report["tones"]):
         return format_harmonics(result.harmonics, result.report["scenario"])
-    return format_table(result.report, result.paper_reduction_db)
+    following = format_following(result.report)
+    table = format_table(result.report, result.paper_reduction_db)
+    return f"{table}\n{following}" if following else table
 
 
 if __name__ == "__main__":

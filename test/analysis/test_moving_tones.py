@@ -119,9 +119,10 @@ def _drift_bag(tmp_path, sensitivity: bool):
                      run_record=record.to_json(), topics=topics)
 
 
-def test_report_follows_the_drifting_tone_from_the_true_frequency(tmp_path):
+def test_report_follows_the_drifting_tone_from_the_true_frequency(tmp_path, capsys):
     bag = _drift_bag(tmp_path, sensitivity=False)
     assert analyze.main([str(bag), '--out', str(tmp_path / 'out'), '--no-plots']) == 0
+    assert 'bands following the tones' in capsys.readouterr().out
     report = json.loads((tmp_path / 'out' / 'report.json').read_text())
     fixed = report['tones'][0]
     row, = report['following_tones']
