@@ -31,11 +31,16 @@ pytestmark = pytest.mark.skipif(
 WINDOW_S, CONTROL_S = 3.0, 5.0
 
 
-def _short(changes: dict) -> dict:
-    """The mismatch scenario's timeline, shortened, with ``changes`` on top."""
+def _short(changes: dict, notch: dict) -> dict:
+    """The mismatch scenario's timeline, shortened, with ``changes`` on top.
+
+    ``notch`` is added to the scenario's own notch settings (its identification method
+    and mu policy stay).
+    """
     base = yaml.safe_load(scenario_path("mismatch").read_text())
     base.update(window_s=WINDOW_S, duration_s=base["control_on_s"] + CONTROL_S)
     base.update(changes)
+    base["notch"] = {**base["notch"], **notch}
     return base
 
 
@@ -54,10 +59,9 @@ def _run(ros_env, tmp_path, scenario: dict) -> dict:
 
 
 def test_tracking_follows_a_1_percent_mismatch_through_the_graph(ros_env, tmp_path):
-    run = _run(ros_env, tmp_path, _short({
-        "name": "mismatch_tracking_short",
-        "notch": {"tone_frequencies_hz": [40.0], "mu": 0.002, "adaptation": "decentralized",
-                  "frequency_tracking": True, "tracking_range_hz": 2.0}}))
+    run = _run(ros_env, tmp_path, _short(
+        {"name": "mismatch_tracking_short", "report_tones_hz": [40.4]},
+        {"tone_frequencies_hz": [40.0], "frequency_tracking": True, "tracking_range_hz": 2.0}))
     index, estimates = run["bag"].frequencies["/pph/notch_frequencies"]
     _, truth = run["bag"].frequencies["/pph/disturbance_frequencies"]
     assert truth[-1] == pytest.approx([40.4])
@@ -69,15 +73,14 @@ def test_tracking_follows_a_1_percent_mismatch_through_the_graph(ros_env, tmp_pa
 
 def test_the_tachometer_drives_the_tones_through_the_graph(ros_env, tmp_path):
     """A rotor at 45.5 Hz (orders 1 and 2); the notch told 45 and 91 Hz follows 1x and 2x."""
-    run = _run(ros_env, tmp_path, _short({
-        "name": "tachometer_short",
-        "shaker": {"frequencies_hz": [40.0], "amplitudes_n": [0.0], "noise_rms_n": 0.5},
-        "rotor": {"orders": [1.0, 2.0], "amplitudes_n": [60.0, 15.0],
-                  "reference_speed_hz": 45.5, "profile_time_s": [0.0],
-                  "profile_speed_hz": [45.5], "tachometer": True},
-        "notch": {"tone_frequencies_hz": [45.0, 91.0], "mu": 0.002,
-                  "adaptation": "decentralized", "reference_harmonics": [1.0, 2.0]},
-        "report_tones_hz": [45.5, 91.0]}))
+    run = _run(ros_env, tmp_path, _short(
+        {"name": "tachometer_short",
+         "shaker": {"frequencies_hz": [40.0], "amplitudes_n": [0.0], "noise_rms_n": 0.5},
+         "rotor": {"orders": [1.0, 2.0], "amplitudes_n": [60.0, 15.0],
+                   "reference_speed_hz": 45.5, "profile_time_s": [0.0],
+                   "profile_speed_hz": [45.5], "tachometer": True},
+         "report_tones_hz": [45.5, 91.0]},
+        {"tone_frequencies_hz": [45.0, 91.0], "reference_harmonics": [1.0, 2.0]}))
     bag = run["bag"]
     ref_index, reference = bag.frequencies["/pph/reference_frequency"]
     samples = run["report"]["loop"]["samples"]
