@@ -437,7 +437,7 @@ def sensitivity_figure(path: Path, result: Analysis) -> Path:
         ax.axhline(0.0, color="0.5", lw=0.6)
         ax.set(xlim=(lo, hi), ylabel="dB", xlabel="frequency (Hz)")
         ax.grid(alpha=0.3)
-        ax.legend(loc="lower right")
+        ax.legend(loc="best")
     axes[0].set_title("sensitivity: predicted vs measured (dotted: notch tones)")
     if len(spans) == 1:
         axes[1].set_visible(False)
