@@ -380,6 +380,8 @@ def analyze_signals(signals: BagSignals, request: Request = Request()) -> Analys
     controlled = signals.notch_tones() or (rec.notch_tones_hz if rec else [])
     tones = [float(f) for f in (request.tones or (rec.report_tones_hz if rec else None)
                                 or controlled or _strongest_peaks(z))]
+    configured = configured_tones(signals, controlled)
+    controlled = snap_to_tones(controlled, tones)
     window_s = request.window_s or (rec.window_s if rec else None)
     ident, ident_source = identification_intervals(signals)
     margin = int(round(IDENTIFICATION_SETTLE_S * FS))
@@ -407,7 +409,7 @@ def analyze_signals(signals: BagSignals, request: Request = Request()) -> Analys
         "convergence_s": _json_float(convergence_s(over_time, controlled)),
         "loop": loop_statistics(signals),
     }
-    following = following_tones(signals, windows, controlled)
+    following = following_tones(signals, windows, configured)
     if following:
         report["following_tones"] = following
     sensitivity, curves = sensitivity_comparison(signals, windows, controlled, tones)
@@ -445,6 +447,37 @@ def _windows(signals: BagSignals, index: np.ndarray, window_s: float | None,
         notes.extend(f"{name}: {n}" for n in window_notes)
         windows[name] = rows
     return windows
+
+
+SNAP_HZ = 0.05
+"""A notch tone within half a 0.1 Hz bin of a reported tone is that tone (a tracked tone
+ends a few mHz from the true frequency)."""
+
+
+def snap_to_tones(controlled: list[float], tones: list[float]) -> list[float]:
+    """The notch's tones, each replaced by the reported tone within ``SNAP_HZ`` of it."""
+    snapped = []
+    for c in controlled:
+        near = [t for t in tones if abs(t - c) <= SNAP_HZ]
+        snapped.append(min(near, key=lambda t: abs(t - c)) if near else float(c))
+    return snapped
+
+
+def configured_tones(signals: BagSignals, controlled: list[float]) -> list[float]:
+    """The notch's configured tones (Hz), one per ``/pph/notch_frequencies`` column.
+
+    The run record's notch tones when they are as many as the columns (the nominal ones:
+    the diagnostics' ``tones_hz`` moves with tracking and holds harmonics), else the
+    estimates' medians; without the topic, the notch's tones.
+    """
+    estimate = signals.frequencies.get(NOTCH_FREQUENCIES_TOPIC)
+    if estimate is None:
+        return list(controlled)
+    columns = estimate[1].shape[1]
+    rec = signals.record
+    if rec is not None and len(rec.notch_tones_hz) == columns:
+        return [float(f) for f in rec.notch_tones_hz]
+    return [round(float(np.nanmedian(estimate[1][:, k])), 6) for k in range(columns)]
 
 
 def _tone_tracks(signals: BagSignals, controlled: list[float]

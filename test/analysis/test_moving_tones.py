@@ -91,14 +91,17 @@ def test_the_measured_ratio_of_a_halved_signal_is_minus_6db():
 ON, END = 12_000, 24_000
 
 
-def _drift_bag(tmp_path, sensitivity: bool):
-    """A 40 Hz tone drifting +-1 Hz (20 s) reduced 60 dB from 3.5 s after control-on."""
+def _drift_bag(tmp_path, sensitivity: bool, notch_tones=(40.0,)):
+    """A 40 Hz tone drifting +-1 Hz (20 s) reduced 60 dB from 3.5 s after control-on.
+
+    ``notch_tones``: the notch's ``tones_hz`` on /diagnostics (tracked ones move).
+    """
     rng = np.random.default_rng(5)
     x, track = drifting_tone(LEVEL_DB, 40.0, 1.0, 20.0, END)
     n = np.arange(END)
     gain = np.where(n < ON, 1.0, np.maximum(np.exp(-(n - ON) / 500.0), 1e-3))
     z = G0 + gain * x + 1e-6 * rng.standard_normal(END)
-    statuses = [(s, notch_status(s, 'adapting' if s >= ON else 'disabled', [40.0],
+    statuses = [(s, notch_status(s, 'adapting' if s >= ON else 'disabled', list(notch_tones),
                                  ON if s >= ON else -1, (500, 1500))) for s in range(0, END, 1000)]
     topics = {
         '/pph/disturbance_frequencies': [(s, frequencies_cdr([25.0, track[s]], s))
@@ -147,3 +150,15 @@ def test_report_compares_the_recorded_prediction_and_plots_both(tmp_path):
     assert sens['near_tones_points'] > 0
     for png in ('frequencies.png', 'sensitivity.png'):
         assert (tmp_path / 'out' / png).stat().st_size > 10_000
+
+
+def test_a_tracked_notch_tone_is_its_reported_tone_and_keeps_its_nominal_label(tmp_path):
+    """The diagnostics' tones_hz of a tracking notch end a few mHz off the reported tone."""
+    from hexapod_vibration.analysis.report import snap_to_tones
+
+    assert snap_to_tones([40.398966, 80.0, 55.0], [40.4, 80.02, 60.0]) == [40.4, 80.02, 55.0]
+    bag = _drift_bag(tmp_path, sensitivity=False, notch_tones=(39.9831,))
+    assert analyze.main([str(bag), '--out', str(tmp_path / 'out'), '--no-plots']) == 0
+    report = json.loads((tmp_path / 'out' / 'report.json').read_text())
+    assert report['tones'][0]['controlled'] is True
+    assert report['following_tones'][0]['frequency_hz'] == 40.0       # the run record's
