@@ -28,11 +28,12 @@ MATCH_TOLERANCE_HZ = 5.0
 tone's estimate (or nominal frequency)."""
 RATIO_SEGMENT_S = 4.0
 """Welch segment (s) of the measured sensitivity (0.25 Hz bins, a few segments per window)."""
-RATIO_WINDOW = "hann"
+RATIO_WINDOW = "blackmanharris"
+"""Sidelobes below -92 dB: a tone's leakage does not pass for a change of the noise around it
+(with Hann it reads tens of dB of "sensitivity" beside a tone removed by control)."""
 NEAR_TONE_HZ = 5.0
-"""The comparison of predicted and measured sensitivity is made within 5 Hz of the tones..."""
-LINE_EXCLUSION_HZ = 1.1
-"""...leaving out 1.1 Hz around each tone and spectral line (the notch, the lines' leakage)."""
+"""The comparison of predicted and measured sensitivity is made within 5 Hz of the tones,
+leaving out each tone's and line's main lobe and one bin more (:func:`line_exclusion_hz`)."""
 
 
 def track_on_samples(message_index: np.ndarray, track_hz: np.ndarray,
@@ -84,10 +85,20 @@ def match_columns(table_hz: np.ndarray, targets_hz: list[float]) -> list[int | N
     return chosen
 
 
+def ratio_segment_s(controlled: np.ndarray, uncontrolled: np.ndarray, fs: float) -> float:
+    """Welch segment (s) of :func:`spectrum_ratio_db`: 4 s, or the shorter window."""
+    return min(RATIO_SEGMENT_S, controlled.size / fs, uncontrolled.size / fs)
+
+
+def line_exclusion_hz(segment_s: float) -> float:
+    """Half-width (Hz) left out around a line: its window's main lobe and one bin more."""
+    return (spectrum.main_lobe_half_width_bins(RATIO_WINDOW) + 1) / segment_s
+
+
 def spectrum_ratio_db(controlled: np.ndarray, uncontrolled: np.ndarray, fs: float
                       ) -> tuple[np.ndarray, np.ndarray]:
     """(f Hz, 10 log10 of the controlled over the uncontrolled Welch PSD), the measured |S|."""
-    segment = min(RATIO_SEGMENT_S, controlled.size / fs, uncontrolled.size / fs)
+    segment = ratio_segment_s(controlled, uncontrolled, fs)
     f, on = spectrum.power_spectral_density(controlled - controlled.mean(), fs, segment,
                                             RATIO_WINDOW)
     _, off = spectrum.power_spectral_density(uncontrolled - uncontrolled.mean(), fs, segment,
@@ -95,12 +106,12 @@ def spectrum_ratio_db(controlled: np.ndarray, uncontrolled: np.ndarray, fs: floa
     return f, 10.0 * np.log10(np.maximum(on, 1e-300) / np.maximum(off, 1e-300))
 
 
-def near_tones_mask(f_hz: np.ndarray, tones_hz: list[float], lines_hz: list[float]
-                    ) -> np.ndarray:
-    """Frequencies within ``NEAR_TONE_HZ`` of a tone, outside ``LINE_EXCLUSION_HZ`` of lines."""
+def near_tones_mask(f_hz: np.ndarray, tones_hz: list[float], lines_hz: list[float],
+                    exclusion_hz: float) -> np.ndarray:
+    """Frequencies within ``NEAR_TONE_HZ`` of a tone, more than ``exclusion_hz`` from lines."""
     near = np.zeros(f_hz.size, dtype=bool)
     for tone in tones_hz:
         near |= np.abs(f_hz - tone) <= NEAR_TONE_HZ
     for line in [*tones_hz, *lines_hz]:
-        near &= np.abs(f_hz - line) > LINE_EXCLUSION_HZ
+        near &= np.abs(f_hz - line) > exclusion_hz
     return near

@@ -546,7 +546,8 @@ def sensitivity_comparison(signals: BagSignals, windows: dict[str, slice],
     Predicted: the last ``/pph/notch_sensitivity`` (its ``output_db`` row, the z axis, when
     given, else ``sigma_max_db``). Measured: the ratio of the controlled to the uncontrolled
     z spectrum (:func:`~hexapod_vibration.analysis.moving_tones.spectrum_ratio_db`). Their
-    difference is summarised within 5 Hz of the controlled tones, away from every line.
+    difference is summarised within 5 Hz of the controlled tones, outside every line's main
+    lobe (``line_exclusion_hz``).
     Both empty without a recorded prediction or without a controlled window.
     """
     if not signals.sensitivity or "controlled" not in windows:
@@ -557,14 +558,18 @@ def sensitivity_comparison(signals: BagSignals, windows: dict[str, slice],
         return {}, {}
     grid, predicted = rows["frequency_hz"], rows[view]
     z = signals.z
-    f, measured = moving_tones.spectrum_ratio_db(z[windows["controlled"]],
-                                                 z[windows["uncontrolled"]], FS)
-    near = moving_tones.near_tones_mask(f, controlled, lines)
+    on, off = z[windows["controlled"]], z[windows["uncontrolled"]]
+    f, measured = moving_tones.spectrum_ratio_db(on, off, FS)
+    segment_s = moving_tones.ratio_segment_s(on, off, FS)
+    exclusion_hz = moving_tones.line_exclusion_hz(segment_s)
+    near = moving_tones.near_tones_mask(f, controlled, lines, exclusion_hz)
     on_grid = np.interp(f, grid, predicted)
     k = int(np.argmax(predicted))
     report = {"view": view.removesuffix("_db"), "prediction_sample": int(sample),
               "predicted_rise_db": _json_float(float(predicted[k])),
               "predicted_rise_at_hz": _json_float(float(grid[k])),
+              "segment_s": _json_float(segment_s),
+              "line_exclusion_hz": _json_float(exclusion_hz),
               "near_tones_points": int(np.count_nonzero(near)),
               "near_tones_max_difference_db": _json_float(
                   float(np.max(np.abs(measured[near] - on_grid[near]))) if near.any()
