@@ -10,7 +10,8 @@ in the post-set callback. Weights go out at 100 Hz on ``/pph/notch_weights``, st
 ``/diagnostics`` (every simulated second and whenever the supervisor reports a change).
 
 Frequencies: a tachometer on ``/pph/reference_frequency`` (one value, Hz, with its sample
-index) goes to ``supervisor.set_reference_frequency``; the frequency of each configured tone
+index; a loop subscription served before ``/pph/accel``) goes to
+``supervisor.set_reference_frequency``; the frequency of each configured tone
 now (``supervisor.tone_estimates_hz``) goes out on ``/pph/notch_frequencies`` every
 ``FREQUENCIES_EVERY_SAMPLES``; after each identification the predicted sensitivity
 (``supervisor.sensitivity``) goes out once on ``/pph/notch_sensitivity`` (transient local).
@@ -51,15 +52,14 @@ from hexapod_vibration.ros.messages import (
     create_loop_subscription,
     make_table_array,
     make_vector_array,
-    parse_vector_sample,
 )
 from hexapod_vibration.ros.parameters import NodeParameters
 from hexapod_vibration.ros.qos import (
     DIAGNOSTICS_QOS,
     LATCHED_QOS,
     LOOP_PUBLISHER_QOS,
-    LOOP_QOS,
 )
+from hexapod_vibration.ros.rclpy_internals import UnsupportedCdr, decode_strut_cdr
 
 WEIGHTS_EVERY_SAMPLES = 10
 """Samples between two /pph/notch_weights messages (100 Hz)."""
@@ -95,9 +95,11 @@ class NotchControllerNode(Node):
         self._pub_sensitivity = self.create_publisher(
             Float64MultiArray, NOTCH_SENSITIVITY_TOPIC, LATCHED_QOS)
         self._published_sensitivity: object | None = None
-        self.loop_subscriptions = [create_loop_subscription(self, "/pph/accel", self._on_accel)]
-        self.create_subscription(Float64MultiArray, REFERENCE_FREQUENCY_TOPIC,
-                                 self._on_reference, LOOP_QOS)
+        # The tachometer is a loop topic too, served first: the driver publishes sample n's
+        # reference before its sensors, so it is taken before sample n is stepped.
+        self.loop_subscriptions = [
+            create_loop_subscription(self, REFERENCE_FREQUENCY_TOPIC, self._on_reference),
+            create_loop_subscription(self, "/pph/accel", self._on_accel)]
         self.create_service(Trigger, "~/identify", self._on_identify)
         self.params.serve(check=self._check_parameters, apply=self._apply_parameters)
         config = self.supervisor.config
@@ -148,11 +150,11 @@ class NotchControllerNode(Node):
             self.publish_diagnostics()
         self._report()
 
-    def _on_reference(self, msg: Float64MultiArray) -> None:
+    def _on_reference(self, msg: bytes) -> None:
         """A tachometer value (Hz) for a loop sample: to the supervisor, or refused (logged)."""
         try:
-            reference = parse_vector_sample(msg, length=1)
-        except InvalidStrutMessage as exc:
+            reference = decode_strut_cdr(bytes(msg), count=1)
+        except (InvalidStrutMessage, UnsupportedCdr) as exc:
             self.get_logger().warn(f"{REFERENCE_FREQUENCY_TOPIC}: rejected message ({exc})",
                                    throttle_duration_sec=1.0)
             return
