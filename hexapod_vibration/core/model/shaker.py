@@ -2,7 +2,9 @@
 
 The force is a sum of tones (frequency Hz, amplitude N, phase rad), each optionally with a
 slow sinusoidal frequency drift, plus white broadband noise, clipped to the shaker's force
-limit. Phases are integrated analytically, so the force at any time is exact and vectorized
+limit; an optional rotating machine (:class:`~hexapod_vibration.core.model.rotor.Rotor`)
+mounted at the same point adds its force (its own source: not clipped by the shaker).
+Phases are integrated analytically, so the force at any time is exact and vectorized
 over the internal steps of a sample.
 """
 
@@ -12,6 +14,8 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
+
+from hexapod_vibration.core.model.rotor import Rotor
 
 
 @dataclass(frozen=True)
@@ -37,16 +41,21 @@ class ShakerTone:
 
 
 class Shaker:
-    """Force generator: tones + drift + broadband noise, clipped to ``force_limit_n``."""
+    """Force generator: tones + drift + broadband noise, clipped to ``force_limit_n``, + rotor."""
 
     def __init__(self, tones: Sequence[ShakerTone] = (), noise_rms_n: float = 0.0,
-                 force_limit_n: float = 100.0, seed: int = 0) -> None:
-        """Create a shaker; ``noise_rms_n`` is the RMS (N) of white noise at the step rate."""
+                 force_limit_n: float = 100.0, seed: int = 0, rotor: Rotor | None = None) -> None:
+        """Create a shaker; ``noise_rms_n`` is the RMS (N) of white noise at the step rate.
+
+        ``rotor`` (optional) is a rotating machine at the same point: its force (N) is added
+        after the shaker's clipping. Without it the force is exactly the shaker's.
+        """
         if not np.isfinite(noise_rms_n) or noise_rms_n < 0.0:
             raise ValueError(f"shaker noise RMS must be >= 0 N, got {noise_rms_n}")
         self._rng = np.random.default_rng(seed)
         self.force_limit_n = float(force_limit_n)
         self.noise_rms_n = float(noise_rms_n)
+        self.rotor = rotor
         self.set_tones(tones)
 
     def set_tones(self, tones: Sequence[ShakerTone]) -> None:
@@ -63,8 +72,26 @@ class Shaker:
         self._grid_key: tuple[float, int] | None = None   # see _tone_sum
         self._grid: tuple[np.ndarray, ...] = ()
 
+    def frequencies_hz(self, time_s: np.ndarray | float) -> np.ndarray:
+        """True frequency (Hz) of every sounding tone at the given times, shape ``(..., tones)``.
+
+        The shaker's tones (with their drift) first, then the rotor's orders if there is one.
+        """
+        t = np.asarray(time_s, float)[..., None]
+        shaker = self._f + self._df * np.sin(2.0 * np.pi * t / self._tp)
+        if self.rotor is None:
+            return shaker
+        return np.concatenate([shaker, self.rotor.frequencies_hz(time_s)], axis=-1)
+
     def force_n(self, time_s: np.ndarray) -> np.ndarray:
-        """Shaker force (N) at the given times (s); one noise draw per time point."""
+        """Force (N) at the given times (s): shaker (one noise draw per time point) + rotor."""
+        force = self._shaker_force_n(time_s)
+        if self.rotor is not None:
+            force += self.rotor.force_n(time_s)
+        return force
+
+    def _shaker_force_n(self, time_s: np.ndarray) -> np.ndarray:
+        """The shaker's own force (N): tones, drift, noise, clipped."""
         t = np.asarray(time_s, float)[:, None]
         # Instantaneous frequency f + df sin(2 pi t / T): phase integrates it exactly.
         phase = 2.0 * np.pi * self._f * t - self._df * self._tp * np.cos(2.0 * np.pi * t / self._tp)
@@ -79,13 +106,16 @@ class Shaker:
         contiguous float array. Returns ``out``.
         """
         if self._drifts:
-            out[:] = self.force_n(start_s + step_s * np.arange(out.shape[0]))
-            return out
-        if self._a.size:
-            self._tone_sum(start_s, step_s, out)
+            out[:] = self._shaker_force_n(start_s + step_s * np.arange(out.shape[0]))
         else:
-            out.fill(0.0)
-        return self._add_noise_and_limit(out)
+            if self._a.size:
+                self._tone_sum(start_s, step_s, out)
+            else:
+                out.fill(0.0)
+            self._add_noise_and_limit(out)
+        if self.rotor is not None:
+            out += self.rotor.force_n(start_s + step_s * np.arange(out.shape[0]))
+        return out
 
     def _add_noise_and_limit(self, force: np.ndarray) -> np.ndarray:
         """Add one noise draw per time point and clip to the force limit, in place (N)."""

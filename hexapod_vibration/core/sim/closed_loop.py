@@ -84,8 +84,10 @@ class CoreLoop:
         fs = self.config.simulation.sample_rate_hz
         self.fs = fs
         rng = np.random.default_rng(scenario.seed)
+        self.rotor = scenario.rotor.rotor()
         shaker = Shaker(scenario.shaker.tones(), scenario.shaker.noise_rms_n,
-                        self.config.shaker.force_limit_n, seed=int(rng.integers(2**31)))
+                        self.config.shaker.force_limit_n, seed=int(rng.integers(2**31)),
+                        rotor=self.rotor)
         self.plant = PPHPlant(self.config, shaker=shaker, seed=int(rng.integers(2**31)))
         self.pointing = make_pointing_controller(self.config, self.plant.eddy.sensing_matrix, fs)
         self.pointing.set_target(np.asarray(scenario.target_pose),

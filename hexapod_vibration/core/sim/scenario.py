@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 import yaml
 
+from hexapod_vibration.core.model.rotor import Rotor, rotor_or_none
 from hexapod_vibration.core.model.shaker import ShakerTone, tones_from_arrays
 
 ADAPTATION_MODES = ("centralized", "decentralized", "raw")
@@ -37,6 +38,34 @@ class ShakerSettings:
         """The tones as :class:`ShakerTone` (validated)."""
         return tones_from_arrays(self.frequencies_hz, self.amplitudes_n, self.phases_rad,
                                  self.drift_hz, self.drift_period_s)
+
+
+@dataclass(frozen=True)
+class RotorSettings:
+    """A rotating machine at the shaker's point (issue 11): orders, N peak at Hz, profile.
+
+    ``amplitudes_n`` are at ``reference_speed_hz`` and scale with the speed squared; the
+    speed (Hz) is piecewise linear through (``profile_time_s``, ``profile_speed_hz``);
+    ``tachometer`` publishes the speed on ``/pph/reference_frequency``. No orders: no rotor.
+    """
+
+    orders: tuple[float, ...] = ()
+    amplitudes_n: tuple[float, ...] = ()
+    reference_speed_hz: float = 50.0
+    profile_time_s: tuple[float, ...] = (0.0,)
+    profile_speed_hz: tuple[float, ...] = (50.0,)
+    tachometer: bool = False
+
+    def __post_init__(self) -> None:
+        """Validate by building the rotor (ValueError with the reason)."""
+        if not isinstance(self.tachometer, bool):
+            raise ValueError(f"rotor.tachometer must be true or false, got {self.tachometer!r}")
+        self.rotor()
+
+    def rotor(self) -> Rotor | None:
+        """The :class:`Rotor`, or None without orders."""
+        return rotor_or_none(self.orders, self.amplitudes_n, self.reference_speed_hz,
+                             self.profile_time_s, self.profile_speed_hz)
 
 
 RUNNER_NOTCH_SETTINGS = frozenset({"enabled", "identify_delay_s"})
@@ -98,6 +127,7 @@ class Scenario:
     nonlinear: bool = True
     model_overrides: dict[str, Any] = field(default_factory=dict)
     shaker: ShakerSettings = ShakerSettings()
+    rotor: RotorSettings = RotorSettings()
     notch: NotchSettings = NotchSettings()
     test_sine: TestSineSettings = TestSineSettings()
     target_pose: tuple[float, ...] = (0.0,) * 6
@@ -154,7 +184,7 @@ def scenario_from_dict(data: dict[str, Any]) -> Scenario:
         raise ValueError("a scenario is a mapping with at least a 'name'")
     values = dict(data)
     sections = {"shaker": ShakerSettings, "notch": NotchSettings.from_yaml,
-                "test_sine": TestSineSettings}
+                "test_sine": TestSineSettings, "rotor": RotorSettings}
     for key, make in sections.items():
         if key in values:
             section = values[key]
