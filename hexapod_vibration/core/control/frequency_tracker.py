@@ -1,0 +1,198 @@
+"""Online frequency estimation of the canceller's tones from the rotation of its weights.
+
+A tone whose oscillator runs at ``f`` while the disturbance sits at ``f + df`` makes the
+converged weight rotate at ``2 pi df`` (paper eq. 21): ``W`` follows the target
+``T = -D/G e^{j 2 pi df t}`` with the adaptation's first-order lag, so the weight lags the
+target by the angle ``e`` and turns by ``mu e`` per sample (normalised ``P``, rate ``mu``).
+The measured turn of the weights over a block of ``B`` samples,
+
+    e = angle(sum_i conj(W_i(n - B)) W_i(n)) / (mu B)          (rad),
+
+is therefore the phase error between oscillator and disturbance: the phase detector of a
+phase-locked loop whose proportional path is the adaptation itself. :class:`FrequencyTracker`
+closes a type-2 loop on it (Bodson & Douglas 1997 for the adaptive-notch PLL idea): per tone
+the frequency integrates ``K2 e`` and the next block's per-sample phase increment gets
+``K1 e`` on top, so the oscillators stay phase-continuous (the correction is a frequency
+offset for ``B`` samples, never a step) and the weights are kept. With ``alpha = K1 + mu``
+and ``beta = K2`` the error obeys ``e'' + alpha e' + beta e = phi_d''``: natural frequency
+``sqrt(beta)`` rad/sample, damping ``alpha / (2 sqrt(beta))``; a frequency ramp of ``r``
+(rad/sample^2) leaves ``e = r / beta`` and so a residual of about ``20 log10(e)`` dB
+relative to the tone; a constant offset leaves none.
+
+Safety: a tone whose weights are frozen, (near) zero or still growing from zero gives no
+measurement and its frequency is held. Every tone stays within ``nominal +- range_hz``
+and, so that close tones never merge, on its own side of the midpoints between adjacent
+nominal tones (at least :data:`MIN_SEPARATION_HZ` from them).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+TWO_PI = 2.0 * np.pi
+DEFAULT_BANDWIDTH_HZ = 3.0
+"""Natural frequency of the tracking loop (Hz): a 1 Hz/s ramp leaves about -33 dB."""
+DEFAULT_DAMPING = 0.7
+DEFAULT_BLOCK_SAMPLES = 8
+"""Samples between two updates of the estimates (the cost is paid once per block)."""
+MIN_SEPARATION_HZ = 0.1
+"""Smallest distance (Hz) a tracked tone keeps from the midpoint to its nominal neighbour."""
+WEIGHT_FLOOR_N = 1e-9
+"""Weights (N, 2-norm over channels) below this carry no phase: no measurement."""
+MAX_GROWTH = 1.25
+"""A weight whose norm changes by more than this factor over a block (growing from zero,
+being reset) gives no measurement."""
+MAX_PHASE_ERROR_RAD = 0.5
+"""A measured phase error above this (rad) is clipped: the linear loop holds to there."""
+
+
+def tracking_bounds_hz(nominal_hz: Sequence[float] | np.ndarray, range_hz: float,
+                       sample_rate_hz: float) -> tuple[np.ndarray, np.ndarray]:
+    """Lowest and highest frequency (Hz) each tone may be tracked to, (T,) each.
+
+    ``nominal +- range_hz``, cut at the midpoints between adjacent nominal tones (minus
+    :data:`MIN_SEPARATION_HZ`) so that two tones can never meet, and inside (0, fs/2).
+
+    Raises:
+        ValueError: a negative or non-finite range.
+    """
+    f = np.asarray(nominal_hz, dtype=float).reshape(-1)
+    r = float(range_hz)
+    if not np.isfinite(r) or r < 0.0:
+        raise ValueError(f'tracking_range_hz must be finite and >= 0, got {range_hz!r}')
+    lower, upper = f - r, f + r
+    order = np.argsort(f)
+    sorted_f = f[order]
+    if f.size > 1:
+        mid = 0.5 * (sorted_f[1:] + sorted_f[:-1])
+        gap = np.minimum(MIN_SEPARATION_HZ, 0.25 * np.diff(sorted_f))
+        lo_sorted = np.concatenate([[-np.inf], mid + gap])
+        hi_sorted = np.concatenate([mid - gap, [np.inf]])
+        lower[order] = np.maximum(lower[order], lo_sorted)
+        upper[order] = np.minimum(upper[order], hi_sorted)
+    edge = 1e-3 * sample_rate_hz
+    lower = np.maximum(lower, np.minimum(edge, f))
+    upper = np.minimum(upper, np.maximum(0.5 * sample_rate_hz - edge, f))
+    return lower, upper
+
+
+def weight_phase_error(previous: np.ndarray, current: np.ndarray, rate: float,
+                       samples: int) -> tuple[np.ndarray, np.ndarray]:
+    """Phase error (rad) of each oscillator from its weights' turn over ``samples`` samples.
+
+    Args:
+        previous: complex (T, C) weights (N) ``samples`` samples ago.
+        current: complex (T, C) weights now.
+        rate: the adaptation rate mu the weights moved with (normalised P).
+        samples: samples between the two (>= 1).
+
+    Returns:
+        ``(error_rad, strength)``: (T,) phase errors (0 where there is no measurement) and
+        (T,) weights of the measurements, ``|W|^2`` (0 = no measurement: frozen, zero or
+        growing weights, or ``rate`` 0).
+    """
+    inner = np.einsum('tc,tc->t', np.conj(previous), current)
+    p2 = np.einsum('tc,tc->t', previous.real, previous.real) + np.einsum(
+        'tc,tc->t', previous.imag, previous.imag)
+    c2 = np.einsum('tc,tc->t', current.real, current.real) + np.einsum(
+        'tc,tc->t', current.imag, current.imag)
+    if rate <= 0.0 or samples < 1:
+        return np.zeros(inner.size), np.zeros(inner.size)
+    valid = ((p2 > WEIGHT_FLOOR_N ** 2) & (c2 <= MAX_GROWTH ** 2 * p2)
+             & (p2 <= MAX_GROWTH ** 2 * c2))
+    error = np.where(valid, np.angle(inner) / (rate * samples), 0.0)
+    np.clip(error, -MAX_PHASE_ERROR_RAD, MAX_PHASE_ERROR_RAD, out=error)
+    return error, np.where(valid, c2, 0.0)
+
+
+def combine_orders(error_rad: np.ndarray, strength: np.ndarray,
+                   orders: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """One phase error per fundamental from the errors of its harmonic orders.
+
+    Order ``k`` follows ``k`` times its fundamental, so its phase error is ``k`` times the
+    fundamental's: the combination is the least-squares estimate
+    ``sum_k s_k k e_k / sum_k s_k k^2`` with ``s_k`` the measurements' strengths.
+
+    Args:
+        error_rad: (K, T) phase errors of order row k for tone column t.
+        strength: (K, T) their weights (0 = no measurement).
+        orders: (K,) the orders (1 first).
+
+    Returns:
+        ``(error_rad, valid)`` of the fundamentals, (T,) each.
+    """
+    k = np.asarray(orders, dtype=float)[:, None]
+    den = np.sum(strength * k * k, axis=0)
+    valid = den > 0.0
+    num = np.sum(strength * k * error_rad, axis=0)
+    return np.where(valid, num / np.where(valid, den, 1.0), 0.0), valid
+
+
+class FrequencyTracker:
+    """Type-2 frequency loops, one per tone, on the canceller's weight rotation.
+
+    Args:
+        nominal_hz: the tones' nominal frequencies (Hz), (T,).
+        range_hz: largest deviation from nominal (Hz), >= 0.
+        sample_rate_hz: loop rate fs (Hz).
+        bandwidth_hz: the loop's natural frequency (Hz).
+        damping: the loop's damping ratio.
+        block_samples: samples per update (the caller calls :meth:`update` once per block).
+    """
+
+    def __init__(self, nominal_hz: Sequence[float] | np.ndarray, range_hz: float,
+                 sample_rate_hz: float, bandwidth_hz: float = DEFAULT_BANDWIDTH_HZ,
+                 damping: float = DEFAULT_DAMPING,
+                 block_samples: int = DEFAULT_BLOCK_SAMPLES) -> None:
+        """Start every tone at its nominal frequency."""
+        self.fs = float(sample_rate_hz)
+        self.nominal_hz = np.asarray(nominal_hz, dtype=float).reshape(-1).copy()
+        self.lower_hz, self.upper_hz = tracking_bounds_hz(self.nominal_hz, range_hz, self.fs)
+        if int(block_samples) < 1:
+            raise ValueError(f'block_samples must be >= 1, got {block_samples!r}')
+        self.block_samples = int(block_samples)
+        omega_n = TWO_PI * float(bandwidth_hz) / self.fs
+        self._alpha = 2.0 * float(damping) * omega_n         # K1 + mu (rad per rad)
+        self._beta = omega_n * omega_n                      # K2 (rad/sample per rad/sample)
+        self._omega = TWO_PI * self.nominal_hz / self.fs     # integrator (rad/sample)
+        self._effective = self._omega.copy()
+
+    def reset(self, frequencies_hz: Sequence[float] | np.ndarray | None = None) -> None:
+        """Set every loop's frequency (Hz; None: nominal), clamped to the bounds."""
+        f = self.nominal_hz if frequencies_hz is None else np.asarray(frequencies_hz, float)
+        f = np.clip(f, self.lower_hz, self.upper_hz)
+        self._omega = TWO_PI * f / self.fs
+        self._effective = self._omega.copy()
+
+    def update(self, error_rad: np.ndarray, valid: np.ndarray, rate: float) -> np.ndarray:
+        """Take one block's phase errors; the frequencies (Hz) for the next block.
+
+        Args:
+            error_rad: (T,) phase errors measured over the last block (rad).
+            valid: (T,) which of them are measurements (the others hold their tone).
+            rate: the adaptation rate mu in force (its share of the proportional gain).
+
+        Returns:
+            (T,) per-sample frequencies (Hz) for the next block: the integrator plus the
+            proportional phase correction, within the bounds (a new array).
+        """
+        e = np.where(valid, error_rad, 0.0)
+        b = self.block_samples
+        k1 = max(self._alpha - float(rate), 0.0)
+        lo = TWO_PI * self.lower_hz / self.fs
+        hi = TWO_PI * self.upper_hz / self.fs
+        self._omega = np.clip(self._omega + self._beta * b * e, lo, hi)
+        self._effective = np.clip(self._omega + k1 * e, lo, hi)
+        return self.frequencies_hz
+
+    @property
+    def frequencies_hz(self) -> np.ndarray:
+        """The frequencies (Hz) the oscillators run at in this block, a new array."""
+        return self._effective * (self.fs / TWO_PI)
+
+    @property
+    def estimates_hz(self) -> np.ndarray:
+        """The loops' frequency estimates (Hz, the integrators), a new array."""
+        return self._omega * (self.fs / TWO_PI)
