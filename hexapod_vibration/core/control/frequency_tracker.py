@@ -37,6 +37,10 @@ DEFAULT_BANDWIDTH_HZ = 3.0
 DEFAULT_DAMPING = 0.7
 DEFAULT_BLOCK_SAMPLES = 8
 """Samples between two updates of the estimates (the cost is paid once per block)."""
+NEIGHBOUR_BANDWIDTH_RATIO = 0.25
+"""A tone's loop bandwidth is at most this fraction of the distance (Hz) to the nearest
+oscillator of another tone: a faster loop would take the neighbour's residual, which beats
+at that distance in its phase detector, for its own phase error (39 and 40 Hz: 0.25 Hz)."""
 MIN_SEPARATION_HZ = 0.1
 """Smallest distance (Hz) a tracked tone keeps from the midpoint to its nominal neighbour."""
 WEIGHT_FLOOR_N = 1e-9
@@ -76,6 +80,26 @@ def tracking_bounds_hz(nominal_hz: Sequence[float] | np.ndarray, range_hz: float
     lower = np.maximum(lower, np.minimum(edge, f))
     upper = np.minimum(upper, np.maximum(0.5 * sample_rate_hz - edge, f))
     return lower, upper
+
+
+def loop_bandwidths_hz(nominal_hz: Sequence[float] | np.ndarray, orders: Sequence[float],
+                       bandwidth_hz: float = DEFAULT_BANDWIDTH_HZ) -> np.ndarray:
+    """Each tone's loop bandwidth (Hz): ``bandwidth_hz``, lowered near other tones.
+
+    Order ``k`` of tone ``t`` at distance ``d`` from an oscillator of another tone limits
+    the tone's bandwidth to :data:`NEIGHBOUR_BANDWIDTH_RATIO` ``d / k`` (order k's phase
+    error is k times the fundamental's).
+    """
+    f = np.asarray(nominal_hz, dtype=float).reshape(-1)
+    k = np.asarray(orders, dtype=float).reshape(-1)
+    bank = k[:, None] * f[None, :]                                  # (K, T)
+    out = np.full(f.size, float(bandwidth_hz))
+    for t in range(f.size):
+        others = np.delete(bank, t, axis=1).reshape(-1)
+        if others.size:
+            d = np.abs(bank[:, t][:, None] - others[None, :]).min(axis=1)     # (K,)
+            out[t] = min(out[t], float(np.min(NEIGHBOUR_BANDWIDTH_RATIO * d / k)))
+    return out
 
 
 def weight_phase_error(previous: np.ndarray, current: np.ndarray, rate: float,
@@ -137,13 +161,15 @@ class FrequencyTracker:
         nominal_hz: the tones' nominal frequencies (Hz), (T,).
         range_hz: largest deviation from nominal (Hz), >= 0.
         sample_rate_hz: loop rate fs (Hz).
-        bandwidth_hz: the loop's natural frequency (Hz).
+        bandwidth_hz: the loop's natural frequency (Hz), one for all or (T,) per tone
+            (see :func:`loop_bandwidths_hz`).
         damping: the loop's damping ratio.
         block_samples: samples per update (the caller calls :meth:`update` once per block).
     """
 
     def __init__(self, nominal_hz: Sequence[float] | np.ndarray, range_hz: float,
-                 sample_rate_hz: float, bandwidth_hz: float = DEFAULT_BANDWIDTH_HZ,
+                 sample_rate_hz: float,
+                 bandwidth_hz: float | np.ndarray = DEFAULT_BANDWIDTH_HZ,
                  damping: float = DEFAULT_DAMPING,
                  block_samples: int = DEFAULT_BLOCK_SAMPLES) -> None:
         """Start every tone at its nominal frequency."""
@@ -153,7 +179,8 @@ class FrequencyTracker:
         if int(block_samples) < 1:
             raise ValueError(f'block_samples must be >= 1, got {block_samples!r}')
         self.block_samples = int(block_samples)
-        omega_n = TWO_PI * float(bandwidth_hz) / self.fs
+        omega_n = TWO_PI * np.broadcast_to(np.asarray(bandwidth_hz, float),
+                                           self.nominal_hz.shape) / self.fs
         self._alpha = 2.0 * float(damping) * omega_n         # K1 + mu (rad per rad)
         self._beta = omega_n * omega_n                      # K2 (rad/sample per rad/sample)
         self._omega = TWO_PI * self.nominal_hz / self.fs     # integrator (rad/sample)
@@ -180,7 +207,7 @@ class FrequencyTracker:
         """
         e = np.where(valid, error_rad, 0.0)
         b = self.block_samples
-        k1 = max(self._alpha - float(rate), 0.0)
+        k1 = np.maximum(self._alpha - float(rate), 0.0)
         lo = TWO_PI * self.lower_hz / self.fs
         hi = TWO_PI * self.upper_hz / self.fs
         self._omega = np.clip(self._omega + self._beta * b * e, lo, hi)

@@ -46,6 +46,7 @@ from hexapod_vibration.core.control.frequency_tracker import (
     DEFAULT_BLOCK_SAMPLES,
     FrequencyTracker,
     combine_orders,
+    loop_bandwidths_hz,
     weight_phase_error,
 )
 from hexapod_vibration.core.control.mu_policy import DEFAULT_MAX_RISE_DB
@@ -679,6 +680,7 @@ class _ToneFollowing:
         self.reference_orders = np.asarray(cfg.reference_harmonics, dtype=float)
         self.timeout_samples = cfg.reference_timeout_s * self.sup.fs
         self.tracker = (FrequencyTracker(nominal, cfg.tracking_range_hz, self.sup.fs,
+                                         loop_bandwidths_hz(nominal, self.orders),
                                          block_samples=self.block)
                         if cfg.frequency_tracking and nominal.size else None)
         self.active = bool(nominal.size) and (self.tracker is not None
