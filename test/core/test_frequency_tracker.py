@@ -82,13 +82,29 @@ def test_bounds_keep_close_tones_apart_and_within_the_range():
 def test_phase_error_is_the_weights_turn_over_mu_and_none_without_a_measurement():
     w = np.exp(1j * np.linspace(0, 3, 12)).reshape(2, 6)
     turned = w * np.exp(1j * np.array([[1e-3], [-2e-3]]))
-    error, strength = weight_phase_error(w, turned, rate=0.002, samples=8)
-    assert error == pytest.approx([1e-3 / 0.016, -2e-3 / 0.016])
+    g = np.broadcast_to(0.1 * np.exp(-0.7j) * np.eye(6), (2, 6, 6))
+    p_inv = np.linalg.inv(-2.0 * np.linalg.inv(g))            # decentralized P = -2/G_ii
+    error, strength = weight_phase_error(w, turned, 0.002, 8, g, p_inv)
+    assert error == pytest.approx([1e-3 / 0.016, -2e-3 / 0.016], rel=2e-3)
     assert np.all(strength > 0)
     for previous, current, rate in ((w, turned, 0.0), (0 * w, turned, 0.002),
                                     (w, 2 * turned, 0.002)):   # frozen, zero, growing
-        error, strength = weight_phase_error(previous, current, rate, 8)
+        error, strength = weight_phase_error(previous, current, rate, 8, g, p_inv)
         assert not np.any(strength) and not np.any(error)
+
+
+def test_phase_error_is_measured_through_the_plant_on_a_coupled_one():
+    rng = np.random.default_rng(3)
+    g = (0.1 * np.eye(6) + 0.03 * rng.standard_normal((6, 6))
+         + 0.03j * rng.standard_normal((6, 6)))[None]
+    p = np.diag(-2.0 / np.diag(g[0]))[None]                   # decentralized
+    target = rng.standard_normal((1, 6)) + 1j * rng.standard_normal((1, 6))
+    w = target.copy()                                         # converged on T
+    psi = 0.01                                                # T turns by psi
+    residual = np.einsum("tij,tj->ti", g, w - target * np.exp(1j * psi))
+    moved = w + 0.002 * 8 * 0.5 * np.einsum("tij,tj->ti", p, residual)
+    error, _ = weight_phase_error(w, moved, 0.002, 8, g, np.linalg.inv(p))
+    assert error == pytest.approx([psi], rel=0.02)
 
 
 def test_orders_combine_to_one_fundamental_error():
@@ -132,7 +148,7 @@ def test_without_tracking_the_same_offset_is_not_followed():
 def test_close_tones_are_tracked_each_to_its_own_frequency():
     sup = supervisor([39.0, 40.0])
     _, est = run(sup, lambda n: [39.2, 40.25], [0.05, 0.05], start_s=3.3, samples=14000)
-    assert est[-1000:].mean(axis=0) == pytest.approx([39.2, 40.25], abs=2e-3)
+    assert est[-1000:].mean(axis=0) == pytest.approx([39.2, 40.25], abs=5e-3)
     assert np.all(np.diff(est, axis=1) > 0.2)          # never met
 
 

@@ -4,20 +4,20 @@ A tone whose oscillator runs at ``f`` while the disturbance sits at ``f + df`` m
 converged weight rotate at ``2 pi df`` (paper eq. 21): ``W`` follows the target
 ``T = -D/G e^{j 2 pi df t}`` with the adaptation's first-order lag, so the weight lags the
 target by the angle ``e`` and turns by ``mu e`` per sample (normalised ``P``, rate ``mu``).
-The measured turn of the weights over a block of ``B`` samples,
-
-    e = angle(sum_i conj(W_i(n - B)) W_i(n)) / (mu B)          (rad),
-
-is therefore the phase error between oscillator and disturbance: the phase detector of a
-phase-locked loop whose proportional path is the adaptation itself. :class:`FrequencyTracker`
-closes a type-2 loop on it (Bodson & Douglas 1997 for the adaptive-notch PLL idea): per tone
-the frequency integrates ``K2 e`` and the next block's per-sample phase increment gets
-``K1 e`` on top, so the oscillators stay phase-continuous (the correction is a frequency
-offset for ``B`` samples, never a step) and the weights are kept. With ``alpha = K1 + mu``
-and ``beta = K2`` the error obeys ``e'' + alpha e' + beta e = phi_d''``: natural frequency
-``sqrt(beta)`` rad/sample, damping ``alpha / (2 sqrt(beta))``; a frequency ramp of ``r``
-(rad/sample^2) leaves ``e = r / beta`` and so a residual of about ``20 log10(e)`` dB
-relative to the tone; a constant offset leaves none.
+The change of the weights over a block of ``B`` samples gives the residual at the tone,
+and its component in quadrature with the canceller's output (both seen through the
+identified plant, :func:`weight_phase_error`) is the phase error ``e`` between oscillator
+and disturbance: the phase detector of a phase-locked loop whose proportional path is
+the adaptation itself. :class:`FrequencyTracker`
+closes a phase-locked loop on it (Bodson & Douglas 1997 for the adaptive-notch PLL idea):
+per tone the frequency integrates ``K2 e`` plus a learnt rate (which integrates ``K3 e``)
+and the next block's per-sample phase increment gets ``K1 e`` on top, so the oscillators
+stay phase-continuous (the correction is a frequency offset for ``B`` samples, never a
+step) and the weights are kept. With ``alpha = K1 + mu``, without K3 this is a type-2 loop
+of natural frequency ``sqrt(K2)`` rad/sample and damping ``alpha / (2 sqrt(K2))``, which
+leaves ``e = r / K2`` on a frequency ramp of ``r`` (rad/sample^2), a residual of about
+``20 log10(e)`` dB relative to the tone; the slow K3 (corner :data:`RAMP_FRACTION` of the
+natural frequency) removes that in steady ramps too. A constant offset leaves none.
 
 Safety: a tone whose weights are frozen, (near) zero or still growing from zero gives no
 measurement and its frequency is held. Every tone stays within ``nominal +- range_hz``
@@ -32,9 +32,13 @@ from collections.abc import Sequence
 import numpy as np
 
 TWO_PI = 2.0 * np.pi
-DEFAULT_BANDWIDTH_HZ = 3.0
-"""Natural frequency of the tracking loop (Hz): a 1 Hz/s ramp leaves about -33 dB."""
+DEFAULT_BANDWIDTH_HZ = 1.5
+"""Natural frequency of the tracking loop (Hz). 2 Hz already oscillates (about 1 Hz) at 30 Hz
+on the PPH plant, whose modes near there slow the loop; 1.5 Hz does not."""
 DEFAULT_DAMPING = 0.7
+RAMP_FRACTION = 0.2
+"""The frequency-rate integrator's corner as a fraction of the loop's natural frequency:
+a slow third pole that learns a steady ramp (spin-up) so that it leaves no phase error."""
 DEFAULT_BLOCK_SAMPLES = 8
 """Samples between two updates of the estimates (the cost is paid once per block)."""
 NEIGHBOUR_BANDWIDTH_RATIO = 0.25
@@ -45,9 +49,10 @@ MIN_SEPARATION_HZ = 0.1
 """Smallest distance (Hz) a tracked tone keeps from the midpoint to its nominal neighbour."""
 WEIGHT_FLOOR_N = 1e-9
 """Weights (N, 2-norm over channels) below this carry no phase: no measurement."""
-MAX_GROWTH = 1.25
-"""A weight whose norm changes by more than this factor over a block (growing from zero,
-being reset) gives no measurement."""
+SETTLED_GROWTH = 1.0
+"""A weight whose squared norm changes over a block by more than this many times
+``2 mu B`` (relative) is still converging from zero (or being reset) and gives no
+measurement: about the first 0.7/mu samples after enabling."""
 MAX_PHASE_ERROR_RAD = 0.5
 """A measured phase error above this (rad) is clipped: the linear loop holds to there."""
 
@@ -103,32 +108,50 @@ def loop_bandwidths_hz(nominal_hz: Sequence[float] | np.ndarray, orders: Sequenc
 
 
 def weight_phase_error(previous: np.ndarray, current: np.ndarray, rate: float,
-                       samples: int) -> tuple[np.ndarray, np.ndarray]:
-    """Phase error (rad) of each oscillator from its weights' turn over ``samples`` samples.
+                       samples: int, plant: np.ndarray,
+                       inverse_coefficients: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Phase error (rad) of each oscillator from its weights' change over a block.
+
+    The weights moved by ``dW = mu P sum_n e_n e^{-j phi_n}``, so the block's residual
+    phasor (m/s^2) is ``E = 2 P^-1 dW / (mu B)``; the canceller's output seen through the
+    plant is ``y = G W``. A disturbance that turned by ``psi`` relative to the oscillator
+    leaves ``E = -j psi y`` (to first order, once ``W`` has converged), so
+
+        psi = -Im(y^H E) / |y|^2
+
+    whatever the coupling between channels (the weights' own turn, ``Im(W^H dW)``, weighs
+    it by ``diag(1/G_ii) G`` in decentralized mode, which is not 1 on a coupled plant).
 
     Args:
         previous: complex (T, C) weights (N) ``samples`` samples ago.
         current: complex (T, C) weights now.
-        rate: the adaptation rate mu the weights moved with (normalised P).
-        samples: samples between the two (>= 1).
+        rate: the adaptation rate mu the weights moved with.
+        samples: samples between the two (B >= 1).
+        plant: complex (T, C, C) plant responses G at the oscillators, (m/s^2)/N.
+        inverse_coefficients: complex (T, C, C) inverses of the coefficients P.
 
     Returns:
         ``(error_rad, strength)``: (T,) phase errors (0 where there is no measurement) and
-        (T,) weights of the measurements, ``|W|^2`` (0 = no measurement: frozen, zero or
-        growing weights, or ``rate`` 0).
+        (T,) weights of the measurements, ``|y|^2`` ((m/s^2)^2; 0 = no measurement:
+        frozen, zero or still converging weights, or ``rate`` 0).
     """
-    inner = np.einsum('tc,tc->t', np.conj(previous), current)
-    p2 = np.einsum('tc,tc->t', previous.real, previous.real) + np.einsum(
-        'tc,tc->t', previous.imag, previous.imag)
-    c2 = np.einsum('tc,tc->t', current.real, current.real) + np.einsum(
-        'tc,tc->t', current.imag, current.imag)
+    t = current.shape[0]
     if rate <= 0.0 or samples < 1:
-        return np.zeros(inner.size), np.zeros(inner.size)
-    valid = ((p2 > WEIGHT_FLOOR_N ** 2) & (c2 <= MAX_GROWTH ** 2 * p2)
-             & (p2 <= MAX_GROWTH ** 2 * c2))
-    error = np.where(valid, np.angle(inner) / (rate * samples), 0.0)
+        return np.zeros(t), np.zeros(t)
+    residual = np.einsum('tij,tj->ti', inverse_coefficients, current - previous)
+    residual *= 2.0 / (rate * samples)
+    y = np.einsum('tij,tj->ti', plant, current)
+    y2 = np.einsum('ti,ti->t', y.real, y.real) + np.einsum('ti,ti->t', y.imag, y.imag)
+    p2 = np.einsum('ti,ti->t', previous.real, previous.real) + np.einsum(
+        'ti,ti->t', previous.imag, previous.imag)
+    c2 = np.einsum('ti,ti->t', current.real, current.real) + np.einsum(
+        'ti,ti->t', current.imag, current.imag)
+    settled = SETTLED_GROWTH * 2.0 * rate * samples * p2
+    valid = (p2 > WEIGHT_FLOOR_N ** 2) & (np.abs(c2 - p2) <= settled) & (y2 > 0.0)
+    cross = np.einsum('ti,ti->t', np.conj(y), residual).imag
+    error = np.where(valid, -cross / np.where(valid, y2, 1.0), 0.0)
     np.clip(error, -MAX_PHASE_ERROR_RAD, MAX_PHASE_ERROR_RAD, out=error)
-    return error, np.where(valid, c2, 0.0)
+    return error, np.where(valid, y2, 0.0)
 
 
 def combine_orders(error_rad: np.ndarray, strength: np.ndarray,
@@ -183,6 +206,8 @@ class FrequencyTracker:
                                            self.nominal_hz.shape) / self.fs
         self._alpha = 2.0 * float(damping) * omega_n         # K1 + mu (rad per rad)
         self._beta = omega_n * omega_n                      # K2 (rad/sample per rad/sample)
+        self._gamma = self._beta * RAMP_FRACTION * omega_n  # K3 (rate per rad)
+        self._rate = np.zeros(self.nominal_hz.size)         # rad/sample per sample
         self._omega = TWO_PI * self.nominal_hz / self.fs     # integrator (rad/sample)
         self._effective = self._omega.copy()
 
@@ -192,6 +217,7 @@ class FrequencyTracker:
         f = np.clip(f, self.lower_hz, self.upper_hz)
         self._omega = TWO_PI * f / self.fs
         self._effective = self._omega.copy()
+        self._rate = np.zeros(self.nominal_hz.size)
 
     def update(self, error_rad: np.ndarray, valid: np.ndarray, rate: float) -> np.ndarray:
         """Take one block's phase errors; the frequencies (Hz) for the next block.
@@ -210,7 +236,11 @@ class FrequencyTracker:
         k1 = np.maximum(self._alpha - float(rate), 0.0)
         lo = TWO_PI * self.lower_hz / self.fs
         hi = TWO_PI * self.upper_hz / self.fs
-        self._omega = np.clip(self._omega + self._beta * b * e, lo, hi)
+        self._rate = np.where(valid, self._rate + self._gamma * b * e, self._rate)
+        step = np.where(valid, self._beta * e + self._rate, 0.0)
+        omega = self._omega + step * b
+        self._rate = np.where((omega < lo) | (omega > hi), 0.0, self._rate)   # anti-windup
+        self._omega = np.clip(omega, lo, hi)
         self._effective = np.clip(self._omega + k1 * e, lo, hi)
         return self.frequencies_hz
 

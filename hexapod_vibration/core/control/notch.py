@@ -475,6 +475,11 @@ class AdaptiveNotchCanceller:
         return self._p_full.copy()
 
     @property
+    def coefficients_view(self) -> np.ndarray:
+        """The (T, C, C) matrices P_t themselves (read only; a new object whenever P changes)."""
+        return self._p_full
+
+    @property
     def is_diagonal(self) -> bool:
         """True when every P_t is diagonal (O(T*C) update path)."""
         return self._p_diag is not None

@@ -662,6 +662,8 @@ class _ToneFollowing:
         self.reference_state = "unused"
         self._previous_w: np.ndarray | None = None
         self._p_at_hz: np.ndarray | None = None
+        self._detector_source: np.ndarray | None = None
+        self._detector: tuple[np.ndarray | None, np.ndarray | None] = (None, None)
 
     def rebuild(self) -> None:
         """Re-read the settings; the tracker restarts from where the tones are.
@@ -778,13 +780,37 @@ class _ToneFollowing:
         if previous is None:
             return None
         rate = canceller.mu if canceller.enabled and not canceller.frozen else 0.0
+        plant, inverse = self._detector_matrices()
+        if plant is None:
+            return None
         t = self.nominal_hz.size
-        error, strength = weight_phase_error(previous, weights, rate, self.block)
-        adapting = canceller.adapting
-        strength = np.where(adapting, strength, 0.0)
+        error, strength = weight_phase_error(previous, weights, rate, self.block, plant,
+                                             inverse)
+        strength = np.where(canceller.adapting, strength, 0.0)
         fundamental_error, valid = combine_orders(error.reshape(-1, t),
                                                   strength.reshape(-1, t), self.orders)
         return self.tracker.update(fundamental_error, valid, rate)
+
+    def _detector_matrices(self) -> tuple[np.ndarray | None, np.ndarray | None]:
+        """G and P^-1 (T, C, C) at the oscillators for the phase detector (None: no G yet).
+
+        G is the broadband response at the frequencies P was last computed for, else the
+        tone-identified one; P^-1 is recomputed when the canceller's P changes.
+        """
+        sup, canceller = self.sup, self.sup.canceller
+        p = canceller.coefficients_view
+        if self._detector_source is not p:
+            g = sup.plant_response
+            if sup.plant_frequency_response is not None and g is not None:
+                g = sup.plant_frequency_response.at(self._p_at_hz)
+            if g is None or g.shape != p.shape:
+                return None, None
+            try:
+                self._detector = (g, np.linalg.inv(p))
+            except np.linalg.LinAlgError:
+                return None, None
+            self._detector_source = p
+        return self._detector
 
     def _retune(self, fundamentals: np.ndarray) -> None:
         """Move every oscillator to its order x fundamental; new P from G(f) if moved."""
@@ -794,16 +820,21 @@ class _ToneFollowing:
         canceller.retune(bank)
         response = self.sup.plant_frequency_response
         if (response is None or self.sup.plant_response is None
-                or np.max(np.abs(bank - self._p_at_hz)) < P_RETUNE_HZ):
+                or np.max(np.abs(bank - self._p_at_hz)) < P_RETUNE_HZ
+                or not np.all(canceller.adapting)):     # tones waiting for identification
             return
         try:
-            g = response.at(bank)
-            coefficients = adaptation.normalized_coefficients(g, self.sup.config.adaptation)
-        except ValueError:
+            g_old, g_new = response.at(self._p_at_hz), response.at(bank)
+            coefficients = adaptation.normalized_coefficients(g_new, self.sup.config.adaptation)
+            moved = np.linalg.solve(g_new, np.einsum("tij,tj->ti", g_old, canceller.weights))
+        except (ValueError, np.linalg.LinAlgError):
             return
-        if np.all(canceller.adapting):     # tones waiting for identification keep waiting
-            canceller.set_coefficients(coefficients)
-            self._p_at_hz = bank
+        # the converged weight is -G^-1 D: carried through the plant's change of response
+        # with the frequency, it stays converged while the tone moves (no lag to make up)
+        if np.all(np.isfinite(moved)):
+            canceller.set_weights(moved)
+        canceller.set_coefficients(coefficients)
+        self._p_at_hz = bank
 
     def status(self) -> dict[str, Any]:
         """The status keys of the moving tones (for ``/diagnostics``)."""

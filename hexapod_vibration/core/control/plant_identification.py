@@ -35,6 +35,7 @@ A 12 s period (15 s in all) halves that; the error scales with the line spacing.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -175,11 +176,16 @@ class PlantFrequencyResponse:
             raise ValueError(f'frequencies must be in [0, {0.5 * self.sample_rate_hz:g}] Hz')
         c = self.n_channels
         out = np.empty((f.size, c, c), dtype=complex)
-        for j in range(c):
+        for j, spline in enumerate(self._splines):
             lines = self.line_frequencies_hz[j]
-            spline = CubicSpline(lines, self.line_response[j], axis=0)
             out[:, :, j] = spline(np.clip(f, lines[0], lines[-1]))
         return out
+
+    @functools.cached_property
+    def _splines(self) -> list[CubicSpline]:
+        """One cubic spline per column, built on first use (tracked tones ask often)."""
+        return [CubicSpline(lines, values, axis=0) for lines, values in zip(
+            self.line_frequencies_hz, self.line_response, strict=True)]
 
 
 def detection_line_noise(spectrum: np.ndarray, bins: np.ndarray,
