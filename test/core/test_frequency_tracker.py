@@ -179,3 +179,56 @@ def test_the_oscillators_move_phase_continuously_and_keep_their_weights():
         canceller.step(np.zeros(6))
     assert canceller.phases_rad == pytest.approx(
         np.remainder(phase + 10 * 2 * np.pi * 40.5 / FS, 2 * np.pi), abs=1e-9)
+
+
+# ------------------------------------------------------------------ settings, reference
+@pytest.mark.parametrize("changes, reason", [
+    ({"tone_frequencies_hz": [40.0, 50.0, 60.0, 70.0, 90.0, 110.0], "harmonics": 2},
+     "at most 16"),
+    ({"tone_frequencies_hz": [260.0], "harmonics": 1, "frequency_tracking": False},
+     "reaches fs/2"),
+    ({"tone_frequencies_hz": [160.0], "harmonics": 2, "tracking_range_hz": 7.0},
+     "reaches fs/2"),
+    ({"tone_frequencies_hz": [40.0, 80.0], "harmonics": 1}, "duplicate"),
+    ({"reference_harmonics": [1.0]}, "one order per tone"),
+    ({"reference_harmonics": [1.0, -2.0]}, "> 0"),
+    ({"harmonics": 8}, "0..7"),
+    ({"tracking_range_hz": -1.0}, "tracking_range_hz"),
+    ({"reference_timeout_s": 0.0}, "reference_timeout_s"),
+])
+def test_bad_moving_tone_settings_are_refused_and_change_nothing(changes, reason):
+    sup = supervisor([40.0, 80.0])
+    before = sup.config
+    with pytest.raises(ValueError, match=reason):
+        sup.check(changes)
+    with pytest.raises(ValueError, match=reason):
+        sup.apply(changes)
+    assert sup.config == before
+    assert sup.canceller.tone_frequencies_hz.tolist() == [40.0, 80.0]
+
+
+def test_harmonics_put_orders_in_the_bank_and_identify_them():
+    sup = supervisor([40.0, 50.0], harmonics=2)
+    assert sup.canceller.tone_frequencies_hz.tolist() == [40.0, 50.0, 80.0, 100.0, 120.0, 150.0]
+    assert sup.status()["bank_tones_hz"] == [40.0, 50.0, 80.0, 100.0, 120.0, 150.0]
+    sup.step(0, np.full(6, GRAVITY))
+    assert "[40.0, 50.0, 80.0, 100.0, 120.0, 150.0]" in sup.drain_events()[0].message
+    sup.apply({"harmonics": 0})
+    assert sup.canceller.tone_frequencies_hz.tolist() == [40.0, 50.0]
+
+
+def test_tones_follow_the_reference_and_fall_back_when_it_goes_stale():
+    sup = supervisor([30.0, 45.0], reference_harmonics=[1.0, 1.5], harmonics=1,
+                     frequency_tracking=False, reference_timeout_s=0.05)
+    assert sup.status()["reference"] == "waiting"
+    speed = lambda n: 30.5 + 0.5e-3 * max(n - 3300, 0)          # noqa: E731  (0.5 Hz/s)
+    residual, est = run(sup, lambda n: [speed(n), 3 * speed(n)], [0.05, 0.03], 3.3, 8000,
+                        reference=lambda n: speed(n) if n < 7000 else None)
+    assert est[6990] == pytest.approx([speed(6990), 1.5 * speed(6990)], abs=5e-3)
+    assert sup.canceller.tone_frequencies_hz.tolist() == [30.0, 45.0, 60.0, 90.0]
+    status = sup.status()
+    assert status["reference"] == "stale" and status["tone_estimates_hz"] == [30.0, 45.0]
+    messages = " | ".join(e.message for e in sup.drain_events())
+    assert "following the reference" in messages and "stale" in messages
+    ramp = demodulated_rms(residual[:6990], [speed(n) for n in range(6990)], 6000)
+    assert 20 * np.log10(0.05 / ramp) > 40.0     # at nominal tones: 3 dB (measured)
