@@ -826,8 +826,9 @@ class _ToneFollowing:
         try:
             g_old, g_new = response.at(self._p_at_hz), response.at(bank)
             coefficients = adaptation.normalized_coefficients(g_new, self.sup.config.adaptation)
-            moved = np.linalg.solve(g_new, np.einsum("tij,tj->ti", g_old, canceller.weights))
-        except (ValueError, np.linalg.LinAlgError):
+            carried = np.einsum("tij,tj->ti", g_old, canceller.weights)[:, :, None]
+            moved = np.linalg.solve(g_new, carried)[:, :, 0]
+        except (ValueError, np.linalg.LinAlgError):     # G(f) unusable there: keep P
             return
         # the converged weight is -G^-1 D: carried through the plant's change of response
         # with the frequency, it stays converged while the tone moves (no lag to make up)
