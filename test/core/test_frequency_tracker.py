@@ -9,6 +9,7 @@ takes the first 3.2 s (one tone set).
 import numpy as np
 import pytest
 
+from hexapod_vibration.core.control import adaptation
 from hexapod_vibration.core.control.frequency_tracker import (
     FrequencyTracker,
     combine_orders,
@@ -20,6 +21,7 @@ from hexapod_vibration.core.control.notch_supervisor import (
     NotchState,
     NotchSupervisor,
 )
+from hexapod_vibration.core.control.plant_identification import PlantFrequencyResponse
 
 FS = 1000.0
 GRAVITY = 9.80665
@@ -232,3 +234,25 @@ def test_tones_follow_the_reference_and_fall_back_when_it_goes_stale():
     assert "following the reference" in messages and "stale" in messages
     ramp = demodulated_rms(residual[:6990], [speed(n) for n in range(6990)], 6000)
     assert 20 * np.log10(0.05 / ramp) > 40.0     # at nominal tones: 3 dB (measured)
+
+
+def static_plant_response(delay_samples: int = 1):
+    """The harness plant's exact G(f) = K e^{-j 2 pi f d / fs} as a broadband response."""
+    lines = np.arange(1.0, 500.0, 1.0)
+    phase = np.exp(-2j * np.pi * lines * delay_samples / FS)[:, None]
+    return PlantFrequencyResponse(FS, tuple(lines for _ in range(6)),
+                                  tuple(K[:, j][None, :] * phase for j in range(6)),
+                                  tuple(np.zeros(lines.size) for _ in range(6)))
+
+
+def test_a_moved_tone_takes_p_and_carries_its_weights_through_the_broadband_response():
+    sup = supervisor([30.0], reference_harmonics=[1.0], frequency_tracking=False)
+    sup.plant_frequency_response = static_plant_response()
+    speed = lambda n: 30.0 + 2e-3 * max(n - 5000, 0)           # noqa: E731  (2 Hz/s)
+    residual, _ = run(sup, lambda n: [speed(n)], [0.05], 3.3, 10000, reference=speed)
+    g = sup.plant_frequency_response.at(sup.canceller.tone_frequencies_hz)
+    p_expected = adaptation.normalized_coefficients(g, "decentralized")
+    assert sup.canceller.tone_frequencies_hz[0] == pytest.approx(speed(9999), abs=0.02)
+    assert np.abs(sup.canceller.coefficients - p_expected).max() < 0.01 * np.abs(p_expected).max()
+    ramp = demodulated_rms(residual, [speed(n) for n in range(10000)], 7000)
+    assert 20 * np.log10(0.05 / ramp) > 40.0
