@@ -149,7 +149,7 @@ def test_without_tracking_the_same_offset_is_not_followed():
 
 def test_close_tones_are_tracked_each_to_its_own_frequency():
     sup = supervisor([39.0, 40.0])
-    _, est = run(sup, lambda n: [39.2, 40.25], [0.05, 0.05], start_s=3.3, samples=14000)
+    _, est = run(sup, lambda n: [39.2, 40.25], [0.05, 0.05], start_s=3.3, samples=17000)
     assert est[-1000:].mean(axis=0) == pytest.approx([39.2, 40.25], abs=5e-3)
     assert np.all(np.diff(est, axis=1) > 0.2)          # never met
 

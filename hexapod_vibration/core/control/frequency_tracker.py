@@ -49,10 +49,14 @@ MIN_SEPARATION_HZ = 0.1
 """Smallest distance (Hz) a tracked tone keeps from the midpoint to its nominal neighbour."""
 WEIGHT_FLOOR_N = 1e-9
 """Weights (N, 2-norm over channels) below this carry no phase: no measurement."""
-SETTLED_GROWTH = 1.0
-"""A weight whose squared norm changes over a block by more than this many times
-``2 mu B`` (relative) is still converging from zero (or being reset) and gives no
-measurement: about the first 0.7/mu samples after enabling."""
+MAX_GROWTH = 1.5
+"""A weight whose norm changes by more than this factor over a block (being reset, set)
+gives no measurement. (Weights still converging from zero are left out by the caller:
+see :data:`SETTLE_TIME_CONSTANTS`; a tighter test here would select blocks by the
+direction of their noise and bias the estimate.)"""
+SETTLE_TIME_CONSTANTS = 2.0
+"""Adaptation time constants (1/mu samples) after adaptation starts before the weights
+are measured: before that they are still converging from zero."""
 MAX_PHASE_ERROR_RAD = 0.5
 """A measured phase error above this (rad) is clipped: the linear loop holds to there."""
 
@@ -114,7 +118,7 @@ def weight_phase_error(previous: np.ndarray, current: np.ndarray, rate: float,
 
     The weights moved by ``dW = mu P sum_n e_n e^{-j phi_n}``, so the block's residual
     phasor (m/s^2) is ``E = 2 P^-1 dW / (mu B)``; the canceller's output seen through the
-    plant is ``y = G W``. A disturbance that turned by ``psi`` relative to the oscillator
+    plant is ``y = G W(n - B)``. A disturbance that turned by ``psi`` relative to the oscillator
     leaves ``E = -j psi y`` (to first order, once ``W`` has converged), so
 
         psi = -Im(y^H E) / |y|^2
@@ -133,21 +137,24 @@ def weight_phase_error(previous: np.ndarray, current: np.ndarray, rate: float,
     Returns:
         ``(error_rad, strength)``: (T,) phase errors (0 where there is no measurement) and
         (T,) weights of the measurements, ``|y|^2`` ((m/s^2)^2; 0 = no measurement:
-        frozen, zero or still converging weights, or ``rate`` 0).
+        frozen, zero or jumping weights, or ``rate`` 0).
     """
     t = current.shape[0]
     if rate <= 0.0 or samples < 1:
         return np.zeros(t), np.zeros(t)
     residual = np.einsum('tij,tj->ti', inverse_coefficients, current - previous)
     residual *= 2.0 / (rate * samples)
-    y = np.einsum('tij,tj->ti', plant, current)
+    # y from the weights before the block: the block's own change is proportional to E,
+    # and through a coupled G its cross term Im(E^H (G P)^H E) would bias psi by the
+    # residual's power (a weak tone beside strong lines then drifts off its frequency)
+    y = np.einsum('tij,tj->ti', plant, previous)
     y2 = np.einsum('ti,ti->t', y.real, y.real) + np.einsum('ti,ti->t', y.imag, y.imag)
     p2 = np.einsum('ti,ti->t', previous.real, previous.real) + np.einsum(
         'ti,ti->t', previous.imag, previous.imag)
     c2 = np.einsum('ti,ti->t', current.real, current.real) + np.einsum(
         'ti,ti->t', current.imag, current.imag)
-    settled = SETTLED_GROWTH * 2.0 * rate * samples * p2
-    valid = (p2 > WEIGHT_FLOOR_N ** 2) & (np.abs(c2 - p2) <= settled) & (y2 > 0.0)
+    valid = ((p2 > WEIGHT_FLOOR_N ** 2) & (c2 <= MAX_GROWTH ** 2 * p2)
+             & (p2 <= MAX_GROWTH ** 2 * c2) & (y2 > 0.0))
     cross = np.einsum('ti,ti->t', np.conj(y), residual).imag
     error = np.where(valid, -cross / np.where(valid, y2, 1.0), 0.0)
     np.clip(error, -MAX_PHASE_ERROR_RAD, MAX_PHASE_ERROR_RAD, out=error)

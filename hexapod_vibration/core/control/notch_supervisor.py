@@ -44,6 +44,7 @@ from hexapod_vibration.core.control import adaptation
 from hexapod_vibration.core.control.filters import DCBlocker
 from hexapod_vibration.core.control.frequency_tracker import (
     DEFAULT_BLOCK_SAMPLES,
+    SETTLE_TIME_CONSTANTS,
     FrequencyTracker,
     combine_orders,
     loop_bandwidths_hz,
@@ -663,6 +664,7 @@ class _ToneFollowing:
         self._previous_w: np.ndarray | None = None
         self._p_at_hz: np.ndarray | None = None
         self._detector_source: np.ndarray | None = None
+        self._adapting_since = -1
         self._detector: tuple[np.ndarray | None, np.ndarray | None] = (None, None)
 
     def rebuild(self) -> None:
@@ -724,11 +726,11 @@ class _ToneFollowing:
         self.count = 0
         sup = self.sup
         if sup.identifier is not None or not sup.canceller.tone_frequencies_hz.size:
-            self._previous_w = None
+            self._previous_w, self._adapting_since = None, -1
             return
         fundamentals = self._from_reference(index)
         if fundamentals is None:
-            fundamentals = self._from_tracking()
+            fundamentals = self._from_tracking(index)
         if fundamentals is None:
             return
         self._retune(fundamentals)
@@ -770,7 +772,7 @@ class _ToneFollowing:
                                     f"{self.reference_orders.tolist()} x reference")
         self.reference_state = state
 
-    def _from_tracking(self) -> np.ndarray | None:
+    def _from_tracking(self, index: int) -> np.ndarray | None:
         """The tracker's frequencies for the next block (None: no tracker)."""
         if self.tracker is None:
             return None
@@ -780,6 +782,13 @@ class _ToneFollowing:
         if previous is None:
             return None
         rate = canceller.mu if canceller.enabled and not canceller.frozen else 0.0
+        if rate <= 0.0:
+            self._adapting_since = -1
+        elif self._adapting_since < 0:
+            self._adapting_since = index
+        if rate <= 0.0 or index - self._adapting_since < SETTLE_TIME_CONSTANTS / rate:
+            return self.tracker.update(np.zeros(self.nominal_hz.size),
+                                       np.zeros(self.nominal_hz.size, bool), rate)
         plant, inverse = self._detector_matrices()
         if plant is None:
             return None
