@@ -236,6 +236,10 @@ def make_tracking_supervisor(n_tones: int, mode: str) -> Step:
     if mode == 'reference':
         changes['reference_harmonics'] = [f / tones[0] for f in tones]
     sup = NotchSupervisor(NotchConfig().replaced(changes), FS_HZ, STRUTS)
+    # a plant response for the phase detector (raw mode has no identification): G = -2 I,
+    # so that P = I is the normalised one; the cost does not depend on the values
+    sup.plant_response = -2.0 * np.broadcast_to(np.eye(STRUTS, dtype=complex),
+                                                (n_tones, STRUTS, STRUTS)).copy()
     reference = mode == 'reference'
 
     def step(error: np.ndarray, out: np.ndarray) -> np.ndarray:

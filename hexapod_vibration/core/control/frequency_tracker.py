@@ -148,11 +148,9 @@ def weight_phase_error(previous: np.ndarray, current: np.ndarray, rate: float,
     # and through a coupled G its cross term Im(E^H (G P)^H E) would bias psi by the
     # residual's power (a weak tone beside strong lines then drifts off its frequency)
     y = np.einsum('tij,tj->ti', plant, previous)
-    y2 = np.einsum('ti,ti->t', y.real, y.real) + np.einsum('ti,ti->t', y.imag, y.imag)
-    p2 = np.einsum('ti,ti->t', previous.real, previous.real) + np.einsum(
-        'ti,ti->t', previous.imag, previous.imag)
-    c2 = np.einsum('ti,ti->t', current.real, current.real) + np.einsum(
-        'ti,ti->t', current.imag, current.imag)
+    y2 = np.einsum('ti,ti->t', np.conj(y), y).real
+    p2 = np.einsum('ti,ti->t', np.conj(previous), previous).real
+    c2 = np.einsum('ti,ti->t', np.conj(current), current).real
     valid = ((p2 > WEIGHT_FLOOR_N ** 2) & (c2 <= MAX_GROWTH ** 2 * p2)
              & (p2 <= MAX_GROWTH ** 2 * c2) & (y2 > 0.0))
     cross = np.einsum('ti,ti->t', np.conj(y), residual).imag
@@ -215,6 +213,10 @@ class FrequencyTracker:
         self._beta = omega_n * omega_n                      # K2 (rad/sample per rad/sample)
         self._gamma = self._beta * RAMP_FRACTION * omega_n  # K3 (rate per rad)
         self._rate = np.zeros(self.nominal_hz.size)         # rad/sample per sample
+        self._beta_b = self._beta * self.block_samples      # per block
+        self._gamma_b = self._gamma * self.block_samples
+        self._lo = TWO_PI * self.lower_hz / self.fs         # bounds, rad/sample
+        self._hi = TWO_PI * self.upper_hz / self.fs
         self._omega = TWO_PI * self.nominal_hz / self.fs     # integrator (rad/sample)
         self._effective = self._omega.copy()
 
@@ -238,17 +240,23 @@ class FrequencyTracker:
             (T,) per-sample frequencies (Hz) for the next block: the integrator plus the
             proportional phase correction, within the bounds (a new array).
         """
-        e = np.where(valid, error_rad, 0.0)
-        b = self.block_samples
+        lo, hi = self._lo, self._hi
+        gate = np.asarray(valid, dtype=float)
+        e = error_rad * gate
         k1 = np.maximum(self._alpha - float(rate), 0.0)
-        lo = TWO_PI * self.lower_hz / self.fs
-        hi = TWO_PI * self.upper_hz / self.fs
-        self._rate = np.where(valid, self._rate + self._gamma * b * e, self._rate)
-        step = np.where(valid, self._beta * e + self._rate, 0.0)
-        omega = self._omega + step * b
-        self._rate = np.where((omega < lo) | (omega > hi), 0.0, self._rate)   # anti-windup
-        self._omega = np.clip(omega, lo, hi)
-        self._effective = np.clip(self._omega + k1 * e, lo, hi)
+        self._rate += self._gamma_b * e
+        step = self._beta_b * e
+        step += self._rate * (self.block_samples * gate)
+        omega = self._omega + step
+        outside = (omega < lo) | (omega > hi)
+        if outside.any():                               # anti-windup at the bounds
+            self._rate[outside] = 0.0
+            np.clip(omega, lo, hi, out=omega)
+        self._omega = omega
+        effective = omega + k1 * e
+        np.maximum(effective, lo, out=effective)
+        np.minimum(effective, hi, out=effective)
+        self._effective = effective
         return self.frequencies_hz
 
     @property

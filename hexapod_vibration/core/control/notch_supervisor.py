@@ -751,7 +751,7 @@ class _ToneFollowing:
         top = self.reference_orders * self.orders[-1]
         fundamentals = np.clip(self.reference_orders * reference, 1e-3 * nyquist,
                                0.999 * nyquist * self.reference_orders / top)
-        if self.tracker is not None:
+        if self.tracker is not None:       # a stale reference hands over from here
             self.tracker.reset(fundamentals)
         self._previous_w = None
         return fundamentals
@@ -779,20 +779,16 @@ class _ToneFollowing:
         canceller = self.sup.canceller
         weights = canceller.weights
         previous, self._previous_w = self._previous_w, weights
-        if previous is None:
-            return None
+        t = self.nominal_hz.size
         rate = canceller.mu if canceller.enabled and not canceller.frozen else 0.0
         if rate <= 0.0:
             self._adapting_since = -1
         elif self._adapting_since < 0:
             self._adapting_since = index
-        if rate <= 0.0 or index - self._adapting_since < SETTLE_TIME_CONSTANTS / rate:
-            return self.tracker.update(np.zeros(self.nominal_hz.size),
-                                       np.zeros(self.nominal_hz.size, bool), rate)
         plant, inverse = self._detector_matrices()
-        if plant is None:
-            return None
-        t = self.nominal_hz.size
+        if (previous is None or plant is None or rate <= 0.0
+                or index - self._adapting_since < SETTLE_TIME_CONSTANTS / rate):
+            return self.tracker.update(np.zeros(t), np.zeros(t, bool), rate)
         error, strength = weight_phase_error(previous, weights, rate, self.block, plant,
                                              inverse)
         strength = np.where(canceller.adapting, strength, 0.0)
@@ -845,6 +841,7 @@ class _ToneFollowing:
             canceller.set_weights(moved)
         canceller.set_coefficients(coefficients)
         self._p_at_hz = bank
+        self._previous_w = None      # the carried weights did not move by adaptation
 
     def status(self) -> dict[str, Any]:
         """The status keys of the moving tones (for ``/diagnostics``)."""
