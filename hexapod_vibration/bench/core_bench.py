@@ -228,7 +228,7 @@ def make_tracking_supervisor(n_tones: int, mode: str) -> Step:
     ``fixed`` (nominal tones), ``tracking`` (frequency_tracking on) or ``reference`` (tones
     following a tachometer value given every sample). Raw adaptation (P = I) adapts from
     the first sample, so the step is the whole per-sample path (DC blocker, canceller,
-    tone following every block of 8 samples).
+    tone following every block of 16 samples).
     """
     tones = tone_frequencies(n_tones).tolist()
     changes = {'tone_frequencies_hz': tones, 'adaptation': 'raw', 'mu': 1e-3,

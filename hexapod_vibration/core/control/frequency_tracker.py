@@ -39,7 +39,7 @@ DEFAULT_DAMPING = 0.7
 RAMP_FRACTION = 0.2
 """The frequency-rate integrator's corner as a fraction of the loop's natural frequency:
 a slow third pole that learns a steady ramp (spin-up) so that it leaves no phase error."""
-DEFAULT_BLOCK_SAMPLES = 8
+DEFAULT_BLOCK_SAMPLES = 16
 """Samples between two updates of the estimates (the cost is paid once per block)."""
 NEIGHBOUR_BANDWIDTH_RATIO = 0.25
 """A tone's loop bandwidth is at most this fraction of the distance (Hz) to the nearest
