@@ -77,6 +77,7 @@ EQUAL_ATTENUATION_TOL_DB = 3.0
 TABLE1_SCENARIO = 'single_tone_harmonic'
 TRACKING_MODES = ('fixed', 'tracking', 'reference')
 TRACKING_TARGET_US = 5.0        # issue 11: tracking adds at most a few us per sample at 6x8
+TRACKING_WARMUP_SAMPLES = 2500  # > 2/mu at mu 1e-3: the tracker measures from then on
 
 
 @dataclasses.dataclass(frozen=True)
@@ -228,7 +229,8 @@ def make_tracking_supervisor(n_tones: int, mode: str) -> Step:
     ``fixed`` (nominal tones), ``tracking`` (frequency_tracking on) or ``reference`` (tones
     following a tachometer value given every sample). Raw adaptation (P = I) adapts from
     the first sample, so the step is the whole per-sample path (DC blocker, canceller,
-    tone following every block of 16 samples).
+    tone following every block of 16 samples; warmed up past the weights' settling, so
+    the phase detector runs).
     """
     tones = tone_frequencies(n_tones).tolist()
     changes = {'tone_frequencies_hz': tones, 'adaptation': 'raw', 'mu': 1e-3,
@@ -236,8 +238,8 @@ def make_tracking_supervisor(n_tones: int, mode: str) -> Step:
     if mode == 'reference':
         changes['reference_harmonics'] = [f / tones[0] for f in tones]
     sup = NotchSupervisor(NotchConfig().replaced(changes), FS_HZ, STRUTS)
-    # a plant response for the phase detector (raw mode has no identification): G = -2 I,
-    # so that P = I is the normalised one; the cost does not depend on the values
+    # a plant response for the phase detector (raw mode has no identification); the cost
+    # does not depend on its values
     sup.plant_response = -2.0 * np.broadcast_to(np.eye(STRUTS, dtype=complex),
                                                 (n_tones, STRUTS, STRUTS)).copy()
     reference = mode == 'reference'
@@ -248,6 +250,9 @@ def make_tracking_supervisor(n_tones: int, mode: str) -> Step:
         out[...] = sup.step(None, error)
         return out
 
+    rng = np.random.default_rng(1)
+    for error in 0.01 * rng.standard_normal((TRACKING_WARMUP_SAMPLES, STRUTS)):
+        step(error, np.zeros(STRUTS))          # past the settling: the detector runs
     return step
 
 
