@@ -92,6 +92,8 @@ class NotchSettings:
         from hexapod_vibration.core.control.notch_supervisor import NotchConfig
 
         values = _tuples(values)
+        nested = values.pop("settings", None) or {}       # a dataclasses.asdict() round trip
+        values = {**_tuples(nested), **values}
         own = {k: values.pop(k) for k in ("tone_frequencies_hz", "mu", "adaptation")
                if k in values}
         unknown = set(values) - set(NotchConfig.__dataclass_fields__)
