@@ -143,20 +143,22 @@ def weight_phase_error(previous: np.ndarray, current: np.ndarray, rate: float,
     if rate <= 0.0 or samples < 1:
         return np.zeros(t), np.zeros(t)
     residual = np.einsum('tij,tj->ti', inverse_coefficients, current - previous)
-    residual *= 2.0 / (rate * samples)
     # y from the weights before the block: the block's own change is proportional to E,
     # and through a coupled G its cross term Im(E^H (G P)^H E) would bias psi by the
     # residual's power (a weak tone beside strong lines then drifts off its frequency)
     y = np.einsum('tij,tj->ti', plant, previous)
-    y2 = np.einsum('ti,ti->t', np.conj(y), y).real
+    y_conj = np.conj(y)
+    y2 = np.einsum('ti,ti->t', y_conj, y).real
     p2 = np.einsum('ti,ti->t', np.conj(previous), previous).real
-    c2 = np.einsum('ti,ti->t', np.conj(current), current).real
-    valid = ((p2 > WEIGHT_FLOOR_N ** 2) & (c2 <= MAX_GROWTH ** 2 * p2)
-             & (p2 <= MAX_GROWTH ** 2 * c2) & (y2 > 0.0))
-    cross = np.einsum('ti,ti->t', np.conj(y), residual).imag
-    error = np.where(valid, -cross / np.where(valid, y2, 1.0), 0.0)
+    growth = np.einsum('ti,ti->t', np.conj(current), current).real
+    growth /= np.maximum(p2, WEIGHT_FLOOR_N ** 2)
+    valid = ((p2 > WEIGHT_FLOOR_N ** 2) & (y2 > 0.0) & (growth <= MAX_GROWTH ** 2)
+             & (growth >= MAX_GROWTH ** -2))
+    cross = np.einsum('ti,ti->t', y_conj, residual).imag
+    cross *= -2.0 / (rate * samples)
+    error = cross / np.where(valid, y2, np.inf)
     np.clip(error, -MAX_PHASE_ERROR_RAD, MAX_PHASE_ERROR_RAD, out=error)
-    return error, np.where(valid, y2, 0.0)
+    return error, y2 * valid
 
 
 def combine_orders(error_rad: np.ndarray, strength: np.ndarray,
@@ -175,6 +177,8 @@ def combine_orders(error_rad: np.ndarray, strength: np.ndarray,
     Returns:
         ``(error_rad, valid)`` of the fundamentals, (T,) each.
     """
+    if error_rad.shape[0] == 1:                 # one order: its own measurement
+        return error_rad[0], strength[0] > 0.0
     k = np.asarray(orders, dtype=float)[:, None]
     den = np.sum(strength * k * k, axis=0)
     valid = den > 0.0
@@ -214,6 +218,8 @@ class FrequencyTracker:
         self._gamma = self._beta * RAMP_FRACTION * omega_n  # K3 (rate per rad)
         self._rate = np.zeros(self.nominal_hz.size)         # rad/sample per sample
         self._beta_b = self._beta * self.block_samples      # per block
+        self._k1_rate = float('nan')                        # K1 = alpha - mu, cached
+        self._k1 = self._alpha
         self._gamma_b = self._gamma * self.block_samples
         self._lo = TWO_PI * self.lower_hz / self.fs         # bounds, rad/sample
         self._hi = TWO_PI * self.upper_hz / self.fs
@@ -243,7 +249,9 @@ class FrequencyTracker:
         lo, hi = self._lo, self._hi
         gate = np.asarray(valid, dtype=float)
         e = error_rad * gate
-        k1 = np.maximum(self._alpha - float(rate), 0.0)
+        if rate != self._k1_rate:
+            self._k1, self._k1_rate = np.maximum(self._alpha - float(rate), 0.0), rate
+        k1 = self._k1
         self._rate += self._gamma_b * e
         step = self._beta_b * e
         step += self._rate * (self.block_samples * gate)
