@@ -831,17 +831,26 @@ class _ToneFollowing:
         try:
             g_old, g_new = response.at(self._p_at_hz), response.at(bank)
             coefficients = adaptation.normalized_coefficients(g_new, self.sup.config.adaptation)
-            carried = np.einsum("tij,tj->ti", g_old, canceller.weights)[:, :, None]
-            moved = np.linalg.solve(g_new, carried)[:, :, 0]
+
+            def carry(weights: np.ndarray) -> np.ndarray:
+                carried = np.einsum("tij,tj->ti", g_old, weights)[:, :, None]
+                return np.linalg.solve(g_new, carried)[:, :, 0]
+
+            moved = carry(canceller.weights)
+            previous = None if self._previous_w is None else carry(self._previous_w)
         except (ValueError, np.linalg.LinAlgError):     # G(f) unusable there: keep P
             return
         # the converged weight is -G^-1 D: carried through the plant's change of response
-        # with the frequency, it stays converged while the tone moves (no lag to make up)
+        # with the frequency, it stays converged while the tone moves (no lag to make up);
+        # the detector's previous weights are carried alike, so the carry is not read as
+        # a phase error (and no block goes unmeasured: a ramp moves P every few blocks)
         if np.all(np.isfinite(moved)):
             canceller.set_weights(moved)
+            self._previous_w = previous
+        else:
+            self._previous_w = None
         canceller.set_coefficients(coefficients)
         self._p_at_hz = bank
-        self._previous_w = None      # the carried weights did not move by adaptation
 
     def status(self) -> dict[str, Any]:
         """The status keys of the moving tones (for ``/diagnostics``)."""
