@@ -45,6 +45,32 @@ MAX_SAMPLE_INDEX = 2**31 * 1000 - 1
 MAX_RUN_ID = 2**63 - 1
 """Run identities are drawn in [1, MAX_RUN_ID]."""
 
+REFERENCE_FREQUENCY_TOPIC = '/pph/reference_frequency'
+"""The rotor's tachometer (driver, when ``rotor_tachometer`` is on): one value, Hz, every
+sample, ``layout.dim[0] = ("frequency_hz", 1, 1)`` then the sample and run labels."""
+
+DISTURBANCE_FREQUENCIES_TOPIC = '/pph/disturbance_frequencies'
+"""The true frequency (Hz) of every sounding tone (driver, every
+``FREQUENCIES_EVERY_SAMPLES``): shaker tones (with their drift), then the rotor's orders."""
+
+NOTCH_FREQUENCIES_TOPIC = '/pph/notch_frequencies'
+"""The notch controller's frequency of each configured tone now (Hz, one per tone, every
+``FREQUENCIES_EVERY_SAMPLES``): nominal, tracked or following the reference."""
+
+NOTCH_SENSITIVITY_TOPIC = '/pph/notch_sensitivity'
+"""The predicted sensitivity |S(f)| (transient local, after each identification): rows
+named in ``layout.dim[0].label`` (``SENSITIVITY_ROWS_PREFIX`` + comma-separated names:
+``frequency_hz`` then |S| in dB per view), ``layout.dim[1] = ("frequency", F, 1)``."""
+
+FREQUENCY_LABEL = 'frequency_hz'
+"""``layout.dim[0]`` label of the frequency topics (values in Hz)."""
+
+SENSITIVITY_ROWS_PREFIX = 'rows:'
+
+FREQUENCIES_EVERY_SAMPLES = 10
+"""Samples between two messages of /pph/disturbance_frequencies and /pph/notch_frequencies
+(100 Hz: tones move by at most a few Hz per second)."""
+
 DRIVER_STATUS = 'pph_driver: loop'
 """``/diagnostics`` status name of the driver's loop."""
 

@@ -25,6 +25,8 @@ SAMPLE_RATE_HZ = 1000.0
 """Loop sample rate (Hz); tone frequencies must stay below half of it."""
 MAX_SHAKER_TONES = 16
 MAX_NOTCH_TONES = 16
+MAX_ROTOR_ORDERS = 16
+MAX_ROTOR_KNOTS = 64
 EXECUTORS = ("waitset", "single_threaded", "events")
 CLOCK_MODES = ("lockstep", "realtime")
 LOCKSTEP_STREAMS = ("notch", "pointing")
@@ -286,8 +288,57 @@ def check_shaker_drift(values: Mapping[str, Any]) -> str:
     return ""
 
 
+def rotor_arrays(values: Mapping[str, Any]) -> tuple[list[float], list[float], list[float],
+                                                      list[float]]:
+    """The rotor's sounding orders and amplitudes (N), and its profile's knots (s, Hz).
+
+    As for the shaker, order k sounds once it has an amplitude (``rotor_amplitudes_n[k]``)
+    and knot k counts once it has a time and a speed: each array can be set on its own. No
+    sounding order: no rotor.
+    """
+    orders = [float(x) for x in values["rotor_orders"] or []]
+    amplitudes = [float(x) for x in values["rotor_amplitudes_n"] or []]
+    times = [float(x) for x in values["rotor_profile_time_s"] or []]
+    speeds = [float(x) for x in values["rotor_profile_speed_hz"] or []]
+    n, k = min(len(orders), len(amplitudes)), min(len(times), len(speeds))
+    return orders[:n], amplitudes[:n], times[:k], speeds[:k]
+
+
+def rotor_unpaired(values: Mapping[str, Any]) -> str:
+    """Which rotor values wait for a partner (``""`` if none): logged by the driver."""
+    pairs = (("rotor_orders", "rotor_amplitudes_n"),
+             ("rotor_profile_time_s", "rotor_profile_speed_hz"))
+    waiting, paired = [], []
+    for pair in pairs:
+        counts = [len(values[name] or []) for name in pair]
+        paired.append(min(counts))
+        waiting += [f"{n - min(counts)} of {name}" for name, n in zip(pair, counts, strict=True)
+                    if n > min(counts)]
+    if not waiting:
+        return ""
+    return (f"{paired[0]} rotor order(s) sound, profile of {paired[1]} knot(s); waiting for "
+            f"a partner: {', '.join(waiting)}")
+
+
+def check_rotor(values: Mapping[str, Any]) -> str:
+    """The sounding rotor: a profile (times increasing), every order below fs/2 at top speed."""
+    orders, _, times, speeds = rotor_arrays(values)
+    if not orders:
+        return ""
+    if not times:
+        return "the rotor needs a speed profile (rotor_profile_time_s, rotor_profile_speed_hz)"
+    if any(b <= a for a, b in zip(times, times[1:], strict=False)):
+        return f"rotor_profile_time_s must be strictly increasing, got {times}"
+    nyquist = SAMPLE_RATE_HZ / 2.0
+    top = max(orders) * max(speeds)
+    if top >= nyquist:
+        return (f"rotor order {max(orders):g} at {max(speeds):g} Hz sounds at {top:g} Hz, "
+                f"not below {nyquist:g} Hz (fs/2)")
+    return ""
+
+
 PPH_DRIVER = NodeSpec("pph_driver", summary="the simulated hexapod (plant, sensors, shaker)",
-                      checks=(check_shaker_drift,), parameters=(
+                      checks=(check_shaker_drift, check_rotor), parameters=(
     ParameterSpec("clock_mode", "string", "lockstep", "lockstep: advance when the commands "
                   "of the sample arrived (or lockstep_timeout_s passed); realtime: paced at "
                   "1 kHz wall clock", choices=CLOCK_MODES, read_only=True),
@@ -312,6 +363,25 @@ PPH_DRIVER = NodeSpec("pph_driver", summary="the simulated hexapod (plant, senso
                   unit="s", low=1.0, high=3600.0),
     ParameterSpec("shaker_noise_rms_n", "double", 0.0, "broadband shaker noise",
                   unit="N RMS", low=0.0, high=20.0),
+    ParameterSpec("rotor_orders", "double[]", [], "rotating machine at the shaker's point: "
+                  "harmonic orders of its speed (may be non-integer); order k sounds once it "
+                  "also has an amplitude; empty = no rotor", low=0.0, high=100.0,
+                  low_open=True, max_length=MAX_ROTOR_ORDERS,
+                  constraints="order x top speed < 500 Hz"),
+    ParameterSpec("rotor_amplitudes_n", "double[]", [], "rotor order amplitudes at "
+                  "rotor_reference_speed_hz, scaling with the speed squared", unit="N peak",
+                  low=0.0, high=100.0, max_length=MAX_ROTOR_ORDERS),
+    ParameterSpec("rotor_reference_speed_hz", "double", 50.0, "speed at which the rotor "
+                  "amplitudes are given", unit="Hz", low=0.0, high=499.0, low_open=True),
+    ParameterSpec("rotor_profile_time_s", "double[]", [0.0], "rotor speed profile: knot "
+                  "times (sim time; speed held before the first and after the last)",
+                  unit="s", low=0.0, high=1e6, max_length=MAX_ROTOR_KNOTS,
+                  constraints="strictly increasing"),
+    ParameterSpec("rotor_profile_speed_hz", "double[]", [50.0], "rotor speed at each knot, "
+                  "linear in between", unit="Hz", low=0.0, high=499.0,
+                  max_length=MAX_ROTOR_KNOTS),
+    ParameterSpec("rotor_tachometer", "bool", False, "publish the rotor speed on "
+                  "/pph/reference_frequency every sample (Hz, with the sample index)"),
     ParameterSpec("test_sine_frequency_hz", "double", 40.0, "sinusoid added to every "
                   "actuator in phase (paper Fig. 4)", unit="Hz", low=0.1, high=499.0),
     ParameterSpec("test_sine_amplitude_n", "double", 0.0, "its amplitude; 0 = off",

@@ -50,6 +50,24 @@ def strut_cdr(values: np.ndarray, index: int | None) -> bytes:
     return bytes(store.serialize_cdr(msg, STRUT_MSGTYPE))
 
 
+def array_cdr(values: np.ndarray, labels: list[tuple[str, int, int]]) -> bytes:
+    """Any Float64MultiArray: values and (label, size, stride) dimensions."""
+    store = typestore()
+    dim = store.types['std_msgs/msg/MultiArrayDimension']
+    layout = store.types['std_msgs/msg/MultiArrayLayout'](
+        dim=[dim(label=a, size=b, stride=c) for a, b, c in labels], data_offset=0)
+    msg = store.types[STRUT_MSGTYPE](layout=layout,
+                                     data=np.asarray(values, np.float64).reshape(-1))
+    return bytes(store.serialize_cdr(msg, STRUT_MSGTYPE))
+
+
+def frequencies_cdr(values_hz, index: int) -> bytes:
+    """A frequency-topic message (``ros.messages.make_vector_array``'s layout)."""
+    values = np.asarray(values_hz, np.float64).reshape(-1)
+    return array_cdr(values, [('frequency_hz', values.size, values.size),
+                              (f'sample:{index}', 1, 1)])
+
+
 def diagnostics_cdr(name: str, values: dict[str, str], sample: int) -> bytes:
     store = typestore()
     t = store.types
@@ -76,10 +94,12 @@ def notch_status(sample: int, state: str, tones: list[float], on: int = -1,
 def write_bag(path: Path, accel: np.ndarray, index: np.ndarray | None = None,
               statuses: list[tuple[int, dict[str, str]]] = (),
               run_record: str = '', storage: str = 'mcap',
-              extra: list[tuple[str, int, bytes]] = ()) -> Path:
+              extra: list[tuple[str, int, bytes]] = (),
+              topics: dict[str, list[tuple[int, bytes]]] | None = None) -> Path:
     """A bag with /pph/accel (in-band index), notch statuses and optional run record.
 
     ``extra``: (topic, sample, raw CDR bytes) written as they are (bad messages).
+    ``topics``: other Float64MultiArray topics, {topic: [(sample, raw CDR bytes)]}.
     """
     index = np.arange(accel.shape[0]) if index is None else np.asarray(index)
     store = typestore()
@@ -93,6 +113,10 @@ def write_bag(path: Path, accel: np.ndarray, index: np.ndarray | None = None,
         extras: dict[int, list[bytes]] = {}
         for _topic, sample, raw in extra:
             extras.setdefault(sample, []).append(raw)
+        for topic, messages in (topics or {}).items():
+            other = writer.add_connection(topic, STRUT_MSGTYPE, typestore=store)
+            for n, raw in messages:
+                writer.write(other, n * 10**6, raw)
         for n, row in zip(index.tolist(), accel, strict=True):
             writer.write(conn, n * 10**6, strut_cdr(row, n))
             for raw in extras.get(n, []):

@@ -33,7 +33,12 @@ from rosbags.typesys.store import Typestore
 
 from hexapod_vibration.analysis import recovery
 from hexapod_vibration.contract import (
+    DISTURBANCE_FREQUENCIES_TOPIC,
+    NOTCH_FREQUENCIES_TOPIC,
+    NOTCH_SENSITIVITY_TOPIC,
+    REFERENCE_FREQUENCY_TOPIC,
     SAMPLE_RATE_HZ,
+    SENSITIVITY_ROWS_PREFIX,
     STRUT_COUNT,
     STRUT_LABEL,
     InvalidStrutMessage,
@@ -59,6 +64,10 @@ PARAMETER_EVENT_MSGTYPE = 'rcl_interfaces/msg/ParameterEvent'
 DIAGNOSTICS_TOPIC = '/diagnostics'
 DIAGNOSTICS_MSGTYPE = 'diagnostic_msgs/msg/DiagnosticArray'
 WEIGHTS_TOPIC = '/pph/notch_weights'
+FREQUENCY_TOPICS: tuple[str, ...] = (
+    REFERENCE_FREQUENCY_TOPIC, DISTURBANCE_FREQUENCIES_TOPIC, NOTCH_FREQUENCIES_TOPIC)
+"""Frequencies (Hz) per sample: any number of values, ``sample:<n>`` in ``layout.dim[1]``."""
+SENSITIVITY_TOPIC = NOTCH_SENSITIVITY_TOPIC
 
 TYPESTORE_NAME = Stores.ROS2_JAZZY
 """rosbags typestore matching ROS 2 Jazzy's message definitions and type hashes."""
@@ -595,6 +604,11 @@ class BagContent:
     """Empty for a closed bag; else how an unfinished recording was read."""
     bad_messages: dict[str, int] = field(default_factory=dict)
     """Undecodable messages skipped on the other topics, per topic."""
+    frequencies: dict[str, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict)
+    """Per topic of :data:`FREQUENCY_TOPICS` recorded: (sample index (N,), Hz (N, K)),
+    sorted by sample, K the most values any message had (fewer: NaN-padded)."""
+    sensitivity: list[tuple[int, dict[str, np.ndarray]]] = field(default_factory=list)
+    """``/pph/notch_sensitivity`` messages: (sample index, {row name: values (F,)})."""
 
 
 def read_bag(
@@ -632,7 +646,9 @@ def read_bag(
             )
         struts = _check_strut_connections(reader, tuple(keeps))
         wanted = {DIAGNOSTICS_TOPIC: DIAGNOSTICS_MSGTYPE, WEIGHTS_TOPIC: STRUT_MSGTYPE,
-                  PARAMETER_EVENTS_TOPIC: PARAMETER_EVENT_MSGTYPE, CLOCK_TOPIC: CLOCK_MSGTYPE}
+                  PARAMETER_EVENTS_TOPIC: PARAMETER_EVENT_MSGTYPE, CLOCK_TOPIC: CLOCK_MSGTYPE,
+                  SENSITIVITY_TOPIC: STRUT_MSGTYPE,
+                  **dict.fromkeys(FREQUENCY_TOPICS, STRUT_MSGTYPE)}
         others = [c for c in reader.connections if wanted.get(c.topic) == c.msgtype]
         return _stream(reader, struts, others, keeps, sample_rate_hz, weights_every,
                        parameter)
@@ -650,6 +666,8 @@ def _stream(reader: Any, struts: list[Connection], others: list[Connection],
     events: list[tuple[int, Any]] = []
     clock: list[tuple[int, int]] = []
     weights = _WeightsStream(weights_every)
+    vectors = {topic: _VectorStream() for topic in FREQUENCY_TOPICS}
+    sensitivity: list[tuple[int, dict[str, np.ndarray]]] = []
     bad: dict[str, int] = {}
     store = typestore()
     for conn, timestamp, data in _iter_messages(reader, [*struts, *others]):
@@ -661,7 +679,13 @@ def _stream(reader: Any, struts: list[Connection], others: list[Connection],
             if conn.topic == WEIGHTS_TOPIC:
                 weights.add(data)
                 continue
+            if conn.topic in vectors:
+                vectors[conn.topic].add(data)
+                continue
             msg = store.deserialize_cdr(bytes(data), conn.msgtype)
+            if conn.topic == SENSITIVITY_TOPIC:
+                sensitivity.append(table_of_message(msg))
+                continue
             if conn.topic == DIAGNOSTICS_TOPIC:
                 diagnostics.extend((timestamp, st.name, {kv.key: kv.value for kv in st.values})
                                    for st in msg.status)
@@ -681,7 +705,49 @@ def _stream(reader: Any, struts: list[Connection], others: list[Connection],
     w_index, w_values = weights.arrays()
     return BagContent(Path(reader.path), series, diagnostics, w_index, w_values, events,
                       (stamps, clock_ns), _custom_data(reader), getattr(reader, 'recovered', ''),
-                      bad)
+                      bad, {t: v.arrays() for t, v in vectors.items() if v.rows}, sensitivity)
+
+
+class _VectorStream:
+    """Messages of a frequency topic: values (Hz) per sample, first message per sample kept."""
+
+    def __init__(self) -> None:
+        self.rows: dict[int, np.ndarray] = {}
+
+    def add(self, data: bytes | memoryview) -> None:
+        raw = bytes(data)
+        if raw[:2] in _LE_CDR:
+            values, labels = _decode_le(raw)
+        else:
+            msg = typestore().deserialize_cdr(raw, STRUT_MSGTYPE)
+            values = np.asarray(msg.data, dtype=np.float64)
+            labels = [d.label for d in msg.layout.dim]
+        if len(labels) < 2 or not np.all(np.isfinite(values)):
+            raise ValueError('no sample index, or a non-finite value')
+        self.rows.setdefault(parse_sample_label(labels[1]), values)
+
+    def arrays(self) -> tuple[np.ndarray, np.ndarray]:
+        index = np.array(sorted(self.rows), dtype=np.int64)
+        width = max(v.size for v in self.rows.values())
+        table = np.full((index.size, width), np.nan)
+        for row, n in enumerate(index):
+            values = self.rows[int(n)]
+            table[row, :values.size] = values
+        return index, table
+
+
+def table_of_message(msg: Any) -> tuple[int, dict[str, np.ndarray]]:
+    """(sample index, {row name: values}) of a ``/pph/notch_sensitivity`` message.
+
+    Raises:
+        ValueError: Not the layout ``ros.messages.make_table_array`` writes.
+    """
+    dims = msg.layout.dim
+    if len(dims) < 3 or not dims[0].label.startswith(SENSITIVITY_ROWS_PREFIX):
+        raise ValueError('not a table message')
+    names = dims[0].label[len(SENSITIVITY_ROWS_PREFIX):].split(',')
+    table = np.asarray(msg.data, dtype=np.float64).reshape(len(names), int(dims[1].size))
+    return parse_sample_label(dims[2].label), dict(zip(names, table, strict=True))
 
 
 class _WeightsStream:

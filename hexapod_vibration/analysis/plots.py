@@ -11,6 +11,12 @@
   (mean over the six struts, and their range).
 - ``pointing.png``: tilts, twist and translations of the top plate from the eddy-current
   sensors, each on its own axis.
+- ``frequencies.png`` (when frequency topics were recorded): the controller's estimate of
+  each tone (``/pph/notch_frequencies``) against the true frequency of every sounding tone
+  (``/pph/disturbance_frequencies``) and the tachometer (``/pph/reference_frequency``) over
+  time, and the estimation error of each controlled tone.
+- ``sensitivity.png`` (when ``/pph/notch_sensitivity`` was recorded): the predicted |S| and
+  the measured ratio of the controlled to the uncontrolled z spectrum, in dB.
 """
 
 from __future__ import annotations
@@ -24,7 +30,17 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from hexapod_vibration.analysis.report import FS, POSE_BLOCK, Analysis, BagSignals  # noqa: E402
+from hexapod_vibration.analysis.report import (  # noqa: E402
+    FS,
+    POSE_BLOCK,
+    Analysis,
+    BagSignals,
+)
+from hexapod_vibration.contract import (  # noqa: E402
+    DISTURBANCE_FREQUENCIES_TOPIC,
+    NOTCH_FREQUENCIES_TOPIC,
+    REFERENCE_FREQUENCY_TOPIC,
+)
 from hexapod_vibration.core import spectrum  # noqa: E402
 from hexapod_vibration.core.model.config import ModelConfig  # noqa: E402
 
@@ -46,6 +62,10 @@ def write_all(out: Path, signals: BagSignals, result: Analysis, model: ModelConf
     eddy = signals.series.get("/pph/eddy")
     if eddy is not None and eddy.sample_index.size > 1:
         paths.append(pointing_figure(out / "pointing.png", signals, model))
+    if signals.frequencies:
+        paths.append(frequencies_figure(out / "frequencies.png", signals, result))
+    if result.sensitivity_curves:
+        paths.append(sensitivity_figure(out / "sensitivity.png", result))
     return paths
 
 
@@ -335,6 +355,92 @@ def pointing_figure(path: Path, signals: BagSignals, model: ModelConfig) -> Path
     axes[0].set_title(f"pointing: pose from the eddy-current sensors, 0.1 s means "
                       f"(y axes fit t > {STARTUP_S:g} s)")
     axes[-1].set_xlabel("sim time (s)" + ("; dashed: control on" if on is not None else ""))
+    return _save(fig, path)
+
+
+# ---------------------------------------------------------------------------- frequencies
+def frequencies_figure(path: Path, signals: BagSignals, result: Analysis) -> Path:
+    """Estimated against true frequencies over time, and each controlled tone's error."""
+    tracks = signals.frequencies
+    fig, (top, bottom) = plt.subplots(2, 1, figsize=(8.0, 6.0), sharex=True,
+                                      gridspec_kw={"height_ratios": [2, 1]})
+    truth = tracks.get(DISTURBANCE_FREQUENCIES_TOPIC)
+    if truth is not None:
+        for j in range(truth[1].shape[1]):
+            top.plot(truth[0] / FS, truth[1][:, j], color="0.6", lw=2.5,
+                     label="true (driver)" if j == 0 else None)
+    reference = tracks.get(REFERENCE_FREQUENCY_TOPIC)
+    if reference is not None:
+        top.plot(reference[0] / FS, reference[1][:, 0], color="k", lw=0.8, ls=":",
+                 label="tachometer")
+    estimate = tracks.get(NOTCH_FREQUENCIES_TOPIC)
+    if estimate is not None:
+        for k in range(estimate[1].shape[1]):
+            top.plot(estimate[0] / FS, estimate[1][:, k], color=f"C{k}", lw=1.0,
+                     label=f"notch tone {k + 1} (estimate)")
+    _errors_panel(bottom, signals, result)
+    on = signals.control_on_sample
+    for ax in (top, bottom):
+        if on is not None:
+            ax.axvline(on / FS, color="k", lw=0.8, ls="--")
+        ax.grid(alpha=0.3)
+    top.set(ylabel="frequency (Hz)", title="tone frequencies: the controller's estimates "
+            "and the true ones (dashed: control on)")
+    top.legend(loc="best")
+    return _save(fig, path)
+
+
+def _errors_panel(ax: plt.Axes, signals: BagSignals, result: Analysis) -> None:
+    """Estimate minus true frequency (Hz) of each controlled tone the report follows."""
+    from hexapod_vibration.analysis import moving_tones
+
+    truth = signals.frequencies.get(DISTURBANCE_FREQUENCIES_TOPIC)
+    estimate = signals.frequencies.get(NOTCH_FREQUENCIES_TOPIC)
+    shown = False
+    if truth is not None and estimate is not None:
+        targets = [float(np.nanmedian(estimate[1][:, k])) for k in range(estimate[1].shape[1])]
+        for k, j in enumerate(moving_tones.match_columns(truth[1], targets)):
+            if j is None:
+                continue
+            true_hz = moving_tones.track_on_samples(truth[0], truth[1][:, j], estimate[0])
+            ax.plot(estimate[0] / FS, estimate[1][:, k] - true_hz, color=f"C{k}", lw=1.0,
+                    label=f"notch tone {k + 1}")
+            shown = True
+    if shown:
+        ax.legend(loc="best")
+    else:
+        ax.text(0.5, 0.5, "needs /pph/notch_frequencies and /pph/disturbance_frequencies",
+                transform=ax.transAxes, ha="center", va="center")
+    ax.set(xlabel="sim time (s)", ylabel="estimate - true (Hz)")
+
+
+# ---------------------------------------------------------------------------- sensitivity
+def sensitivity_figure(path: Path, result: Analysis) -> Path:
+    """Predicted |S| against the measured controlled/uncontrolled spectrum ratio (dB)."""
+    curves = result.sensitivity_curves
+    view = result.report.get("sensitivity", {}).get("view", "")
+    notch = [r["frequency_hz"] for r in result.report["tones"] if r["controlled"]]
+    fig, axes = plt.subplots(2, 1, figsize=(8.0, 6.0))
+    spans = [(0.0, FS / 2.0)]
+    if notch:
+        spans.append((max(min(notch) - 8.0, 0.0), max(notch) + 8.0))
+    for ax, (lo, hi) in zip(axes, spans, strict=False):
+        sel = (curves["measured_frequency_hz"] >= lo) & (curves["measured_frequency_hz"] <= hi)
+        ax.plot(curves["measured_frequency_hz"][sel], curves["measured_db"][sel],
+                color="tab:red", lw=0.8, label="measured: controlled / uncontrolled spectrum")
+        sel = (curves["frequency_hz"] >= lo) & (curves["frequency_hz"] <= hi)
+        ax.plot(curves["frequency_hz"][sel], curves["predicted_db"][sel], color="k", lw=1.2,
+                label=f"predicted |S| ({view}) before control")
+        for f in notch:
+            if lo <= f <= hi:
+                ax.axvline(f, color="0.5", lw=0.6, ls=":")
+        ax.axhline(0.0, color="0.5", lw=0.6)
+        ax.set(xlim=(lo, hi), ylabel="dB", xlabel="frequency (Hz)")
+        ax.grid(alpha=0.3)
+        ax.legend(loc="best")
+    axes[0].set_title("sensitivity: predicted vs measured (dotted: notch tones)")
+    if len(spans) == 1:
+        axes[1].set_visible(False)
     return _save(fig, path)
 
 

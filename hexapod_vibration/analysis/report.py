@@ -32,8 +32,15 @@ from typing import Any
 
 import numpy as np
 
-from hexapod_vibration.analysis import bag_io
-from hexapod_vibration.contract import DRIVER_STATUS, NOTCH_STATUS, SAMPLE_RATE_HZ, NotchState
+from hexapod_vibration.analysis import bag_io, moving_tones
+from hexapod_vibration.contract import (
+    DISTURBANCE_FREQUENCIES_TOPIC,
+    DRIVER_STATUS,
+    NOTCH_FREQUENCIES_TOPIC,
+    NOTCH_STATUS,
+    SAMPLE_RATE_HZ,
+    NotchState,
+)
 from hexapod_vibration.core import spectrum
 from hexapod_vibration.core.model.config import ModelConfig
 from hexapod_vibration.core.model.geometry import CubicHexapodGeometry
@@ -124,6 +131,10 @@ class BagSignals:
     record: RunRecord | None = None
     recovered: str = ""
     bad_messages: dict[str, int] = field(default_factory=dict)
+    frequencies: dict[str, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict)
+    """Recorded frequency topics: (sample index (N,), Hz (N, K)) (``BagContent.frequencies``)."""
+    sensitivity: list[tuple[int, dict[str, np.ndarray]]] = field(default_factory=list)
+    """Recorded ``/pph/notch_sensitivity`` predictions: (sample, {row: values})."""
 
     @property
     def accel(self) -> bag_io.StrutSeries:
@@ -170,7 +181,8 @@ def load_signals(bag_path: str | Path, model: ModelConfig,
     keep["/pph/notch_command"] = bag_io.Keep(columns=none, every=COMMAND_EVERY)
     content = bag_io.read_bag(bag_path, keep, FS, weights_every=WEIGHTS_EVERY)
     signals = BagSignals(Path(bag_path), content.strut, recovered=content.recovered,
-                         bad_messages=content.bad_messages)
+                         bad_messages=content.bad_messages, frequencies=content.frequencies,
+                         sensitivity=content.sensitivity)
     for _, name, values in content.diagnostics:
         if name == DRIVER_STATUS:
             signals.driver_status = values
@@ -339,6 +351,9 @@ class Analysis:
     identification: list[tuple[int, int]] = field(default_factory=list)
     paper_reduction_db: dict[float, float] = field(default_factory=dict)
     harmonics: dict[str, Any] | None = None
+    sensitivity_curves: dict[str, np.ndarray] = field(default_factory=dict)
+    """Predicted (``frequency_hz``, ``predicted_db``) and measured (``measured_frequency_hz``,
+    ``measured_db``) |S| for ``sensitivity.png``; empty without a recorded prediction."""
 
 
 @dataclass(frozen=True)
@@ -365,6 +380,8 @@ def analyze_signals(signals: BagSignals, request: Request = Request()) -> Analys
     controlled = signals.notch_tones() or (rec.notch_tones_hz if rec else [])
     tones = [float(f) for f in (request.tones or (rec.report_tones_hz if rec else None)
                                 or controlled or _strongest_peaks(z))]
+    configured = configured_tones(signals, controlled)
+    controlled = snap_to_tones(controlled, tones)
     window_s = request.window_s or (rec.window_s if rec else None)
     ident, ident_source = identification_intervals(signals)
     margin = int(round(IDENTIFICATION_SETTLE_S * FS))
@@ -392,6 +409,12 @@ def analyze_signals(signals: BagSignals, request: Request = Request()) -> Analys
         "convergence_s": _json_float(convergence_s(over_time, controlled)),
         "loop": loop_statistics(signals),
     }
+    following = following_tones(signals, windows, configured)
+    if following:
+        report["following_tones"] = following
+    sensitivity, curves = sensitivity_comparison(signals, windows, controlled, tones)
+    if sensitivity:
+        report["sensitivity"] = sensitivity
     harmonics_of = (request.harmonics_of_hz if request.harmonics_of_hz is not None
                     else (rec.harmonics_of_hz if rec else 0.0))
     harmonics = None
@@ -403,7 +426,7 @@ def analyze_signals(signals: BagSignals, request: Request = Request()) -> Analys
     details = _details(signals, levels, tones, notes, windows, index, over_time,
                        (ident, ident_source), harmonics)
     return Analysis(report, details, z, windows, index, over_time, ident,
-                    rec.paper() if rec else {}, harmonics)
+                    rec.paper() if rec else {}, harmonics, curves)
 
 
 def _windows(signals: BagSignals, index: np.ndarray, window_s: float | None,
@@ -424,6 +447,139 @@ def _windows(signals: BagSignals, index: np.ndarray, window_s: float | None,
         notes.extend(f"{name}: {n}" for n in window_notes)
         windows[name] = rows
     return windows
+
+
+SNAP_HZ = 0.05
+"""A notch tone within half a 0.1 Hz bin of a reported tone is that tone (a tracked tone
+ends a few mHz from the true frequency)."""
+
+
+def snap_to_tones(controlled: list[float], tones: list[float]) -> list[float]:
+    """The notch's tones, each replaced by the reported tone within ``SNAP_HZ`` of it."""
+    snapped = []
+    for c in controlled:
+        near = [t for t in tones if abs(t - c) <= SNAP_HZ]
+        snapped.append(min(near, key=lambda t: abs(t - c)) if near else float(c))
+    return snapped
+
+
+def configured_tones(signals: BagSignals, controlled: list[float]) -> list[float]:
+    """The notch's configured tones (Hz), one per ``/pph/notch_frequencies`` column.
+
+    The run record's notch tones when they are as many as the columns (the nominal ones:
+    the diagnostics' ``tones_hz`` moves with tracking and holds harmonics), else the
+    estimates' medians; without the topic, the notch's tones.
+    """
+    estimate = signals.frequencies.get(NOTCH_FREQUENCIES_TOPIC)
+    if estimate is None:
+        return list(controlled)
+    columns = estimate[1].shape[1]
+    rec = signals.record
+    if rec is not None and len(rec.notch_tones_hz) == columns:
+        return [float(f) for f in rec.notch_tones_hz]
+    return [round(float(np.nanmedian(estimate[1][:, k])), 6) for k in range(columns)]
+
+
+def _tone_tracks(signals: BagSignals, controlled: list[float]
+                 ) -> list[tuple[str, np.ndarray, np.ndarray] | None]:
+    """Per controlled tone: (source topic, message samples, Hz) of the track that follows it.
+
+    The driver's true frequency (the column nearest the controller's estimate, or the
+    nominal tone without one) when recorded, else the controller's estimate; None if neither.
+    """
+    truth = signals.frequencies.get(DISTURBANCE_FREQUENCIES_TOPIC)
+    estimate = signals.frequencies.get(NOTCH_FREQUENCIES_TOPIC)
+    targets = list(controlled)
+    if estimate is not None and estimate[1].shape[1] == len(controlled):
+        targets = [float(np.nanmedian(estimate[1][:, k])) for k in range(len(controlled))]
+    else:
+        estimate = None
+    columns = moving_tones.match_columns(truth[1], targets) if truth is not None else \
+        [None] * len(controlled)
+    tracks: list[tuple[str, np.ndarray, np.ndarray] | None] = []
+    for k, column in enumerate(columns):
+        if column is not None:
+            tracks.append((DISTURBANCE_FREQUENCIES_TOPIC, truth[0], truth[1][:, column]))
+        elif estimate is not None:
+            tracks.append((NOTCH_FREQUENCIES_TOPIC, estimate[0], estimate[1][:, k]))
+        else:
+            tracks.append(None)
+    return tracks
+
+
+def following_tones(signals: BagSignals, windows: dict[str, slice],
+                    controlled: list[float]) -> list[dict[str, Any]]:
+    """report.json's ``following_tones``: each controlled tone's level in a band following it.
+
+    The level is :func:`tone_levels` of the z acceleration dechirped along the tone's
+    recorded track (:func:`~hexapod_vibration.analysis.moving_tones.dechirp`), per window;
+    ``frequency_span_hz`` is the track's range over the window. Empty when no frequency
+    topic was recorded.
+    """
+    z, index = signals.z, signals.accel.sample_index
+    rows = []
+    for nominal, track in zip(controlled, _tone_tracks(signals, controlled), strict=True):
+        if track is None:
+            continue
+        topic, at, hz = track
+        row: dict[str, Any] = {"frequency_hz": float(nominal), "source": topic}
+        spans, floors = {}, {}
+        for name, window in windows.items():
+            track_hz = moving_tones.track_on_samples(at, hz, index[window])
+            y, f_ref = moving_tones.dechirp(z[window], track_hz, FS)
+            level, _, at_floor = tone_levels(y, [f_ref])
+            row[f"{name}_db"] = round(level[0], 2)
+            spans[name] = [round(float(track_hz.min()), 4), round(float(track_hz.max()), 4)]
+            floors[name] = at_floor[0]
+        if "controlled_db" in row:
+            row["reduction_db"] = round(row["uncontrolled_db"] - row["controlled_db"], 2)
+        row["frequency_span_hz"], row["at_noise_floor"] = spans, floors
+        rows.append(row)
+    return rows
+
+
+def sensitivity_comparison(signals: BagSignals, windows: dict[str, slice],
+                           controlled: list[float], lines: list[float]
+                           ) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+    """report.json's ``sensitivity`` and the curves of ``sensitivity.png``.
+
+    Predicted: the last ``/pph/notch_sensitivity`` (its ``output_db`` row, the z axis, when
+    given, else ``sigma_max_db``). Measured: the ratio of the controlled to the uncontrolled
+    z spectrum (:func:`~hexapod_vibration.analysis.moving_tones.spectrum_ratio_db`). Their
+    difference is summarised within 5 Hz of the controlled tones, outside every line's main
+    lobe (``line_exclusion_hz``).
+    Both empty without a recorded prediction or without a controlled window.
+    """
+    if not signals.sensitivity or "controlled" not in windows:
+        return {}, {}
+    sample, rows = signals.sensitivity[-1]
+    view = "output_db" if "output_db" in rows else "sigma_max_db"
+    if "frequency_hz" not in rows or view not in rows:
+        return {}, {}
+    grid, predicted = rows["frequency_hz"], rows[view]
+    z = signals.z
+    on, off = z[windows["controlled"]], z[windows["uncontrolled"]]
+    f, measured = moving_tones.spectrum_ratio_db(on, off, FS)
+    segment_s = moving_tones.ratio_segment_s(on, off, FS)
+    exclusion_hz = moving_tones.line_exclusion_hz(segment_s)
+    near = moving_tones.near_tones_mask(f, controlled, lines, exclusion_hz)
+    on_grid = np.interp(f, grid, predicted)
+    k = int(np.argmax(predicted))
+    report = {"view": view.removesuffix("_db"), "prediction_sample": int(sample),
+              "predicted_rise_db": _json_float(float(predicted[k])),
+              "predicted_rise_at_hz": _json_float(float(grid[k])),
+              "segment_s": _json_float(segment_s),
+              "line_exclusion_hz": _json_float(exclusion_hz),
+              "near_tones_points": int(np.count_nonzero(near)),
+              "near_tones_max_difference_db": _json_float(
+                  float(np.max(np.abs(measured[near] - on_grid[near]))) if near.any()
+                  else math.nan),
+              "near_tones_rms_difference_db": _json_float(
+                  float(np.sqrt(np.mean((measured[near] - on_grid[near]) ** 2))) if near.any()
+                  else math.nan)}
+    curves = {"frequency_hz": grid, "predicted_db": predicted, "measured_frequency_hz": f,
+              "measured_db": measured}
+    return report, curves
 
 
 def levels_over_time(z: np.ndarray, index: np.ndarray, on: int | None, tones: list[float],
@@ -632,6 +788,30 @@ def format_table(report: dict[str, Any], paper_reduction_db: dict[float, float] 
     lines.append(f"convergence {'-' if conv is None else f'{conv:.2f} s'}; loop {loop['mode']}, "
                  f"{loop['samples']} samples, {loop['missed_samples']} missed, "
                  f"{'-' if rate is None else f'{rate:.0f}'} samples/s")
+    return "\n".join(lines)
+
+
+def format_following(report: dict[str, Any]) -> str:
+    """The following bands (``following_tones``) as a table; "" when no controlled tone moved.
+
+    A tone whose track stayed at one frequency in both windows has its fixed-band row in
+    the main table already.
+    """
+    rows = report.get("following_tones") or []
+    moved = [r for r in rows if any(hi - lo > 1e-6 for lo, hi in
+                                    r["frequency_span_hz"].values())]
+    if not moved:
+        return ""
+    lines = [f"{report['scenario']}  (bands following the tones; tracks from the bag)",
+             f"{'tone':>10} {'non-controlled':>17} {'controlled':>17} {'reduction':>10}"
+             f"  {'track (Hz), uncontrolled -> controlled'}"]
+    for row in moved:
+        floor = row.get("at_noise_floor", {})
+        spans = " -> ".join(f"{lo:.2f}-{hi:.2f}" for lo, hi in row["frequency_span_hz"].values())
+        lines.append(f"{row['frequency_hz']:>8.1f}Hz"
+                     f"{level_text(row['uncontrolled_db'], floor.get('uncontrolled')):>18} "
+                     f"{level_text(row.get('controlled_db'), floor.get('controlled')):>17} "
+                     f"{reduction_text(row):>10}  {spans}")
     return "\n".join(lines)
 
 

@@ -8,9 +8,18 @@ passes each sample to the supervisor and publishes ``/pph/notch_command`` with t
 sample index; parameters are checked by the supervisor in the on-set callback and applied
 in the post-set callback. Weights go out at 100 Hz on ``/pph/notch_weights``, status on
 ``/diagnostics`` (every simulated second and whenever the supervisor reports a change).
+
+Frequencies: a tachometer on ``/pph/reference_frequency`` (one value, Hz, with its sample
+index; a loop subscription served before ``/pph/accel``) goes to
+``supervisor.set_reference_frequency``; the frequency of each configured tone
+now (``supervisor.tone_estimates_hz``) goes out on ``/pph/notch_frequencies`` every
+``FREQUENCIES_EVERY_SAMPLES``; after each identification the predicted sensitivity
+(``supervisor.sensitivity``) goes out once on ``/pph/notch_sensitivity`` (transient local).
 """
 
 from __future__ import annotations
+
+import inspect
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
@@ -19,7 +28,17 @@ from rclpy.parameter import Parameter
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 from std_srvs.srv import Trigger
 
-from hexapod_vibration.contract import NOTCH_STATUS, SAMPLE_RATE_HZ, STRUT_COUNT, sample_label
+from hexapod_vibration.contract import (
+    FREQUENCIES_EVERY_SAMPLES,
+    NOTCH_FREQUENCIES_TOPIC,
+    NOTCH_SENSITIVITY_TOPIC,
+    NOTCH_STATUS,
+    REFERENCE_FREQUENCY_TOPIC,
+    SAMPLE_RATE_HZ,
+    STRUT_COUNT,
+    InvalidStrutMessage,
+    sample_label,
+)
 from hexapod_vibration.core.control.notch_supervisor import NotchConfig, NotchSupervisor
 from hexapod_vibration.core.loop.signal_ranges import SignalRanges
 from hexapod_vibration.core.model.config import load_model_config
@@ -31,9 +50,16 @@ from hexapod_vibration.ros.messages import (
     ControllerLoopPort,
     StrutArrayPublisher,
     create_loop_subscription,
+    make_table_array,
+    make_vector_array,
 )
 from hexapod_vibration.ros.parameters import NodeParameters
-from hexapod_vibration.ros.qos import DIAGNOSTICS_QOS, LOOP_PUBLISHER_QOS
+from hexapod_vibration.ros.qos import (
+    DIAGNOSTICS_QOS,
+    LATCHED_QOS,
+    LOOP_PUBLISHER_QOS,
+)
+from hexapod_vibration.ros.rclpy_internals import UnsupportedCdr, decode_strut_cdr
 
 WEIGHTS_EVERY_SAMPLES = 10
 """Samples between two /pph/notch_weights messages (100 Hz)."""
@@ -50,17 +76,30 @@ class NotchControllerNode(Node):
         self.params = NodeParameters(self, NOTCH_CONTROLLER)
         self.fs = SAMPLE_RATE_HZ
         values = self.params.values()
-        self.supervisor = NotchSupervisor(
-            NotchConfig().replaced({k: v for k, v in values.items() if k in SETTINGS}), self.fs)
-        accel_range = SignalRanges.from_model(load_model_config(config_path(
-            "pph_model.yaml"))).accel_m_s2      # the accelerometers' +-2 g
+        model = load_model_config(config_path("pph_model.yaml"))
+        config = NotchConfig().replaced({k: v for k, v in values.items() if k in SETTINGS})
+        if "output_weights" in inspect.signature(NotchSupervisor).parameters:   # guard branch
+            z_row = np.linalg.inv(model.geometry.top_jacobian)[2]   # the z axis, as CoreLoop
+            self.supervisor = NotchSupervisor(config, self.fs, output_weights=z_row)
+        else:
+            self.supervisor = NotchSupervisor(config, self.fs)
+        accel_range = SignalRanges.from_model(model).accel_m_s2      # the accelerometers' +-2 g
         self.port = ControllerLoopPort("/pph/accel", accel_range, StrutArrayPublisher(
             self.create_publisher(Float64MultiArray, "/pph/notch_command", LOOP_PUBLISHER_QOS)),
             self.get_logger())
         self._pub_w = self.create_publisher(Float64MultiArray, "/pph/notch_weights",
                                             LOOP_PUBLISHER_QOS)
         self._pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", DIAGNOSTICS_QOS)
-        self.loop_subscriptions = [create_loop_subscription(self, "/pph/accel", self._on_accel)]
+        self._pub_frequencies = self.create_publisher(Float64MultiArray, NOTCH_FREQUENCIES_TOPIC,
+                                                      LOOP_PUBLISHER_QOS)
+        self._pub_sensitivity = self.create_publisher(
+            Float64MultiArray, NOTCH_SENSITIVITY_TOPIC, LATCHED_QOS)
+        self._published_sensitivity: object | None = None
+        # The tachometer is a loop topic too, served first: the driver publishes sample n's
+        # reference before its sensors, so it is taken before sample n is stepped.
+        self.loop_subscriptions = [
+            create_loop_subscription(self, REFERENCE_FREQUENCY_TOPIC, self._on_reference),
+            create_loop_subscription(self, "/pph/accel", self._on_accel)]
         self.create_service(Trigger, "~/identify", self._on_identify)
         self.params.serve(check=self._check_parameters, apply=self._apply_parameters)
         config = self.supervisor.config
@@ -104,15 +143,58 @@ class NotchControllerNode(Node):
         index = sample.index
         if index % WEIGHTS_EVERY_SAMPLES == 0:
             self._publish_weights(index)
+        if index % FREQUENCIES_EVERY_SAMPLES == 0:
+            self._pub_frequencies.publish(make_vector_array(self._tone_frequencies_hz(), index,
+                                                            sample.run))
         if index % int(self.fs) == 0:
             self.publish_diagnostics()
         self._report()
+
+    def _on_reference(self, msg: bytes) -> None:
+        """A tachometer value (Hz) for a loop sample: to the supervisor, or refused (logged)."""
+        try:
+            reference = decode_strut_cdr(bytes(msg), count=1)
+        except (InvalidStrutMessage, UnsupportedCdr) as exc:
+            self.get_logger().warn(f"{REFERENCE_FREQUENCY_TOPIC}: rejected message ({exc})",
+                                   throttle_duration_sec=1.0)
+            return
+        frequency_hz = float(reference.values[0])
+        run = self.port.sequence.run
+        if not 0.0 <= frequency_hz < self.fs / 2.0:
+            self.get_logger().warn(f"{REFERENCE_FREQUENCY_TOPIC}: rejected {frequency_hz:g} Hz "
+                                   f"(must be in [0, {self.fs / 2.0:g}) Hz)",
+                                   throttle_duration_sec=1.0)
+        elif reference.run is None or run is None or reference.run == run:
+            follow = getattr(self.supervisor, "set_reference_frequency", None)  # tracking branch
+            if follow is not None:
+                follow(frequency_hz, reference.index)
+
+    def _tone_frequencies_hz(self) -> np.ndarray:
+        """The frequency (Hz) of each configured tone now (the supervisor's estimates)."""
+        estimates = getattr(self.supervisor, "tone_estimates_hz", None)    # tracking branch
+        return self.supervisor.canceller.tone_frequencies_hz if estimates is None else estimates
+
+    def _publish_sensitivity(self) -> None:
+        """The prediction of the last identification, once (``/pph/notch_sensitivity``)."""
+        prediction = getattr(self.supervisor, "sensitivity", None)         # guard branch
+        if prediction is None or prediction is self._published_sensitivity:
+            return
+        self._published_sensitivity = prediction
+        rows = {"frequency_hz": prediction.frequencies_hz,
+                "sigma_max_db": prediction.db("sigma_max")}
+        strut_db = 20.0 * np.log10(np.maximum(prediction.strut, 1e-300))
+        rows.update({f"strut{k + 1}_db": strut_db[:, k] for k in range(strut_db.shape[1])})
+        if prediction.output is not None:
+            rows["output_db"] = prediction.db("output")
+        self._pub_sensitivity.publish(make_table_array(rows, max(self.supervisor.last_sample,
+                                                                 0)))
 
     def _report(self) -> None:
         """Log what the supervisor did, mirror a setting it changed, publish the change."""
         events = self.supervisor.drain_events()
         if not events:
             return
+        self._publish_sensitivity()
         logger = self.get_logger()
         for event in events:
             # One call site per severity: rclpy refuses a call site whose severity changes.

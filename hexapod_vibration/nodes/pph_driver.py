@@ -11,6 +11,13 @@ applies (the first valid one per sample; zero force once a stream is older than
 :class:`~hexapod_vibration.core.loop.command_arbiter.CommandArbiter`; this node moves
 messages and parameters. Health and loop statistics go to ``/diagnostics`` once per
 simulated second.
+
+A rotating machine (parameters ``rotor_*``, :class:`~hexapod_vibration.core.model.rotor.Rotor`)
+may act at the shaker's point. With ``rotor_tachometer`` on, its speed for sample n (Hz, at
+the time the sample's sensors are read) goes out on ``/pph/reference_frequency`` just before
+the sample's sensors. The true frequency of every sounding tone (shaker tones with their
+drift, then the rotor's orders) goes out on ``/pph/disturbance_frequencies`` every
+``FREQUENCIES_EVERY_SAMPLES`` samples, for the analysis.
 """
 
 from __future__ import annotations
@@ -24,15 +31,24 @@ from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
 from std_msgs.msg import Float64MultiArray
 
-from hexapod_vibration.contract import DRIVER_STATUS, new_run_id
+from hexapod_vibration.contract import (
+    DISTURBANCE_FREQUENCIES_TOPIC,
+    DRIVER_STATUS,
+    FREQUENCIES_EVERY_SAMPLES,
+    REFERENCE_FREQUENCY_TOPIC,
+    new_run_id,
+)
 from hexapod_vibration.core.loop.command_arbiter import CommandArbiter
 from hexapod_vibration.core.loop.signal_ranges import SignalRanges
 from hexapod_vibration.core.model.config import load_model_config
 from hexapod_vibration.core.model.plant import PPHPlant, actuator_test_sine, saturate_commands
+from hexapod_vibration.core.model.rotor import Rotor, rotor_or_none
 from hexapod_vibration.core.model.shaker import Shaker, tones_from_arrays
 from hexapod_vibration.parameter_specs import (
     LOCKSTEP_STREAMS,
     PPH_DRIVER,
+    rotor_arrays,
+    rotor_unpaired,
     shaker_tone_arrays,
     shaker_unpaired,
 )
@@ -42,6 +58,7 @@ from hexapod_vibration.ros.executors import LoopSpinner, run_node
 from hexapod_vibration.ros.messages import (
     StrutArrayPublisher,
     create_loop_subscription,
+    make_vector_array,
     receive_strut_sample,
 )
 from hexapod_vibration.ros.parameters import NodeParameters
@@ -56,6 +73,8 @@ from hexapod_vibration.ros.rclpy_internals import clock_cdr, serialized_publish
 STREAMS = LOCKSTEP_STREAMS
 SHAKER_PARAMS = ("shaker_frequencies_hz", "shaker_amplitudes_n", "shaker_phases_rad",
                  "shaker_drift_hz", "shaker_drift_period_s", "shaker_noise_rms_n")
+ROTOR_PARAMS = ("rotor_orders", "rotor_amplitudes_n", "rotor_reference_speed_hz",
+                "rotor_profile_time_s", "rotor_profile_speed_hz")
 OFFER_AGAIN_S = 0.05
 """Lockstep: wall time (s) after which a sample whose commands are missing is published
 again (controllers answer a repeated sample with the same command): a command lost in
@@ -93,6 +112,11 @@ class PPHDriver(Node):
             Float64MultiArray, "/pph/eddy", pub_qos))
         self._pub_force = StrutArrayPublisher(self.create_publisher(
             Float64MultiArray, "/pph/actuator_force", pub_qos))
+        self._pub_reference = self.create_publisher(Float64MultiArray, REFERENCE_FREQUENCY_TOPIC,
+                                                    pub_qos)
+        self._pub_frequencies = self.create_publisher(
+            Float64MultiArray, DISTURBANCE_FREQUENCIES_TOPIC, pub_qos)
+        self._reference_msg: Float64MultiArray | None = None
         self._pub_clock = serialized_publish(self.create_publisher(Clock, "/clock", CLOCK_QOS))
         self._pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", DIAGNOSTICS_QOS)
         self.loop_subscriptions = [
@@ -120,7 +144,15 @@ class PPHDriver(Node):
     def _make_shaker(self, seed: int) -> Shaker:
         values = self.params.values()
         return Shaker(self._shaker_tones(values), values["shaker_noise_rms_n"],
-                      self.model.shaker.force_limit_n, seed=seed + 1)
+                      self.model.shaker.force_limit_n, seed=seed + 1,
+                      rotor=self._make_rotor(values))
+
+    @staticmethod
+    def _make_rotor(values: dict) -> Rotor | None:
+        """The rotor of the sounding ``rotor_*`` values (``parameter_specs.rotor_arrays``)."""
+        orders, amplitudes, times, speeds = rotor_arrays(values)
+        return rotor_or_none(orders, amplitudes, values["rotor_reference_speed_hz"], times,
+                             speeds) if orders else None
 
     @staticmethod
     def _shaker_tones(values: dict) -> list:
@@ -138,6 +170,10 @@ class PPHDriver(Node):
                 setattr(self, f"_{name}", float(changes[name]))
         if "lockstep_controllers" in changes:
             self._expected = list(changes["lockstep_controllers"])
+        if "rotor_tachometer" in changes:
+            self._tachometer = bool(changes["rotor_tachometer"])
+        if any(name in changes for name in ROTOR_PARAMS):
+            self._apply_rotor(startup)
         if not any(name in changes for name in SHAKER_PARAMS):
             return
         values = self.params.values()
@@ -148,6 +184,16 @@ class PPHDriver(Node):
             return                      # the plant's shaker is built from the same values
         self.plant.shaker.set_tones(self._shaker_tones(values))
         self.plant.shaker.noise_rms_n = float(values["shaker_noise_rms_n"])
+
+    def _apply_rotor(self, startup: bool) -> None:
+        """Rebuild the rotor from the parameters (checked in on-set): its phase restarts."""
+        values = self.params.values()
+        unpaired = rotor_unpaired(values)
+        if unpaired:
+            self.get_logger().warn(unpaired)
+        if startup:
+            return                      # the plant's shaker is built with it
+        self.plant.shaker.rotor = self._make_rotor(values)
 
     # ------------------------------------------------------------------ state for the loop
     @property
@@ -194,17 +240,38 @@ class PPHDriver(Node):
             self._timeout_samples)
 
     # ------------------------------------------------------------------ loop steps
+    def sensor_time_s(self) -> float:
+        """Sim time (s) at which the current sample's sensors were read: (n + 1) / fs.
+
+        The plant has advanced n + 1 steps when sample n is published (the sensors of
+        sample n are read at the end of step n).
+        """
+        return self.plant.sample_index * self.plant.dt_sample_s
+
     def publish_sample(self) -> None:
-        """Publish /clock and the sensors of the current sample."""
+        """Publish /clock, the tachometer and the sensors of the current sample."""
         n, sensors, run = self.sample, self._sample_pending, self.run_id
         self._offer = (clock_cdr(n, self.fs), self._pub_accel.encode(sensors.accel_m_s2, n, run),
                        self._pub_eddy.encode(sensors.eddy_m, n, run))
+        self._reference_msg = self._tachometer_message(n)
         self.offer_again(repeated=False)
         self.arbiter.published(time.perf_counter())
+        if n % FREQUENCIES_EVERY_SAMPLES == 0:
+            self._pub_frequencies.publish(make_vector_array(
+                self.plant.shaker.frequencies_hz(self.sensor_time_s()), n, run))
+
+    def _tachometer_message(self, n: int) -> Float64MultiArray | None:
+        """/pph/reference_frequency for sample n (rotor speed, Hz), None when off."""
+        rotor = self.plant.shaker.rotor
+        if not self._tachometer or rotor is None:
+            return None
+        return make_vector_array([float(rotor.speed_hz(self.sensor_time_s()))], n, self.run_id)
 
     def offer_again(self, repeated: bool = True) -> None:
-        """Publish the current sample's /clock and sensors (again: the same bytes)."""
+        """Publish the current sample's /clock, tachometer and sensors (again: the same)."""
         clock, accel, eddy = self._offer
+        if self._reference_msg is not None:
+            self._pub_reference.publish(self._reference_msg)
         self._pub_clock(clock)
         self._pub_accel.publish_bytes(accel)
         self._pub_eddy.publish_bytes(eddy)
@@ -245,6 +312,9 @@ class PPHDriver(Node):
         values.update({"mode": self.mode, "held": held,
                        "fallback_samples": self.plant.fallback_samples,
                        "accel_clipped_samples": self.plant.accelerometers.clipped_samples})
+        rotor = self.plant.shaker.rotor
+        if rotor is not None:
+            values["rotor_speed_hz"] = float(rotor.speed_hz(self.sensor_time_s()))
         self._pub_diag.publish(diagnostic_array(DRIVER_STATUS, warn, message, values,
                                                 self.sample))
 

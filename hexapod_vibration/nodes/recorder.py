@@ -67,7 +67,9 @@ from std_msgs.msg import Float64MultiArray
 
 from hexapod_vibration import cli
 from hexapod_vibration.analysis.bag_io import (
+    FREQUENCY_TOPICS,
     RUN_RECORD_KEY,
+    SENSITIVITY_TOPIC,
     STORAGE_PLUGINS,
     STRUT_TOPICS,
     WEIGHTS_TOPIC,
@@ -79,6 +81,7 @@ from hexapod_vibration.parameter_specs import PPH_RECORDER
 from hexapod_vibration.ros.parameters import NodeParameters
 from hexapod_vibration.ros.qos import (
     DIAGNOSTICS_QOS,
+    LATCHED_QOS,
     PARAMETER_EVENTS_QOS,
     RECORDER_CLOCK_QOS,
     RECORDER_QOS,
@@ -100,7 +103,7 @@ FLUSH_PERIOD_S = 0.25
 """Longest time (s, wall) that written messages stay in memory before they are on disk."""
 COMMIT_EVERY = 2000
 """sqlite3: messages per transaction at most (bounded loss and journal when killed)."""
-LOOP_TOPICS = frozenset((*STRUT_TOPICS, WEIGHTS_TOPIC))
+LOOP_TOPICS = frozenset((*STRUT_TOPICS, WEIGHTS_TOPIC, *FREQUENCY_TOPICS))
 """Topics whose messages carry ``sample:<n>``: stamped n ms, one message per sample."""
 
 
@@ -121,6 +124,13 @@ RECORDED_TOPICS: tuple[RecordedTopic, ...] = (
     ),
     RecordedTopic(
         '/pph/notch_weights', Float64MultiArray, 'std_msgs/msg/Float64MultiArray', RECORDER_QOS
+    ),
+    *(
+        RecordedTopic(t, Float64MultiArray, 'std_msgs/msg/Float64MultiArray', RECORDER_QOS)
+        for t in FREQUENCY_TOPICS
+    ),
+    RecordedTopic(
+        SENSITIVITY_TOPIC, Float64MultiArray, 'std_msgs/msg/Float64MultiArray', LATCHED_QOS
     ),
     RecordedTopic('/clock', ClockMessage, 'rosgraph_msgs/msg/Clock', RECORDER_CLOCK_QOS),
     RecordedTopic(

@@ -38,6 +38,8 @@ from rclpy.subscription import Subscription
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
 from hexapod_vibration.contract import (
+    FREQUENCY_LABEL,
+    SENSITIVITY_ROWS_PREFIX,
     STRUT_COUNT,
     STRUT_LABEL,
     InvalidStrutMessage,
@@ -65,6 +67,9 @@ __all__ = [
     'UnsupportedCdr',
     'create_loop_subscription',
     'make_strut_array',
+    'make_table_array',
+    'make_vector_array',
+    'parse_vector_sample',
     'parse_strut_array',
     'parse_strut_sample',
     'receive_strut_array',
@@ -313,3 +318,61 @@ class ControllerLoopPort:
         keys = ('malformed', 'out_of_range', 'unconfirmed', 'late', 'repeats', 'new_runs',
                 'missed_samples')
         return {'invalid': self.invalid, **{k: self.counters[k] for k in keys}}
+
+
+# --------------------------------------------------------------------------- other arrays
+def make_vector_array(values: np.ndarray | Sequence[float], sample_index: int | None,
+                      run: int | None = None, label: str = FREQUENCY_LABEL
+                      ) -> Float64MultiArray:
+    """A message of any number of values (e.g. frequencies, Hz) for loop sample ``n``.
+
+    ``layout.dim[0] = (label, N, N)``, then ``("sample:<n>", 1, 1)`` and ``("run:<id>", 1,
+    1)`` as on the strut topics (each left out when None; a run needs an index).
+    """
+    flat = np.ascontiguousarray(values, dtype=_FLOAT64).reshape(-1)
+    dims = [MultiArrayDimension(label=label, size=flat.size, stride=flat.size)]
+    if sample_index is not None:
+        dims.append(MultiArrayDimension(label=sample_label(sample_index), size=1, stride=1))
+        if run is not None:
+            dims.append(MultiArrayDimension(label=run_label(run), size=1, stride=1))
+    msg = Float64MultiArray()
+    msg.layout.dim = dims
+    msg.data = array.array('d', flat.tobytes())
+    return msg
+
+
+def parse_vector_sample(msg: Float64MultiArray, length: int | None = None) -> StrutSample:
+    """Values, sample index and run of a :func:`make_vector_array` message.
+
+    A message without a layout (``ros2 topic pub``) is accepted without an index.
+
+    Raises:
+        InvalidStrutMessage: Not ``length`` values (when given), a non-finite value, or a
+            garbled sample or run label.
+    """
+    values = np.asarray(msg.data, dtype=_FLOAT64)
+    if length is not None and values.size != length:
+        raise InvalidStrutMessage(f'expected {length} value(s), got {values.size}')
+    if not np.all(np.isfinite(values)):
+        raise InvalidStrutMessage(f'non-finite value in {values.tolist()}')
+    index, run = parse_layout_labels([d.label for d in msg.layout.dim[:3]])
+    return StrutSample(values, index, run)
+
+
+def make_table_array(rows: dict[str, np.ndarray], sample_index: int) -> Float64MultiArray:
+    """Named rows of equal length F (e.g. ``frequency_hz`` and |S| in dB) in one message.
+
+    ``layout.dim[0] = ("rows:<name>,<name>,...", R, R F)``, ``dim[1] = ("frequency", F, 1)``,
+    ``dim[2] = ("sample:<n>", 1, 1)``; data row-major.
+    """
+    names = list(rows)
+    table = np.vstack([np.asarray(rows[name], dtype=_FLOAT64).reshape(-1) for name in names])
+    r, f = table.shape
+    msg = Float64MultiArray()
+    msg.layout.dim = [
+        MultiArrayDimension(label=SENSITIVITY_ROWS_PREFIX + ','.join(names), size=r,
+                            stride=r * f),
+        MultiArrayDimension(label='frequency', size=f, stride=1),
+        MultiArrayDimension(label=sample_label(sample_index), size=1, stride=1)]
+    msg.data = array.array('d', np.ascontiguousarray(table).tobytes())
+    return msg

@@ -123,3 +123,13 @@ VOLATILE, so every standard diagnostics tool matches it.
 PARAMETER_EVENTS_QOS = qos_profile_parameter_events
 """``/parameter_events`` (``rcl_interfaces/msg/ParameterEvent``): rclpy's own profile
 (RELIABLE, KEEP_LAST 1000, VOLATILE), so the recorder keeps every parameter change."""
+
+LATCHED_QOS = QoSProfile(
+    reliability=ReliabilityPolicy.RELIABLE,
+    history=HistoryPolicy.KEEP_LAST,
+    depth=1,
+    durability=DurabilityPolicy.TRANSIENT_LOCAL,
+)
+"""``/pph/notch_sensitivity``: published once per identification, kept for late joiners
+(TRANSIENT_LOCAL, the last one). A VOLATILE subscription matches it too but gets only what
+is published after it joined; the recorder and the tools subscribe TRANSIENT_LOCAL."""

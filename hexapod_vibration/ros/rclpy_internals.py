@@ -256,8 +256,11 @@ class UnsupportedCdr(InvalidStrutMessage):
     """Bytes that are not a Float64MultiArray in plain CDR: truncated, garbage, other encoding."""
 
 
-def decode_strut_cdr(raw: bytes) -> StrutSample:
+def decode_strut_cdr(raw: bytes, count: int = STRUT_COUNT) -> StrutSample:
     """The six values, sample index and run of a serialized ``/pph/*`` message.
+
+    ``count``: the number of values the topic carries (6 on the strut topics; 1 on
+    ``/pph/reference_frequency``).
 
     Reads plain CDR (XCDR1) in either byte order without building the Python message
     (about 3 us against about 19 us for rclpy's conversion), with the rules of
@@ -276,11 +279,12 @@ def decode_strut_cdr(raw: bytes) -> StrutSample:
                              f"encapsulation {bytes(raw[:2]).hex()})")
     try:
         pos, labels = _read_layout(raw, _U32[order])
-        (count,) = _U32[order].unpack_from(raw, pos)
+        (received,) = _U32[order].unpack_from(raw, pos)
     except (struct.error, UnicodeDecodeError) as exc:
         raise UnsupportedCdr(f"malformed Float64MultiArray CDR: {exc}") from None
-    if count != STRUT_COUNT:
-        raise InvalidStrutMessage(f"expected {STRUT_COUNT} strut values, got {count}")
+    if received != count:
+        kind = "strut values" if count == STRUT_COUNT else "value(s)"
+        raise InvalidStrutMessage(f"expected {count} {kind}, got {received}")
     pos += 4
     pos += -(pos - _CDR_HEADER) % 8                        # float64 alignment
     if not 0 <= len(raw) - (pos + 8 * count) <= 3:

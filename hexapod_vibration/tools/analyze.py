@@ -55,6 +55,7 @@ def main(argv: list[str] | None = None) -> int:
         Request,
         WindowTooShort,
         analyze_bag,
+        format_following,
         format_harmonics,
         format_table,
     )
@@ -72,6 +73,9 @@ def main(argv: list[str] | None = None) -> int:
         print("analyze: interrupted; nothing written", file=sys.stderr, flush=True)
         return cli.interrupted_exit_code(exc)
     print(format_table(result.report, result.paper_reduction_db))
+    following = format_following(result.report)
+    if following:
+        print(following)
     if result.harmonics is not None:
         print(format_harmonics(result.harmonics, result.report["scenario"]))
     for note in result.details["notes"]:

@@ -37,7 +37,14 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from hexapod_vibration import cli
-from hexapod_vibration.contract import DRIVER_STATUS, NOTCH_STATUS
+from hexapod_vibration.contract import (
+    DISTURBANCE_FREQUENCIES_TOPIC,
+    DRIVER_STATUS,
+    NOTCH_FREQUENCIES_TOPIC,
+    NOTCH_SENSITIVITY_TOPIC,
+    NOTCH_STATUS,
+    REFERENCE_FREQUENCY_TOPIC,
+)
 from hexapod_vibration.parameter_specs import STORAGES
 from hexapod_vibration.paths import available_scenarios, config_path, scenario_path
 from hexapod_vibration.tools import outputs
@@ -53,8 +60,10 @@ PAPER_REDUCTION_DB = {
 }
 DEMO_SCENARIOS = ("single_tone_harmonic", "close_tones", "plant_response")
 STOP_TIMEOUT_S = 15.0
-DRIVER_TOPICS = ("/pph/accel", "/pph/eddy", "/pph/actuator_force", "/clock")
-NOTCH_TOPICS = ("/pph/notch_command", "/pph/notch_weights")
+DRIVER_TOPICS = ("/pph/accel", "/pph/eddy", "/pph/actuator_force", "/clock",
+                 DISTURBANCE_FREQUENCIES_TOPIC)
+NOTCH_TOPICS = ("/pph/notch_command", "/pph/notch_weights", NOTCH_FREQUENCIES_TOPIC,
+                NOTCH_SENSITIVITY_TOPIC)
 POINTING_TOPICS = ("/pph/pointing_command",)
 
 
@@ -79,6 +88,7 @@ def node_parameters(scenario: Scenario, mode: str) -> dict[str, dict[str, Any]]:
     }
     if sh.phases_rad:
         driver["shaker_phases_rad"] = list(sh.phases_rad)
+    driver.update(rotor_parameters(scenario))
     pose = [math.degrees(a) for a in scenario.target_pose[3:]]
     params = {
         "pph_driver": driver,
@@ -97,6 +107,18 @@ def node_parameters(scenario: Scenario, mode: str) -> dict[str, dict[str, Any]]:
             "identify_delay_s": scenario.identify_at_s,
         }
     return {node: {"ros__parameters": values} for node, values in params.items()}
+
+
+def rotor_parameters(scenario: Scenario) -> dict[str, Any]:
+    """The driver's ``rotor_*`` parameters of the scenario's ``rotor:`` (none without one)."""
+    rotor = scenario.rotor
+    if not rotor.orders:
+        return {}
+    return {"rotor_orders": list(rotor.orders), "rotor_amplitudes_n": list(rotor.amplitudes_n),
+            "rotor_reference_speed_hz": float(rotor.reference_speed_hz),
+            "rotor_profile_time_s": list(rotor.profile_time_s),
+            "rotor_profile_speed_hz": list(rotor.profile_speed_hz),
+            "rotor_tachometer": bool(rotor.tachometer)}
 
 
 PARAMS_FILE_HEADER = """\
@@ -388,7 +410,10 @@ class ExperimentRun:
 
     def recorded_topics(self) -> list[str]:
         """Every topic whose publishers the recorder must match before sample 0."""
-        return [*DRIVER_TOPICS, *POINTING_TOPICS, *(NOTCH_TOPICS if self.has_notch else ())]
+        tachometer = (REFERENCE_FREQUENCY_TOPIC,) if rotor_parameters(
+            self.o.scenario).get("rotor_tachometer") else ()
+        return [*DRIVER_TOPICS, *tachometer, *POINTING_TOPICS,
+                *(NOTCH_TOPICS if self.has_notch else ())]
 
     def _breakpoint(self, prefix: str = "") -> list[str]:
         """Lockstep: the driver starts held before sample 0 (after the params file: wins)."""
@@ -598,12 +623,18 @@ def _run_all(args: argparse.Namespace, scenarios: list[Scenario]) -> int:
 
 def scenario_table(result: Any) -> str:
     """The printed table of one scenario: tones (with the paper's column) or harmonics."""
-    from hexapod_vibration.analysis.report import format_harmonics, format_table
+    from hexapod_vibration.analysis.report import (
+        format_following,
+        format_harmonics,
+        format_table,
+    )
 
     if result.harmonics is not None and not any(
             r["controlled"] for r in result.report["tones"]):
         return format_harmonics(result.harmonics, result.report["scenario"])
-    return format_table(result.report, result.paper_reduction_db)
+    following = format_following(result.report)
+    table = format_table(result.report, result.paper_reduction_db)
+    return f"{table}\n{following}" if following else table
 
 
 if __name__ == "__main__":

@@ -112,6 +112,9 @@ def test_disturbance_frequencies_list_shaker_tones_with_drift_then_rotor_orders(
     assert shaker.frequencies_hz(5.0) == pytest.approx([41.0, 61.0, 33.0, 66.0, 99.0])
     assert shaker.frequencies_hz(np.array([0.0, 12.0])).shape == (2, 5)
     assert Shaker(drifting).frequencies_hz(15.0) == pytest.approx([39.0, 59.0])
+    silent = tones_from_arrays([40.0, 60.0], [0.0, 1.0])
+    quiet_order = Rotor([1.0, 2.0], [0.0, 3.0], 50.0, [0.0], [30.0])
+    assert Shaker(silent, rotor=quiet_order).frequencies_hz(1.0) == pytest.approx([60.0, 60.0])
 
 
 def test_scenario_rotor_section_builds_the_rotor_and_refuses_bad_keys():

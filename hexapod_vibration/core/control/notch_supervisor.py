@@ -661,6 +661,7 @@ class _ToneFollowing:
         self.reference_index = -1
         self.reference_slope = 0.0             # Hz per sample, from the last two values
         self.reference_state = "unused"
+        self._ignoring = False
         self._previous_w: np.ndarray | None = None
         self._p_at_hz: np.ndarray | None = None
         self._detector_source: np.ndarray | None = None
@@ -711,9 +712,12 @@ class _ToneFollowing:
         except (TypeError, ValueError):
             value = float("nan")
         if not np.isfinite(value) or value <= 0.0:
-            self.sup._event("warn", f"reference frequency {frequency_hz!r} ignored: not a "
-                                    "finite frequency > 0 Hz")
+            if not self._ignoring:         # once until a usable value comes (no flood)
+                self.sup._event("warn", f"reference frequency {frequency_hz!r} ignored: "
+                                        "not a finite frequency > 0 Hz")
+            self._ignoring = True
             return
+        self._ignoring = False
         if index > self.reference_index >= 0 and np.isfinite(self.reference_hz):
             self.reference_slope = (value - self.reference_hz) / (index - self.reference_index)
         self.reference_hz, self.reference_index = value, int(index)

@@ -75,13 +75,16 @@ class Shaker:
     def frequencies_hz(self, time_s: np.ndarray | float) -> np.ndarray:
         """True frequency (Hz) of every sounding tone at the given times, shape ``(..., tones)``.
 
-        The shaker's tones (with their drift) first, then the rotor's orders if there is one.
+        The shaker's tones (with their drift) first, then the rotor's orders if there is one;
+        a tone or order of zero amplitude is silent and left out.
         """
         t = np.asarray(time_s, float)[..., None]
-        shaker = self._f + self._df * np.sin(2.0 * np.pi * t / self._tp)
+        loud = self._a > 0.0
+        shaker = self._f[loud] + self._df[loud] * np.sin(2.0 * np.pi * t / self._tp[loud])
         if self.rotor is None:
             return shaker
-        return np.concatenate([shaker, self.rotor.frequencies_hz(time_s)], axis=-1)
+        rotor = self.rotor.frequencies_hz(time_s)[..., self.rotor.amplitudes_n > 0.0]
+        return np.concatenate([shaker, rotor], axis=-1)
 
     def force_n(self, time_s: np.ndarray) -> np.ndarray:
         """Force (N) at the given times (s): shaker (one noise draw per time point) + rotor."""

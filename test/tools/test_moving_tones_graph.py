@@ -1,0 +1,95 @@
+"""Moving tones through the ROS graph (lockstep): frequency tracking and the tachometer.
+
+Short runs of the experiment runner: the driver's rotor and frequency topics, the notch
+node's reference input and estimates, the recorder and the report's following bands, end
+to end. They need the notch supervisor's tracking API (``tone_estimates_hz``,
+``set_reference_frequency``): skipped where it does not exist yet.
+
+The timeline is the ``mismatch`` scenario's (its uncontrolled window is after the
+identification, however long that is), with a 3 s window and 5 s of control. Missed
+samples are not asserted here: a lockstep timeout depends on the machine's load.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+import yaml
+
+from hexapod_vibration.analysis.bag_io import read_bag
+from hexapod_vibration.core.control.notch_supervisor import NotchSupervisor
+from hexapod_vibration.paths import scenario_path
+
+pytestmark = pytest.mark.skipif(
+    not hasattr(NotchSupervisor, "tone_estimates_hz")
+    or not hasattr(NotchSupervisor, "set_reference_frequency"),
+    reason="needs the notch supervisor's frequency tracking (branch tracking)")
+
+WINDOW_S, CONTROL_S = 3.0, 5.0
+
+
+def _short(changes: dict, notch: dict) -> dict:
+    """The mismatch scenario's timeline, shortened, with ``changes`` on top.
+
+    ``notch`` is added to the scenario's own notch settings (its identification method
+    and mu policy stay).
+    """
+    base = yaml.safe_load(scenario_path("mismatch").read_text())
+    base.update(window_s=WINDOW_S, duration_s=base["control_on_s"] + CONTROL_S)
+    base.update(changes)
+    base["notch"] = {**base["notch"], **notch}
+    return base
+
+
+def _run(ros_env, tmp_path, scenario: dict) -> dict:
+    path = tmp_path / "scenario.yaml"
+    path.write_text(yaml.safe_dump(scenario))
+    out = tmp_path / "run"
+    result = subprocess.run([sys.executable, "-m", "hexapod_vibration.tools.experiment",
+                             "--scenario", str(path), "--out", str(out)], env=ros_env,
+                            capture_output=True, text=True, timeout=600)
+    assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
+    report = json.loads((out / "report.json").read_text())
+    assert (out / "frequencies.png").stat().st_size > 10_000
+    return {"report": report, "bag": read_bag(out / "bag", {}), "out": out}
+
+
+def test_tracking_follows_a_1_percent_mismatch_through_the_graph(ros_env, tmp_path):
+    run = _run(ros_env, tmp_path, _short(
+        {"name": "mismatch_tracking_short", "report_tones_hz": [40.4]},
+        {"tone_frequencies_hz": [40.0], "frequency_tracking": True, "tracking_range_hz": 2.0}))
+    index, estimates = run["bag"].frequencies["/pph/notch_frequencies"]
+    _, truth = run["bag"].frequencies["/pph/disturbance_frequencies"]
+    assert truth[-1] == pytest.approx([40.4])
+    assert abs(estimates[-1, 0] - 40.4) < 0.05         # the estimate found the tone
+    row, = run["report"]["following_tones"]
+    assert row["source"] == "/pph/disturbance_frequencies"
+    assert row["reduction_db"] >= 30.0
+
+
+def test_the_tachometer_drives_the_tones_through_the_graph(ros_env, tmp_path):
+    """A rotor at 45.5 Hz (orders 1 and 2); the notch told 45 and 91 Hz follows 1x and 2x."""
+    run = _run(ros_env, tmp_path, _short(
+        {"name": "tachometer_short",
+         "shaker": {"frequencies_hz": [40.0], "amplitudes_n": [0.0], "noise_rms_n": 0.5},
+         "rotor": {"orders": [1.0, 2.0], "amplitudes_n": [60.0, 60.0],
+                   "reference_speed_hz": 45.5, "profile_time_s": [0.0],
+                   "profile_speed_hz": [45.5], "tachometer": True},
+         "report_tones_hz": [45.5, 91.0]},
+        {"tone_frequencies_hz": [45.0, 91.0], "reference_harmonics": [1.0, 2.0]}))
+    bag = run["bag"]
+    ref_index, reference = bag.frequencies["/pph/reference_frequency"]
+    samples = run["report"]["loop"]["samples"]
+    assert np.array_equal(ref_index, np.arange(samples))        # one reading per sample
+    assert np.all(reference[:, 0] == 45.5)
+    _, estimates = bag.frequencies["/pph/notch_frequencies"]
+    assert estimates[-1] == pytest.approx([45.5, 91.0], abs=1e-9)
+    rows = {r["frequency_hz"]: r for r in run["report"]["following_tones"]}
+    assert set(rows) == {45.0, 91.0}
+    for row in rows.values():
+        assert row["source"] == "/pph/disturbance_frequencies"
+        assert row["reduction_db"] >= 40.0
