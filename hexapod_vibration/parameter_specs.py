@@ -34,6 +34,8 @@ ADAPTATION_MODES = ("centralized", "decentralized", "raw")
 """Same as ``core.control.adaptation.COEFFICIENT_MODES`` (tested), kept here import-free."""
 MU_POLICIES = ("manual", "auto")
 """Same as ``core.control.mu_policy.MU_POLICIES`` (tested)."""
+IDENTIFICATION_METHODS = ("tones", "broadband")
+"""Same as ``core.control.notch_supervisor.IDENTIFICATION_METHODS`` (tested)."""
 STORAGES = ("mcap", "sqlite3")
 TYPES = ("bool", "int", "double", "string", "double[]", "string[]")
 
@@ -459,10 +461,17 @@ NOTCH_CONTROLLER = NodeSpec("notch_controller", summary="six decentralized Adapt
                   "rate within it", choices=MU_POLICIES),
     ParameterSpec("max_rise_db", "double", 3.0, "largest predicted rise of "
                   "the vibration off the tones", unit="dB", low=0.1, high=20.0),
-    ParameterSpec("divergence_guard", "bool", True, "back off (freeze, lower mu, fade out) "
+    ParameterSpec("divergence_guard", "bool", True, "back off (lower mu, then fade out) "
                   "when control makes a band worse than its level before control"),
     ParameterSpec("guard_margin_db", "double", 1.0, "rise over the level before control "
                   "that counts as worse", unit="dB", low=0.1, high=10.0),
+    ParameterSpec("weight_limit_n", "double", 40.0, "anti-windup: each strut's weights "
+                  "never add up to more than this (the actuator's dynamic rating)",
+                  unit="N", low=0.0, high=1000.0, low_open=True),
+    ParameterSpec("identification", "string", "tones", "tones = test tones at the tones "
+                  "(3.2 s, eq. 18 bound); broadband = a 10 s multisine over 0..fs/2 that "
+                  "survives a disturbance next to a tone (Nyquist bound on G(f), mu_policy, "
+                  "predicted sensitivity)", choices=IDENTIFICATION_METHODS),
     EXECUTOR,
 ))
 

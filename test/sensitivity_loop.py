@@ -1,13 +1,14 @@
-"""The core loop with broadband identification, the mu policy and the predicted sensitivity.
+"""The core loop with the supervisor's broadband identification, mu policy and prediction.
 
-A test helper until the notch supervisor carries them (issue 12, phase 2): a
-:class:`~hexapod_vibration.core.sim.closed_loop.CoreLoop` that, at the scenario's
-``identify_at_s``, first measures G(f) with a
-:class:`~hexapod_vibration.core.control.plant_identification.BroadbandIdentifier`, then runs
-the usual tone identification, applies the mu policy (per-tone rates folded into P) and
-predicts |S(f)| before control goes on. ``enable_control=False`` runs the same timeline
-(same seeds, same identification) with the output never enabled: the uncontrolled twin of
-a run, driven by the same disturbance realization.
+:class:`IdentifyingLoop` is a :class:`~hexapod_vibration.core.sim.closed_loop.CoreLoop`
+whose notch supervisor identifies G(f) with its
+:class:`~hexapod_vibration.core.control.plant_identification.BroadbandIdentifier`
+(``identification: broadband``), applies the mu policy (per-tone rates folded into P) and
+predicts |S(f)| before control goes on, all on the z axis as the output view (what the
+report measures). This helper only reads what the supervisor did. ``enable_control=False``
+runs the same timeline (same seeds, same identification) with the output never enabled:
+the uncontrolled twin of a run, driven by the same disturbance realization.
+:class:`ImpulseLoop` measures the reference G(f) of a quiet plant by impulses.
 """
 
 from __future__ import annotations
@@ -17,10 +18,9 @@ import dataclasses
 import numpy as np
 from scipy import signal
 
-from hexapod_vibration.core.control import mu_policy, sensitivity
+from hexapod_vibration.core.control import adaptation, mu_policy, sensitivity
 from hexapod_vibration.core.control.filters import DCBlocker
 from hexapod_vibration.core.control.plant_identification import (
-    BroadbandIdentifier,
     DisturbanceSpectrum,
     PlantFrequencyResponse,
 )
@@ -32,67 +32,58 @@ FS = 1000.0
 
 
 class IdentifyingLoop(CoreLoop):
-    """CoreLoop + broadband G(f) + mu policy + predicted sensitivity (see the module)."""
+    """CoreLoop with the supervisor's broadband identification and mu policy (the module)."""
 
     def __init__(self, config: ModelConfig, scenario: Scenario, policy: str = 'manual',
                  max_rise_db: float = mu_policy.DEFAULT_MAX_RISE_DB,
-                 enable_control: bool = True, broadband: dict | None = None,
-                 identifier=None) -> None:
-        """Shift the tone identification after the broadband one; keep the rest.
+                 enable_control: bool = True, guard: bool = True) -> None:
+        """The scenario with ``identification: broadband`` and the policy's settings."""
+        settings = {**scenario.notch.settings, 'identification': 'broadband',
+                    'mu_policy': policy, 'max_rise_db': max_rise_db,
+                    'divergence_guard': guard}
+        scenario = dataclasses.replace(
+            scenario, notch=dataclasses.replace(scenario.notch, settings=settings))
+        if not enable_control:
+            scenario = dataclasses.replace(scenario, control_on_s=scenario.duration_s)
+        super().__init__(config, scenario)
+        self.enable_control = enable_control
 
-        ``identifier`` replaces the broadband identifier (anything with ``step``, ``done``,
-        ``duration_s`` and ``result()``, e.g. :class:`ImpulseIdentifier`).
-        """
-        self.broadband = identifier or BroadbandIdentifier(6, FS, **(broadband or {}))
-        self.broadband_start = int(round(scenario.identify_at_s * FS))
-        shifted = dataclasses.replace(
-            scenario, identify_at_s=scenario.identify_at_s + self.broadband.duration_s)
-        super().__init__(config, shifted)
-        self.policy, self.max_rise_db, self.enable_control = policy, max_rise_db, enable_control
-        self.response: PlantFrequencyResponse | None = None
-        self.disturbance: DisturbanceSpectrum | None = None
-        self.choice: mu_policy.MuChoice | None = None
-        self.z_row = np.linalg.inv(self.config.geometry.top_jacobian)[2]
-        self._dc = DCBlocker(6, FS, self.notch.config.dc_cutoff_hz)
+    @property
+    def response(self) -> PlantFrequencyResponse:
+        """The supervisor's identified G(f)."""
+        return self.notch.plant_frequency_response
 
-    def _controller_step(self, n: int, accel_m_s2: np.ndarray,
-                         record: LoopRecord) -> np.ndarray:
-        if self.notch is not None and not self.broadband.done and n >= self.broadband_start:
-            self.notch.step(n, accel_m_s2)                  # keeps its phase running
-            command = self.broadband.step(self._dc.step(accel_m_s2))
-            if self.broadband.done:
-                self.response = self.broadband.result()
-                if hasattr(self.broadband, 'disturbance'):
-                    self.disturbance = self.broadband.disturbance()
-            return command
-        self._dc.step(accel_m_s2)
-        if not self.enable_control and n == record.control_on_sample:
-            command = self.notch.step(n, accel_m_s2)        # stays disabled: output 0
-        else:
-            command = super()._controller_step(n, accel_m_s2, record)
-        if self.choice is None and self.notch.plant_response is not None:
-            self._install_policy()
-        return command
+    @property
+    def disturbance(self) -> DisturbanceSpectrum:
+        """The disturbance's CSD the supervisor measured during its identification."""
+        return self.notch.disturbance_spectrum
 
-    def _install_policy(self) -> None:
-        """Fold the mu policy's per-tone rates into the supervisor's normalised P."""
-        sc = self.scenario
-        coefficients = self.notch.canceller.coefficients      # normalised, before the policy
-        self.record_coefficients = coefficients
-        self.choice = mu_policy.choose_tone_rates(
-            self.response.at, sc.notch.tone_frequencies_hz, FS, coefficients, sc.notch.mu,
-            policy=self.policy, max_rise_db=self.max_rise_db, output_weights=self.z_row,
-            disturbance_csd=self.disturbance.at)
-        folded = sensitivity.per_tone_coefficients(coefficients, sc.notch.mu,
-                                                   self.choice.tone_mu)
-        self.notch.canceller.set_coefficients(folded)
+    @property
+    def choice(self) -> mu_policy.MuChoice:
+        """The supervisor's mu policy result."""
+        return self.notch.mu_choice
+
+    @property
+    def z_row(self) -> np.ndarray:
+        """The supervisor's output view: the z row of J^-1."""
+        return self.notch.output_weights
+
+    @property
+    def record_coefficients(self) -> np.ndarray:
+        """The normalised P at the tones (before the policy's per-tone rates)."""
+        tones = self.scenario.notch.tone_frequencies_hz
+        return adaptation.normalized_coefficients(self.response.at(tones),
+                                                  self.notch.config.adaptation)
 
     def predict(self, disturbance_csd=None, frequencies_hz=None
                 ) -> sensitivity.SensitivityPrediction:
         """|S| of the installed canceller on the identified G, z axis as the output view.
 
-        ``disturbance_csd`` defaults to the one measured during the identification.
+        ``disturbance_csd`` defaults to the one measured during the identification; with
+        neither argument this is the supervisor's own ``sensitivity``.
         """
+        if disturbance_csd is None and frequencies_hz is None:
+            return self.notch.sensitivity
         if disturbance_csd is None:
             disturbance_csd = self.disturbance.at
         return sensitivity.predict_sensitivity(
@@ -100,6 +91,25 @@ class IdentifyingLoop(CoreLoop):
             self.notch.canceller.coefficients, self.notch.canceller.mu,
             frequencies_hz=frequencies_hz,
             output_weights=self.z_row, disturbance_csd=disturbance_csd)
+
+
+class ImpulseLoop(CoreLoop):
+    """CoreLoop that runs an :class:`ImpulseIdentifier` from ``identify_at_s`` (no notch)."""
+
+    def __init__(self, config: ModelConfig, scenario: Scenario,
+                 identifier: ImpulseIdentifier) -> None:
+        """The scenario's plant; the impulses replace the notch's command."""
+        super().__init__(config, scenario)
+        self.identifier = identifier
+        self.start = int(round(scenario.identify_at_s * FS))
+        self._dc = DCBlocker(6, FS, self.notch.config.dc_cutoff_hz)
+
+    def _controller_step(self, n: int, accel_m_s2: np.ndarray,
+                         record: LoopRecord) -> np.ndarray:
+        error = self._dc.step(accel_m_s2)
+        if n < self.start or self.identifier.done:
+            return np.zeros(6)
+        return self.identifier.step(error)
 
 
 def z_axis(config: ModelConfig, record: LoopRecord) -> np.ndarray:

@@ -42,6 +42,8 @@ def test_spec_constants_are_the_cores():
 
     assert set(specs.ADAPTATION_MODES) == set(COEFFICIENT_MODES)
     assert set(specs.MU_POLICIES) == set(MU_POLICIES)
+    from hexapod_vibration.core.control.notch_supervisor import IDENTIFICATION_METHODS
+    assert specs.IDENTIFICATION_METHODS == IDENTIFICATION_METHODS
     notch = specs.NOTCH_CONTROLLER.defaults()
     for name, value in vars(NotchConfig()).items():
         expected = list(value) if isinstance(value, tuple) else value

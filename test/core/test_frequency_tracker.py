@@ -248,9 +248,15 @@ def static_plant_response(delay_samples: int = 1):
 
 def test_a_moved_tone_takes_p_and_carries_its_weights_through_the_broadband_response():
     sup = supervisor([30.0], reference_harmonics=[1.0], frequency_tracking=False)
-    sup.plant_frequency_response = static_plant_response()
+    response = static_plant_response()
     speed = lambda n: 30.0 + 2e-3 * max(n - 5000, 0)           # noqa: E731  (2 Hz/s)
-    residual, _ = run(sup, lambda n: [speed(n)], [0.05], 3.3, 10000, reference=speed)
+
+    def reference(n):                 # the broadband G(f) once the tone identification ends
+        if sup.plant_response is not None:
+            sup.plant_frequency_response = response
+        return speed(n)
+
+    residual, _ = run(sup, lambda n: [speed(n)], [0.05], 3.3, 10000, reference=reference)
     g = sup.plant_frequency_response.at(sup.canceller.tone_frequencies_hz)
     p_expected = adaptation.normalized_coefficients(g, "decentralized")
     assert sup.canceller.tone_frequencies_hz[0] == pytest.approx(speed(9999), abs=0.02)

@@ -133,8 +133,13 @@ def test_nyquist_limit_from_the_identified_plant_is_the_simulated_one(close_tone
     for mu in (0.8 * limit, 1.3 * limit):
         run = dataclasses.replace(
             _scenario('close_tones'), nonlinear=False, duration_s=40.0, control_on_s=6.0,
-            window_s=1.0, notch=dataclasses.replace(sc.notch, mu=mu))
+            window_s=1.0, notch=dataclasses.replace(sc.notch, mu=mu, settings={
+                **sc.notch.settings, 'identification': 'tones', 'mu_policy': 'manual',
+                'divergence_guard': False, 'weight_limit_n': 1000.0}))  # bare: no guard
         weights = np.abs(CoreLoop(CFG, run).run().weights).max(axis=(1, 2))
-        growth.append(weights[-1] / weights[24_999])
-    assert growth[0] < 1.05                     # converged, bounded
-    assert growth[1] > 1.2                      # still growing 15 s later
+        growth.append(weights)
+    stable, unstable = growth
+    assert stable[-1] / stable[24_999] < 1.05   # converged, bounded
+    # Unstable: the weights run away until the actuators' 40 N clip holds them in a limit
+    # cycle, several times the weights that cancel the disturbance.
+    assert np.min(unstable[10_000:]) > 3.0 * stable[-1]

@@ -22,6 +22,10 @@ TINY_SET = {
     "shaker.frequencies_hz": [40.0], "shaker.amplitudes_n": [80.0],
     "shaker.phases_rad": [0.0], "notch.tone_frequencies_hz": [40.0],
     "report_tones_hz": [40.0, 80.0],
+    # the bare canceller of the paper: the 3.2 s tone identification (broadband takes 10 s),
+    # no divergence guard and no anti-windup, so that a mu beyond the bound winds up
+    "notch.settings": {"identification": "tones", "divergence_guard": False,
+                       "weight_limit_n": 1000.0},
 }
 # Wall-clock and process fields: the only ones allowed to differ between two runs.
 RUN_FIELDS = ("elapsed_s", "worker")

@@ -443,6 +443,24 @@ class ToneResponseIdentifier(SampledRun):
         """Tones (Hz), a copy."""
         return self._freqs.copy()
 
+    def baseline_change(self) -> np.ndarray:
+        """Per tone, how far the disturbance moved between the two baselines (T,).
+
+        ``|Y_last - Y_first|`` (norm over the channels) divided by the norm of the
+        excited channels' response ``Y_j - baseline``: 0 for a stationary disturbance at
+        the tone; of order 1 when a disturbance a fraction of a hertz away rotates
+        through the fit (the baseline subtraction then corrupts G by as much).
+
+        Raises:
+            RuntimeError: if the run is not finished.
+        """
+        if not self.done:
+            raise RuntimeError(f'identification not finished ({100 * self.progress:.0f} %)')
+        change = np.linalg.norm(self._y[-1] - self._y[0], axis=1)                  # (T,)
+        base = 0.5 * (self._y[0] + self._y[-1])
+        response = np.linalg.norm(self._y[1:-1] - base[None], axis=2)            # (C, T)
+        return change / np.maximum(np.median(response, axis=0), 1e-300)
+
     def result(self) -> np.ndarray:
         """Measured plant response G (T, C, C), complex (m/s^2 per N).
 

@@ -223,6 +223,8 @@ class AdaptiveNotchCanceller:
         self._gain_step = 0.0
         self._fading = _FadingTones(self._c)
         self._u = np.zeros(self._c)
+        self._weight_limit: float | None = None
+        self.clamped_samples = 0
         self._install(freqs, np.zeros((freqs.size, self._c), dtype=complex),
                       np.zeros(freqs.size), p_full, np.ones(freqs.size, dtype=bool))
 
@@ -290,6 +292,8 @@ class AdaptiveNotchCanceller:
             raise ValueError(f'error must be finite, got {e.tolist()}')
         if self._enabled and not self._frozen and self._mu > 0.0:
             self._adapt(e)
+            if self._weight_limit is not None:
+                self.limit_weights(self._weight_limit)
         if self._gain != self._target:
             self._advance_gain()
         np.dot(self._v_r, self._z_r, out=self._u)          # sum_t a cos phi + b sin phi
@@ -452,6 +456,27 @@ class AdaptiveNotchCanceller:
     def set_frozen(self, flag: bool) -> None:
         """Freeze (True) or resume (False) adaptation; the output keeps running."""
         self._frozen = bool(flag)
+
+    def limit_weights(self, limit_n: float) -> bool:
+        """Anti-windup: scale each channel's weights so that sum_t |W[t, i]| <= limit_n (N).
+
+        The sum is the largest output the channel's tones can add up to, so after the
+        clamp the canceller never asks for more than ``limit_n``. Returns True if a weight
+        was scaled.
+        """
+        peak = np.abs(self._v).sum(axis=1)                   # (C,) largest output (N)
+        over = peak > limit_n
+        if not over.any():
+            return False
+        self._v[over] *= (limit_n / peak[over])[:, None]
+        self.clamped_samples += 1
+        return True
+
+    def set_weight_limit(self, limit_n: float | None) -> None:
+        """Apply :meth:`limit_weights` after every adaptation step (None: no limit)."""
+        if limit_n is not None and not (np.isfinite(limit_n) and limit_n > 0.0):
+            raise ValueError(f'weight limit must be finite and > 0 N, got {limit_n!r}')
+        self._weight_limit = None if limit_n is None else float(limit_n)
 
     # ------------------------------------------------------------------ read-only views
     @property

@@ -21,6 +21,20 @@ the supervisor finds it):
   off;
 - ``raw`` (the paper as printed, ``P = I``) adapts from the first sample; its
   identification only measures G and the bound (and freezes the weights meanwhile).
+- ``identification: broadband`` measures G(f) over 0..fs/2 instead (10 s multisine,
+  :class:`~hexapod_vibration.core.control.plant_identification.BroadbandIdentifier`,
+  off-grid disturbance lines fitted and removed): G at the tones comes from it, the bound
+  is the Nyquist limit on G(f) (eq. 18 is 15-50x optimistic on the PPH), ``mu_policy``
+  folds its per-tone rates into P and :attr:`NotchSupervisor.sensitivity` holds the
+  predicted |S(f)| before control goes on;
+- every identification carries a confidence figure (1 - its relative uncertainty at the
+  tones: the broadband lines' standard error and interpolation error, or how far the
+  disturbance moved between the tone identification's two baselines); above 10 % (G(f))
+  or 25 % (baselines) control is refused (state ``refused``, the reason in ``refusal``);
+- the divergence guard (:mod:`~hexapod_vibration.core.control.divergence_guard`) records
+  the error's band levels while control is off and nothing is injected, and under control
+  lowers ``mu``, then fades out, when a band rises above that level; the
+  canceller clamps its weights to ``weight_limit_n`` after every update (anti-windup).
 
 Missing samples (a gap in the indices) move the phases on as if the samples had been
 there (:meth:`AdaptiveNotchCanceller.advance`); a gap during an identification restarts it.
@@ -33,14 +47,25 @@ the ROS parameter must mirror) is queued as :class:`SupervisorEvent` for
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Mapping
+from collections.abc import Generator, Iterator, Mapping
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from hexapod_vibration.contract import SAMPLE_RATE_HZ, STRUT_COUNT, NotchState
-from hexapod_vibration.core.control import adaptation
+from hexapod_vibration.core.control import adaptation, mu_policy, sensitivity
+from hexapod_vibration.core.control.divergence_guard import (
+    FADE_S,
+    GUARD_BACKED_OFF,
+    GUARD_DISABLED,
+    GUARD_OFF,
+    GUARD_REFERENCING,
+    GUARD_WATCHING,
+    MU_DIVISOR,
+    DivergenceGuard,
+    GuardVerdict,
+)
 from hexapod_vibration.core.control.filters import DCBlocker
 from hexapod_vibration.core.control.frequency_tracker import (
     DEFAULT_BLOCK_SAMPLES,
@@ -56,6 +81,11 @@ from hexapod_vibration.core.control.notch import (
     validate_frequencies,
     validate_mu,
 )
+from hexapod_vibration.core.control.plant_identification import (
+    BroadbandIdentifier,
+    DisturbanceSpectrum,
+    PlantFrequencyResponse,
+)
 
 MAX_TONES = 16
 """Largest number of tones the controller accepts (oscillators, harmonics included)."""
@@ -64,6 +94,19 @@ MAX_HARMONICS = 7
 P_RETUNE_HZ = 0.05
 """A moved oscillator gets new coefficients from the broadband G(f) after this shift (Hz)."""
 REFERENCE_STATES = ("unused", "waiting", "following", "stale")
+IDENTIFICATION_METHODS = ("tones", "broadband")
+MAX_IDENTIFICATION_UNCERTAINTY = 0.1
+"""An identification whose relative uncertainty at a tone exceeds this is refused (10 %:
+a gain within 10 % and a phase within ~6 degrees)."""
+MAX_BASELINE_CHANGE = 0.25
+"""The tone identification is refused when the disturbance at a tone moved by more than
+this fraction of the response between its two baselines (0.4 Hz off the tone: 48 %; a plant
+still settling 0.2 s after start-up: 12 %, whose G is still within 3 %)."""
+GUARD_SETTLE_S = 0.5
+"""After the first sample (DC blocker) and after an identification (the excitation's
+decay) the guard waits this long before the error counts as the level without control (s)."""
+DEFAULT_WEIGHT_LIMIT_N = 40.0
+"""The model's strut dynamic force limit (config/pph_model.yaml force_limit_dynamic_n)."""
 
 
 @dataclass(frozen=True)
@@ -97,8 +140,15 @@ class NotchConfig:
             exceeds ``max_rise_db``) or ``auto`` (per tone the largest rate within it).
         max_rise_db: the largest predicted rise of the vibration off the tones (dB).
         divergence_guard: watch every controlled band against its level before control
-            and back off (freeze, lower mu, fade out) when control makes it worse.
+            and back off (lower mu, then fade out) when control makes it
+            worse (:mod:`~hexapod_vibration.core.control.divergence_guard`).
         guard_margin_db: rise over the level before control that counts as worse (dB).
+        weight_limit_n: anti-windup: each strut's weights never add up to more than this
+            (N), the actuator's dynamic rating.
+        identification: ``tones`` (test tones at the tones, 3.2 s with one or two tones;
+            eq. 18 bound) or ``broadband`` (a 10 s multisine over 0..fs/2 that survives a
+            disturbance a fraction of a hertz from a tone; the Nyquist bound on the
+            identified G(f), the mu policy and the predicted sensitivity).
     """
 
     mu: float = 0.002
@@ -122,6 +172,8 @@ class NotchConfig:
     max_rise_db: float = DEFAULT_MAX_RISE_DB
     divergence_guard: bool = True
     guard_margin_db: float = 1.0
+    weight_limit_n: float = DEFAULT_WEIGHT_LIMIT_N
+    identification: str = "tones"
 
     def replaced(self, changes: Mapping[str, Any]) -> NotchConfig:
         """A copy with ``changes`` (parameter name -> value); unknown names raise KeyError."""
@@ -204,15 +256,21 @@ class NotchSupervisor:
         config: initial settings (checked as a whole; ValueError with the reason).
         sample_rate_hz: loop rate fs (Hz).
         channels: number of struts C.
+        output_weights: c (C,): the output whose rise ``mu_policy`` bounds and the
+            prediction reports, ``c^T e`` (e.g. the top plate's z axis, the z row of
+            ``J^-1``, what the report measures); None: the 6x6 loop's largest singular
+            value (any disturbance direction).
     """
 
     def __init__(self, config: NotchConfig, sample_rate_hz: float = SAMPLE_RATE_HZ,
-                 channels: int = STRUT_COUNT) -> None:
+                 channels: int = STRUT_COUNT,
+                 output_weights: np.ndarray | None = None) -> None:
         """Build the canceller and the DC blocker; identification waits for the first sample."""
         self.fs = float(sample_rate_hz)
         self.channels = int(channels)
+        self.output_weights = (None if output_weights is None
+                               else np.asarray(output_weights, dtype=float))
         self._config = config
-        self.plant_frequency_response = None       # broadband G(f), set by identification
         self._follow = _ToneFollowing(self)
         tones = bank_frequencies(config.tone_frequencies_hz, config.harmonics).tolist()
         raw = config.adaptation == "raw"
@@ -223,6 +281,7 @@ class NotchSupervisor:
         if not raw:
             self.canceller.set_tone_frequencies(tones, ramp_samples=0)
         self.canceller.set_enabled(False, ramp_samples=0)
+        self.canceller.set_weight_limit(config.weight_limit_n)
         self.dc_blocker = DCBlocker(self.channels, self.fs, config.dc_cutoff_hz)
         self._command = np.zeros(self.channels)
         self.identifier: adaptation.ToneResponseIdentifier | None = None
@@ -237,7 +296,22 @@ class NotchSupervisor:
         self.identification_end_sample = -1
         self.refusal = ""
         self.counters = {"gaps": 0, "missed_samples": 0, "duplicates": 0}
+        self.weight_clamps = 0
         self._events: list[SupervisorEvent] = []
+        self._identifying_tones: list[float] = []
+        self._analysis: Iterator[None] | None = None
+        self.plant_frequency_response: PlantFrequencyResponse | None = None
+        self.disturbance_spectrum: DisturbanceSpectrum | None = None
+        self.sensitivity: sensitivity.SensitivityPrediction | None = None
+        self.mu_choice: mu_policy.MuChoice | None = None
+        self.mu_limit = float("nan")
+        self.identification_confidence = float("nan")
+        self.guard = DivergenceGuard(self.channels, self.fs, tones, config.guard_margin_db)
+        self.guard_action = ""
+        self._guard_backed_off = False
+        self._guard_gave_up = False
+        self._quiet_from_sample = -1
+        self._last_clamp_event = -10**9
         self.bound = self._plan({"mu": config.mu,
                                  "tone_frequencies_hz": list(config.tone_frequencies_hz),
                                  "adaptation": config.adaptation,
@@ -274,10 +348,21 @@ class NotchSupervisor:
         plan = self._plan(changes)
         old = self._config
         self._config = old.replaced(changes)
+        # The node mirrors a mu the supervisor lowered into its ROS parameter, which comes
+        # back here: only a different mu is the user's new choice.
+        new_mu = "mu" in changes and float(changes["mu"]) != self.canceller.mu
         if "mu" in changes:
             self.canceller.set_mu(changes["mu"])
         tones_changed = "tone_frequencies_hz" in changes or "harmonics" in changes
         mode_changed = "adaptation" in changes
+        if "weight_limit_n" in changes:
+            self.canceller.set_weight_limit(float(changes["weight_limit_n"]))
+        if "guard_margin_db" in changes:
+            self.guard.margin_db = float(changes["guard_margin_db"])
+        if tones_changed:
+            self.guard.set_tones(plan.tones)
+        if tones_changed or mode_changed or new_mu:
+            self._clear_guard_refusal()
         if tones_changed:
             self.canceller.set_tone_frequencies(plan.tones, coefficients=plan.coefficients,
                                                 ramp_samples=self.ramp_samples)
@@ -291,6 +376,17 @@ class NotchSupervisor:
             self._after_tone_or_mode_change(plan, mode_changed)
         if tones_changed or any(name in changes for name in _FOLLOW_SETTINGS):
             self._follow.rebuild()
+
+    def _clear_guard_refusal(self) -> None:
+        """New settings: the guard's fade-out no longer holds; control may try again."""
+        if not self._guard_gave_up:
+            return
+        self._guard_restart()
+        self.refusal = ""
+        if (self.identifier is None and self._analysis is None
+                and self.plant_response is not None):
+            self.canceller.set_frozen(False)
+            self.canceller.set_enabled(self._config.enabled, self.ramp_samples)
 
     def _check_tones(self, changes: Mapping[str, Any]) -> None:
         if "tone_frequencies_hz" not in changes:
@@ -347,6 +443,21 @@ class NotchSupervisor:
             raise ValueError(f"harmonics={harmonics} rejected: {exc}") from None
         return bank.tolist()
 
+    @staticmethod
+    def _check_guard_settings(changes: Mapping[str, Any]) -> None:
+        """Refuse bad identification, policy, guard and weight-limit settings."""
+        method = changes.get("identification", IDENTIFICATION_METHODS[0])
+        if method not in IDENTIFICATION_METHODS:
+            raise ValueError(f"identification must be one of {IDENTIFICATION_METHODS}, "
+                             f"got {method!r}")
+        if "mu_policy" in changes or "max_rise_db" in changes:
+            mu_policy.validate_policy(changes.get("mu_policy", "manual"),
+                                      changes.get("max_rise_db", DEFAULT_MAX_RISE_DB))
+        for name in ("weight_limit_n", "guard_margin_db"):
+            value = changes.get(name, 1.0)
+            if not np.isfinite(value) or value <= 0.0:
+                raise ValueError(f"{name} must be finite and > 0, got {value!r}")
+
     def _plan(self, changes: Mapping[str, Any]) -> _Plan:
         """Check a set of changes as a whole, changing nothing.
 
@@ -359,6 +470,7 @@ class NotchSupervisor:
             ValueError: the reason to refuse the changes.
         """
         self._check_tones(changes)
+        self._check_guard_settings(changes)
         tones = self._bank_for(changes)
         mode = changes.get("adaptation", self._config.adaptation)
         if mode not in adaptation.COEFFICIENT_MODES:
@@ -394,12 +506,12 @@ class NotchSupervisor:
         if mode_changed:      # a normalised mode must not adapt with another mode's P
             self.canceller.set_frozen(True)
         running = self.identifier is not None and np.array_equal(
-            self.identifier.tone_frequencies_hz, plan.tones)
+            self._identifying_tones, plan.tones)
         if self._config.auto_identify and self.first_sample >= 0 and not running:
             self.start_identification(plan.tones)
 
     def _set_enabled(self, flag: bool) -> None:
-        if self.identifier is None and not (flag and self.refusal):
+        if self.identifier is None and self._analysis is None and not (flag and self.refusal):
             self.canceller.set_enabled(flag, self.ramp_samples)
         self.enabled_since_sample = self.last_sample + 1 if flag else -1
         self._event("info", f"control {'on' if flag else 'off'} from sample "
@@ -411,6 +523,8 @@ class NotchSupervisor:
 
     def _known_response(self, tones: list[float]) -> np.ndarray | None:
         """Identified G (T, C, C) at ``tones``, or None if a tone was never identified."""
+        if self.plant_frequency_response is not None and tones:
+            return self.plant_frequency_response.at(tones)
         rows = [self._responses.get(_tone_key(f)) for f in tones]
         if not rows or any(r is None for r in rows):
             return None
@@ -419,6 +533,9 @@ class NotchSupervisor:
     def _coefficients_for(self, tones: list[float], response: np.ndarray | None,
                           mode: str) -> tuple[np.ndarray | None, float]:
         """Coefficients for the canceller (None: new tones wait) and the mu bound."""
+        if response is not None and self.plant_frequency_response is not None:
+            coefficients = adaptation.normalized_coefficients(response, mode)
+            return coefficients, self._nyquist_limit(tones, coefficients)
         if response is not None:
             return coefficients_and_bound(response, mode, self._config.loop_delay_samples)
         if mode == "raw":
@@ -448,40 +565,93 @@ class NotchSupervisor:
         if not tones:
             raise ValueError("no tones to identify")
         cfg = self._config
-        self.identifier = adaptation.ToneResponseIdentifier(
-            self.channels, tones, self.fs, cfg.identification_amplitude_n,
-            cfg.identification_settle_s, cfg.identification_measure_s)
+        if cfg.identification == "broadband":
+            self.identifier = BroadbandIdentifier(self.channels, self.fs)
+            what = "over 0..fs/2 (multisine)"
+        else:
+            self.identifier = adaptation.ToneResponseIdentifier(
+                self.channels, tones, self.fs, cfg.identification_amplitude_n,
+                cfg.identification_settle_s, cfg.identification_measure_s)
+            what = f"at {tones} Hz"
+        self._identifying_tones = tones
         self.canceller.set_frozen(True)
         self.identification_start_sample = first_sample
         self.identification_end_sample = -1
-        text = (f"identifying the plant at {tones} Hz "
-                f"({self.identifier.duration_s:.1f} s of samples)")
+        text = f"identifying the plant {what} ({self.identifier.duration_s:.1f} s of samples)"
         self._event("info", text)
         return text
 
-    def _finish_identification(self) -> None:
+    def _nyquist_limit(self, tones: list[float], coefficients: np.ndarray) -> float:
+        """Largest common rate the Nyquist test finds stable on the identified G(f)."""
+        return sensitivity.stable_mu_limit(self.plant_frequency_response.at, tones, self.fs,
+                                           coefficients)
+
+    def _measured_response(self) -> tuple[np.ndarray, float, float, str]:
+        """G at the tones from the finished identifier, its uncertainty, limit, what it is."""
+        tones = self._identifying_tones
+        if isinstance(self.identifier, BroadbandIdentifier):
+            pfr = self.identifier.result()
+            self.plant_frequency_response = pfr
+            self.disturbance_spectrum = self.identifier.disturbance()
+            uncertainty = float(np.max(pfr.uncertainty_at(tones)))
+            return (pfr.at(tones), uncertainty, MAX_IDENTIFICATION_UNCERTAINTY,
+                    "relative uncertainty of G(f) at the tones")
         response = self.identifier.result()
-        for f, g in zip(self.identifier.tone_frequencies_hz, response, strict=True):
+        self.plant_frequency_response = None
+        self.disturbance_spectrum = None
+        change = self.identifier.baseline_change()
+        for f, g in zip(tones, response, strict=True):
             self._responses[_tone_key(f)] = g
+        return response, float(np.max(change)), MAX_BASELINE_CHANGE, (
+            "change of the disturbance at the tones during the identification")
+
+    def _finish_identification(self) -> Iterator[None]:
+        """The analysis of a finished identification, one piece per sample (a generator).
+
+        G, its confidence, the coefficients, the bound, the policy and the prediction: with
+        a broadband G(f) the Nyquist tests of the bound take ~0.1 s each, so :meth:`step`
+        runs one per sample (the lockstep driver waits at most ``lockstep_timeout_s`` for
+        a sample's command). The canceller stays frozen and off meanwhile (state
+        ``identifying``).
+        """
+        response, uncertainty, limit, what = self._measured_response()
         self.identifier = None
         self.identification_end_sample = self.last_sample
-        self.canceller.set_frozen(False)
+        self._quiet_from_sample = self.last_sample + int(round(GUARD_SETTLE_S * self.fs))
+        self.identification_confidence = float(max(0.0, 1.0 - uncertainty))
+        self.sensitivity = self.mu_choice = None
+        if self.plant_frequency_response is not None:
+            yield                          # the tone identification's analysis is quick
         tones = [float(f) for f in self.canceller.tone_frequencies_hz]
         mode = self._config.adaptation
-        current = self._known_response(tones)
+        if uncertainty > limit:
+            self.plant_response, self.identified_tones = None, []
+            self._refuse(f"identification failed: {what} {100 * uncertainty:.0f} % > "
+                         f"{100 * limit:.0f} % (a disturbance "
+                         "next to a tone?); control stays off")
+            return
+        current = response if tones == self._identifying_tones else self._known_response(
+            tones)
         try:
             if current is None:
                 raise ValueError(f"no identified response at {tones} Hz")
-            coefficients, bound = coefficients_and_bound(current, mode,
-                                                         self._config.loop_delay_samples)
+            if self.plant_frequency_response is not None:
+                coefficients = adaptation.normalized_coefficients(current, mode)
+            else:
+                coefficients, bound = self._coefficients_for(tones, current, mode)
         except ValueError as exc:
             self._refuse(f"identification unusable for {mode}: {exc}; not adapting")
             return
+        if self.plant_frequency_response is not None:
+            bound = yield from self._mu_limit_steps(tones, coefficients)
         self.plant_response, self.identified_tones, self.bound = current, tones, bound
+        self.mu_limit = bound
         self.canceller.set_coefficients(coefficients)
         gains = np.abs(np.diagonal(current, axis1=1, axis2=2)).mean(axis=1)
-        self._event("info", f"identified: |G_ii| {np.round(gains, 4)} (m/s^2)/N, mu bound "
-                            f"{bound:.4g}")
+        source = "Nyquist on G(f)" if self.plant_frequency_response is not None else "eq. 18"
+        self._event("info", f"identified: |G_ii| {np.round(gains, 4)} (m/s^2)/N, confidence "
+                            f"{self.identification_confidence:.3f}, mu bound {bound:.4g} "
+                            f"({source})")
         if bound <= 0.0:
             self._clamp_mu(0.0)
             self._refuse(f"identified mu bound is 0 ({mode} adaptation at {tones} Hz): no "
@@ -489,9 +659,63 @@ class NotchSupervisor:
             return
         self.refusal = ""
         self._clamp_mu(bound)
+        if self.plant_frequency_response is not None:
+            yield
+            self._apply_mu_policy(tones, coefficients)
+        self.canceller.set_frozen(False)
+        self._guard_restart()
         self.canceller.set_enabled(self._config.enabled, self.ramp_samples)
         if self._config.enabled and self.enabled_since_sample < 0:
             self.enabled_since_sample = self.last_sample + 1
+
+    def _mu_limit_steps(self, tones: list[float], coefficients: np.ndarray
+                        ) -> Generator[None, None, float]:
+        """The Nyquist limit on G(f), one stability test per ``yield`` (a generator).
+
+        As :func:`~hexapod_vibration.core.control.sensitivity.stable_mu_limit` (the
+        largest stable common rate), found by doubling from 1e-5 and bisecting to 2 %.
+        """
+        def stable(mu: float) -> bool:
+            return sensitivity.closed_loop_is_stable(self.plant_frequency_response.at,
+                                                     tones, self.fs, coefficients, mu)
+
+        lo = 1e-5
+        if not stable(lo):
+            return 0.0
+        hi = lo
+        while True:
+            yield
+            hi = min(2.0 * hi, 1.0)
+            if not stable(hi):
+                break
+            lo = hi
+            if hi >= 1.0:
+                return 1.0
+        while hi > lo * 1.02:
+            yield
+            mid = float(np.sqrt(lo * hi))
+            lo, hi = (mid, hi) if stable(mid) else (lo, mid)
+        return lo
+
+    def _apply_mu_policy(self, tones: list[float], coefficients: np.ndarray) -> None:
+        """Per-tone rates of ``mu_policy`` folded into P; the predicted sensitivity."""
+        cfg, mu = self._config, self.canceller.mu
+        pfr, phi = self.plant_frequency_response, self.disturbance_spectrum
+        choice = mu_policy.choose_tone_rates(pfr.at, tones, self.fs, coefficients, mu,
+                                             policy=cfg.mu_policy,
+                                             max_rise_db=cfg.max_rise_db,
+                                             output_weights=self.output_weights,
+                                             disturbance_csd=phi.at)
+        self.mu_choice = choice
+        folded = sensitivity.per_tone_coefficients(coefficients, mu, choice.tone_mu)
+        self.canceller.set_coefficients(folded)
+        self.sensitivity = sensitivity.predict_sensitivity(
+            pfr.at, tones, self.fs, folded, mu, output_weights=self.output_weights,
+            disturbance_csd=phi.at, check_stability=False)
+        self._event("warn" if choice.warning else "info",
+                    choice.warning or f"mu_policy {choice.policy}: tone rates "
+                    f"{np.round(choice.tone_mu, 6).tolist()}, predicted rise "
+                    f"{choice.predicted_rise_db:.2f} dB at {choice.rise_at_hz:.2f} Hz")
 
     def _refuse(self, reason: str) -> None:
         """Keep control off (frozen, faded out) and say why."""
@@ -526,8 +750,7 @@ class NotchSupervisor:
         self._event("warn", f"new run of the loop from sample {first_index}: sequence "
                             "restarted, identification and weights kept")
         if self.identifier is not None:
-            self._start_identification(list(self.identifier.tone_frequencies_hz),
-                                       int(first_index))
+            self._start_identification(list(self._identifying_tones), int(first_index))
 
     def step(self, index: int | None, accel_m_s2: np.ndarray) -> np.ndarray | None:
         """Take the raw accelerations of sample ``index``; the command (N) for that sample.
@@ -546,14 +769,29 @@ class NotchSupervisor:
             return None
         self._catch_up(index)
         error = self.dc_blocker.step(accel_m_s2)
+        clamped = self.canceller.clamped_samples
         command = self.canceller.step(error, out=self._command)
+        if self.canceller.clamped_samples != clamped:
+            self._weights_clamped()
+        if self._config.divergence_guard:
+            self._guard_step(error)
         if self._follow.active:
             self._follow.step(index)
         if self.identifier is not None:
             command += self.identifier.step(error)
             if self.identifier.done:
-                self._finish_identification()
+                self._analysis = self._finish_identification()
+                self._advance_analysis()
+        elif self._analysis is not None:
+            self._advance_analysis()
         return command
+
+    def _advance_analysis(self) -> None:
+        """One piece of the running identification analysis."""
+        try:
+            next(self._analysis)
+        except StopIteration:
+            self._analysis = None
 
     def _catch_up(self, index: int) -> None:
         """Keep the phase references on the sample grid across missing samples."""
@@ -567,7 +805,7 @@ class NotchSupervisor:
             self._event("warn", f"/pph/accel: {gap} samples missing before {index}")
             if self.identifier is not None:
                 self._event("warn", "samples missed during identification: restarting it")
-                self._start_identification(list(self.identifier.tone_frequencies_hz), index)
+                self._start_identification(list(self._identifying_tones), index)
         self.last_sample = index
         delay = int(round(self._config.identify_delay_s * self.fs))
         if (index - self.first_sample == delay and self.plant_response is None
@@ -575,11 +813,70 @@ class NotchSupervisor:
                 and self.canceller.tone_frequencies_hz.size):
             self._start_identification(None, index)
 
+    # ------------------------------------------------------------------ guard
+    def _weights_clamped(self) -> None:
+        """Anti-windup took effect (the canceller's limit, ``weight_limit_n``): say so."""
+        self.weight_clamps += 1
+        if self.last_sample - self._last_clamp_event >= self.fs:      # one line a second
+            self._last_clamp_event = self.last_sample
+            self._event("warn", f"weights clamped to the actuator rating "
+                                f"{self._config.weight_limit_n:g} N (anti-windup)")
+
+    def _guard_step(self, error: np.ndarray) -> None:
+        """Feed the guard; act on its verdict (see divergence_guard for the order)."""
+        n = self.last_sample
+        quiet = (self.identifier is None and n >= self._quiet_from_sample
+                 and n - self.first_sample >= GUARD_SETTLE_S * self.fs)
+        off = not self.canceller.enabled and self.canceller.output_gain == 0.0
+        controlling = (self.canceller.enabled and self.canceller.output_gain == 1.0
+                       and not self.canceller.frozen and self.identifier is None
+                       and self.plant_response is not None)
+        verdict = self.guard.step(error, recording=quiet and off,
+                                  judging=controlling and not self._guard_gave_up)
+        if verdict is None:
+            return
+        if verdict.action is not None:
+            self._guard_act(verdict)
+
+    def _guard_act(self, verdict: GuardVerdict) -> None:
+        """Lower mu, or fade out; say what and why."""
+        self.guard_action = f"{verdict.text} at sample {self.last_sample}"
+        if verdict.action == "lower_mu":
+            mu = self.canceller.mu / MU_DIVISOR
+            self.canceller.set_mu(mu)
+            self._config = self._config.replaced({"mu": mu})
+            self._guard_backed_off = True
+            self._event("warn", f"divergence guard: {self.guard_action}: mu lowered to "
+                                f"{mu:.4g}", ("mu", mu))
+            return
+        self._guard_gave_up = True
+        self.refusal = (f"divergence guard: {self.guard_action}: control faded out "
+                        "(worse than off at any rate tried)")
+        self.canceller.set_frozen(True)
+        self.canceller.set_enabled(False, int(round(FADE_S * self.fs)))
+        self._event("error", self.refusal)
+
+    def _guard_restart(self) -> None:
+        """New coefficients or settings: the guard's action sequence starts again."""
+        self.guard.restart()
+        self._guard_backed_off = self._guard_gave_up = False
+
+    @property
+    def guard_state(self) -> str:
+        """The guard's state: disabled, referencing, watching, backed_off or off."""
+        if not self._config.divergence_guard:
+            return GUARD_DISABLED
+        if self._guard_gave_up:
+            return GUARD_OFF
+        if self.state != NotchState.ADAPTING:
+            return GUARD_REFERENCING
+        return GUARD_BACKED_OFF if self._guard_backed_off else GUARD_WATCHING
+
     # ------------------------------------------------------------------ reporting
     @property
     def state(self) -> str:
         """One of :class:`NotchState`'s names."""
-        if self.identifier is not None:
+        if self.identifier is not None or self._analysis is not None:
             return NotchState.IDENTIFYING
         if self.refusal:
             return NotchState.REFUSED
@@ -602,6 +899,7 @@ class NotchSupervisor:
         values.update(self._follow.status())
         if self.refusal:
             values["refusal"] = self.refusal
+        values.update(self._guard_status())
         if self.plant_response is not None:
             diag = np.diagonal(self.plant_response, axis1=1, axis2=2)
             values["plant_gain_m_s2_per_n"] = np.round(np.abs(diag).mean(axis=1), 6).tolist()
@@ -624,6 +922,22 @@ class NotchSupervisor:
         """
         self._follow.set_reference(frequency_hz, self.last_sample if index is None
                                    else int(index))
+
+    def _guard_status(self) -> dict[str, Any]:
+        """The status keys of the identification, the mu policy and the guard."""
+        choice = self.mu_choice
+        rise, at_hz = ((choice.predicted_rise_db, choice.rise_at_hz) if choice is not None
+                       else (float("nan"), float("nan")))
+        return {"identification": self._config.identification,
+                "identification_confidence": round(self.identification_confidence, 4),
+                "mu_limit": self.mu_limit, "mu_policy": self._config.mu_policy,
+                "tone_mu": ([] if choice is None
+                            else np.round(choice.tone_mu, 8).tolist()),
+                "predicted_rise_db": round(float(rise), 3),
+                "predicted_rise_at_hz": round(float(at_hz), 3),
+                "guard": self.guard_state, "guard_action": self.guard_action,
+                "guard_reference_blocks": self.guard.reference_blocks,
+                "weight_clamps": self.weight_clamps}
 
     def _event(self, level: str, message: str,
                parameter: tuple[str, Any] | None = None) -> None:

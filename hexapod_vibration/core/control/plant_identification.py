@@ -35,12 +35,12 @@ A 12 s period (15 s in all) halves that; the error scales with the line spacing.
 
 from __future__ import annotations
 
-import functools
 from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
 from scipy.interpolate import CubicSpline
+from scipy.optimize import minimize_scalar
 
 from hexapod_vibration.core.control.adaptation import SampledRun, schroeder_phases
 
@@ -52,6 +52,16 @@ DEFAULT_MAX_RELATIVE_ERROR = 0.1
 DETECTION_NEIGHBOURS = 4
 DEFAULT_SMOOTHING_HZ = 4.0
 DEFAULT_LINE_FACTOR = 10.0
+STRONG_LINE_FACTOR = 100.0
+"""A spectral peak this many times the median power is a disturbance line, removed."""
+MAX_REMOVED_LINES = 6
+ZERO_PADDING = 8
+OFF_GRID_GAIN = 0.1
+"""A line counts as off the grid only if the off-grid fit leaves less than this fraction of
+the residual the on-grid one leaves (a leaking line: most of its power is leakage)."""
+ON_GRID_TOLERANCE = 0.05
+"""A fitted line closer than this (in record bins) to the DFT grid is on it: it does not
+leak, and is left alone."""
 
 
 @dataclass(frozen=True)
@@ -176,16 +186,132 @@ class PlantFrequencyResponse:
             raise ValueError(f'frequencies must be in [0, {0.5 * self.sample_rate_hz:g}] Hz')
         c = self.n_channels
         out = np.empty((f.size, c, c), dtype=complex)
-        for j, spline in enumerate(self._splines):
+        for j, spline in enumerate(self._splines()):
             lines = self.line_frequencies_hz[j]
             out[:, :, j] = spline(np.clip(f, lines[0], lines[-1]))
         return out
 
-    @functools.cached_property
     def _splines(self) -> list[CubicSpline]:
-        """One cubic spline per column, built on first use (tracked tones ask often)."""
-        return [CubicSpline(lines, values, axis=0) for lines, values in zip(
-            self.line_frequencies_hz, self.line_response, strict=True)]
+        """One cubic spline per column, built once (the response is immutable)."""
+        cached = self.__dict__.get('_spline_cache')
+        if cached is None:
+            cached = [CubicSpline(lines, g, axis=0) for lines, g in
+                      zip(self.line_frequencies_hz, self.line_response, strict=True)]
+            object.__setattr__(self, '_spline_cache', cached)
+        return cached
+
+
+    def uncertainty_at(self, frequencies_hz: Sequence[float] | np.ndarray) -> np.ndarray:
+        """Relative uncertainty of G at ``frequencies_hz`` (F,): the worst column's.
+
+        Two figures per column, the larger kept: the standard error of the lines there
+        (``line_relative_error``, interpolated linearly) and the interpolation's own
+        error, estimated by leaving out the measured line nearest to f and comparing the
+        two splines (``|G - G_loo| / |G|``, column norms). A disturbance that corrupts the
+        lines next to a tone removes them; the wider gap shows up in the second figure.
+        """
+        f = np.asarray(frequencies_hz, dtype=float).reshape(-1)
+        full = self.at(f)
+        out = np.zeros(f.size)
+        for j in range(self.n_channels):
+            lines = self.line_frequencies_hz[j]
+            err = np.interp(f, lines, self.line_relative_error[j])
+            loo = np.empty((f.size, self.n_channels), dtype=complex)
+            for m, fm in enumerate(f):
+                keep = np.ones(lines.size, bool)
+                keep[int(np.argmin(np.abs(lines - fm)))] = False
+                spline = CubicSpline(lines[keep], self.line_response[j][keep], axis=0)
+                loo[m] = spline(np.clip(fm, lines[keep][0], lines[keep][-1]))
+            col = full[:, :, j]
+            interp = (np.linalg.norm(col - loo, axis=1)
+                      / np.maximum(np.linalg.norm(col, axis=1), 1e-300))
+            out = np.maximum(out, np.maximum(err, interp))
+        return out
+
+
+@dataclass(frozen=True)
+class RemovedLine:
+    """A disturbance sinusoid fitted in the record and subtracted before the DFT.
+
+    Attributes:
+        frequency_hz: its frequency (Hz), fitted to a small fraction of a bin.
+        amplitude: (C,) peak amplitude per channel (m/s^2).
+    """
+
+    frequency_hz: float
+    amplitude: np.ndarray
+
+
+def _dirichlet(offset_bins: np.ndarray, n: int) -> np.ndarray:
+    """DFT at bin k of ``e^{j 2 pi nu m / n}``, m = 0..n-1, as a function of k - nu."""
+    x = np.asarray(offset_bins, dtype=float)
+    den = np.sin(np.pi * x / n)
+    small = np.abs(den) < 1e-12
+    ratio = np.where(small, n, np.sin(np.pi * x) / np.where(small, 1.0, den))
+    return np.exp(-1j * np.pi * x * (n - 1) / n) * ratio
+
+
+def _kernel_fit(spectrum: np.ndarray, bins: np.ndarray, nu: float, n: int
+                ) -> tuple[np.ndarray, float]:
+    """Least-squares phasors A (C,) of a line at bin ``nu`` on ``bins``, residual power."""
+    kernel = _dirichlet(bins - nu, n)                                   # (S,)
+    amp = kernel.conj() @ spectrum[bins] / np.vdot(kernel, kernel).real  # (C,)
+    residual = spectrum[bins] - kernel[:, None] * amp[None, :]
+    return amp, float(np.sum(np.abs(residual) ** 2))
+
+
+def remove_strong_lines(record: np.ndarray, fs: float, design: MultisineDesign,
+                        span_hz: float = 8.0) -> tuple[np.ndarray, list[RemovedLine]]:
+    """Subtract the disturbance lines that would leak over the excitation (N, C) -> (N, C).
+
+    A disturbance line off the record's DFT grid (a tone a fraction of a hertz from the
+    told one) is not periodic in the record: its DFT leaks, as ``1/distance``, over every
+    line around it (an 80 N shaker line at 40.4 Hz spoils every line from 30 to 50 Hz).
+    The bins the excitation does not use (all but the odd multiples of the period's grid)
+    hold only the disturbance and noise, so there its leakage is known exactly: the
+    Dirichlet kernel of the record. The strongest local maxima of those bins (channels
+    summed) above ``STRONG_LINE_FACTOR`` times their median are candidates; each is fitted
+    on the unexcited bins within ``span_hz`` but those of the other strong lines (frequency
+    by a bounded 1-D search, phasor per channel by least squares) and, if it lies off the
+    DFT grid (and fits there far better than on it, ``OFF_GRID_GAIN``), subtracted from
+    the record as a sinusoid, up to ``MAX_REMOVED_LINES``. A line on the grid does not
+    leak and is left alone. The excitation lines next to a removed line are dropped by
+    :func:`response_from_periods`.
+    """
+    x = np.asarray(record, dtype=float).copy()
+    n = x.shape[0]
+    periods = n // design.period_samples
+    k = np.arange(n // 2 + 1)
+    excited = (k % periods == 0) & ((k // periods) % 2 == 1)
+    free = np.flatnonzero(~excited & (k > 1))
+    span = int(round(span_hz * n / fs))
+    removed: list[RemovedLine] = []
+    skipped: set[int] = set()
+    t = np.arange(n)
+    while len(removed) < MAX_REMOVED_LINES:
+        spectrum = np.fft.fft(x, axis=0)
+        power = np.sum(np.abs(spectrum[free]) ** 2, axis=1)
+        local = np.flatnonzero((power[1:-1] > power[:-2]) & (power[1:-1] >= power[2:])) + 1
+        local = [int(c) for c in local[np.argsort(power[local])[::-1]]
+                 if power[c] > STRONG_LINE_FACTOR * np.median(power) and int(c) not in skipped]
+        if not local:
+            break
+        k0 = int(free[local[0]])
+        strong = free[power > STRONG_LINE_FACTOR * np.median(power)]
+        others = strong[np.abs(strong - k0) > 2]
+        near = free[(np.abs(free - k0) <= span) & ~np.isin(free, others)]
+        fit = minimize_scalar(lambda nu, near=near, sp=spectrum: _kernel_fit(sp, near, nu, n)[1],
+                              bounds=(k0 - 1.0, k0 + 1.0), method='bounded',
+                              options={'xatol': 1e-6})
+        nu = float(fit.x)
+        if (abs(nu - round(nu)) < ON_GRID_TOLERANCE
+                or fit.fun > OFF_GRID_GAIN * _kernel_fit(spectrum, near, round(nu), n)[1]):
+            skipped.add(local[0])                      # on the DFT grid: does not leak
+            continue
+        amp, _ = _kernel_fit(spectrum, near, nu, n)
+        x -= (2.0 * amp[None, :] * np.exp(2j * np.pi * nu * t / n)[:, None]).real
+        removed.append(RemovedLine(nu * fs / n, 2.0 * np.abs(amp)))
+    return x, removed
 
 
 def detection_line_noise(spectrum: np.ndarray, bins: np.ndarray,
@@ -217,8 +343,8 @@ def detection_line_noise(spectrum: np.ndarray, bins: np.ndarray,
 
 
 def response_from_periods(design: MultisineDesign, error_periods: np.ndarray,
-                          max_relative_error: float = DEFAULT_MAX_RELATIVE_ERROR
-                          ) -> PlantFrequencyResponse:
+                          max_relative_error: float = DEFAULT_MAX_RELATIVE_ERROR,
+                          removed_hz: Sequence[float] = ()) -> PlantFrequencyResponse:
     """G from the errors of M whole periods of steady-state excitation.
 
     Args:
@@ -230,6 +356,8 @@ def response_from_periods(design: MultisineDesign, error_periods: np.ndarray,
             remain per column (the best ones are kept otherwise). The standard error comes
             from the detection lines (:func:`detection_line_noise`), so it works with one
             period too.
+        removed_hz: disturbance lines subtracted from the record
+            (:func:`remove_strong_lines`): the lines within 1.5 bins of them are dropped.
 
     Returns:
         The response at the kept lines of every column.
@@ -245,6 +373,10 @@ def response_from_periods(design: MultisineDesign, error_periods: np.ndarray,
     rel = (np.linalg.norm(noise, axis=1)
            / np.maximum(np.linalg.norm(mean, axis=1), 1e-300))
     freqs = design.frequencies_hz
+    record_bin_hz = design.sample_rate_hz / (design.period_samples * m)
+    for f_line in removed_hz:
+        rel[np.abs(freqs - f_line) <= 1.5 * max(record_bin_hz, design.sample_rate_hz / p)
+            ] = np.inf
     lines_f, lines_g, lines_e = [], [], []
     for j in range(c):
         idx = np.flatnonzero(design.channel_of_bin == j)
@@ -387,7 +519,9 @@ class BroadbandIdentifier(SampledRun):
         """
         if not self.done:
             raise RuntimeError(f'identification not finished ({100 * self.progress:.0f} %)')
-        return response_from_periods(self.design, self._aligned_periods(), self._max_rel)
+        periods, removed = self._cleaned_periods()
+        return response_from_periods(self.design, periods, self._max_rel,
+                                     [line.frequency_hz for line in removed])
 
     def disturbance(self, smoothing_hz: float = DEFAULT_SMOOTHING_HZ) -> DisturbanceSpectrum:
         """The disturbance's CSD from the same record (:func:`disturbance_from_periods`).
@@ -397,7 +531,22 @@ class BroadbandIdentifier(SampledRun):
         """
         if not self.done:
             raise RuntimeError(f'identification not finished ({100 * self.progress:.0f} %)')
-        return disturbance_from_periods(self.design, self._aligned_periods(), smoothing_hz)
+        return disturbance_from_periods(self.design, self._cleaned_periods()[0], smoothing_hz)
+
+    def removed_lines(self) -> list[RemovedLine]:
+        """The disturbance lines subtracted before the DFT (:func:`remove_strong_lines`)."""
+        return self._cleaned_periods()[1]
+
+    def _cleaned_periods(self) -> tuple[np.ndarray, list[RemovedLine]]:
+        """The aligned periods with the strong disturbance lines removed (cached)."""
+        if getattr(self, '_cleaned', None) is None:
+            record, removed = remove_strong_lines(self._record, self._fs, self.design)
+            self._cleaned = (self._align(record), removed)
+        return self._cleaned
+
+    def _align(self, record: np.ndarray) -> np.ndarray:
+        periods = record.reshape(self._periods, self._p, self._c)
+        return np.roll(periods, self._settle % self._p, axis=1)
 
     def _aligned_periods(self) -> np.ndarray:
         """The measured periods (M, P, C), row n of each paired with table row n.

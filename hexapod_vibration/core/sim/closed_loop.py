@@ -94,7 +94,9 @@ class CoreLoop:
         self.pointing.set_target(np.asarray(scenario.target_pose),
                                  self.config.strut.stroke_limit_m)
         tones = scenario.notch.tone_frequencies_hz
-        self.notch = NotchSupervisor(notch_config(scenario), fs) if tones else None
+        z_row = np.linalg.inv(self.config.geometry.top_jacobian)[2]     # the report's z axis
+        self.notch = (NotchSupervisor(notch_config(scenario), fs, output_weights=z_row)
+                      if tones else None)
         self.tachometer = self.rotor is not None and scenario.rotor.tachometer
         """Whether the rotor's speed (the speed at the sample's time, Hz) is fed to the
         notch as its reference frequency each sample, as the driver publishes it."""

@@ -1,0 +1,289 @@
+"""Never worse than off: watch the error under control against its level before control.
+
+:class:`DivergenceGuard` is pure bookkeeping on the error the canceller sees (the six
+DC-blocked accelerations, m/s^2). It cuts the error into blocks of ``block_s`` (0.25 s)
+and, from a Hann-windowed FFT of each block, takes the power (summed over the channels) in
+
+- one band per controlled tone, ``f_t +- band_half_width_hz`` (4 Hz: the band a 1 %
+  frequency error or a +-1 Hz drift stays in), and
+- the broadband error, ``BROADBAND_LOW_HZ`` .. fs/2, and
+- every one-third-octave band from ``THIRD_OCTAVE_LOW_HZ`` (50 Hz: narrower bands hold
+  fewer than three of the block's 4 Hz bins) to fs/2, without the bins within the tones'
+  bands and their window's main lobe (a converging tone is no rise): a harmonic the nonlinear plant
+  makes of a line the canceller moves (the 80 Hz band of ``drift``) is a band too. Below
+  50 Hz off the tones (the loop's resonances at 17.7 and 22.5 Hz, where the waterbed
+  rise is) the bound is ``mu_policy``'s prediction, accurate there to 0.3 dB.
+
+While control is off and nothing is injected (no identification running) the blocks build
+the *reference*: the uncontrolled level of every band (mean power) and its block-to-block
+scatter (dB). While control is on each block is judged against it:
+
+- fast: one block above ``reference + margin + max(3 sigma, FAST_EXTRA_MIN_DB)`` (a
+  runaway: unstable rate, wound-up weights) is a divergence, seen at the end of the block
+  in which it happens (<= 0.25 s, well within the 0.5 s the issue allows);
+- slow: the exponential mean over ``SLOW_BLOCKS`` blocks (2 s) above ``reference + margin
+  + 3 sigma / sqrt(SLOW_BLOCKS)`` (a steady excess of a few dB: a canceller that is
+  stable but wrong, e.g. tuned 0.4 Hz off the line) is a divergence too.
+
+The guard decides, the supervisor acts (:class:`GuardVerdict`). The order of the actions
+(:data:`ACTIONS`), one step per divergence:
+
+1. ``lower_mu``: ``mu`` is divided by ``MU_DIVISOR``, the weights kept. A rate too high
+   for the loop (the identified bound was optimistic or the plant changed) is cured by a
+   lower one, which then unwinds the weights smoothly, and the benefit of control is
+   kept. No weight is set back: a jump of the output splatters over every band (measured
+   on ``drift``: +25 dB in 44.7-56.2 Hz for 2 s after a rollback to older weights), and
+   freezing alone leaves weights tuned to a tone the disturbance has left beating
+   against it. The fast detector then waits ``GRACE_BLOCKS`` blocks. Only for a tone's
+   band or the broadband: a band off the tones that rises (a harmonic the nonlinear plant
+   makes of a line the canceller moves) says the model is wrong, not the rate, and goes
+   straight to 2.
+2. ``fade_out``: the output fades to 0 over ``FADE_S`` (0.25 s: a fade that keeps the
+   splatter within the tone's own band) and adaptation stops: a canceller whose model of
+   the disturbance is wrong (frequency mismatch or drift, a plant response that no longer
+   holds) diverges at any rate; off is the level it must not exceed. Control stays off
+   until the settings change or a new identification succeeds.
+
+Anti-windup (weights never above what the actuators deliver) is the supervisor's per-sample
+clamp (:meth:`~hexapod_vibration.core.control.notch.AdaptiveNotchCanceller.limit_weights`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from hexapod_vibration.core.spectrum import third_octave_bands_hz
+
+DEFAULT_BLOCK_S = 0.25
+DEFAULT_BAND_HALF_WIDTH_HZ = 4.0
+BROADBAND_LOW_HZ = 8.0
+"""Below this (two 4 Hz bins) the DC blocker's settling leaks into the block's spectrum:
+left out of the broadband."""
+THIRD_OCTAVE_LOW_HZ = 50.0
+FAST_EXTRA_MIN_DB = 2.0
+SLOW_BLOCKS = 8
+MIN_REFERENCE_BLOCKS = 4
+OCTAVE_REFERENCE_BLOCKS = 16
+DEFAULT_SCATTER_DB = 1.0
+"""Block-to-block scatter assumed until MIN_REFERENCE_BLOCKS reference blocks exist (dB)."""
+MU_DIVISOR = 4.0
+GRACE_BLOCKS = 2
+"""After an action the fast detector waits this many blocks (0.5 s); the slow one keeps
+watching."""
+ACTIONS = ("lower_mu", "fade_out")
+FADE_S = 0.25
+
+GUARD_DISABLED = "disabled"
+GUARD_REFERENCING = "referencing"
+GUARD_WATCHING = "watching"
+GUARD_BACKED_OFF = "backed_off"
+GUARD_OFF = "off"
+
+
+@dataclass(frozen=True)
+class GuardVerdict:
+    """What the guard found at the end of a block while control was on.
+
+    Attributes:
+        action: ``None`` (all bands within their thresholds), or the action to take now
+            (one of :data:`ACTIONS`).
+        band: the band that diverged (e.g. ``tone 40 Hz`` or ``broadband``), or None.
+        rise_db: its level above the reference (dB).
+        threshold_db: the rise that counts as divergence for it (dB).
+        detector: ``fast`` (one block) or ``slow`` (the exponential mean), or None.
+    """
+
+    action: str | None
+    band: str | None = None
+    rise_db: float = 0.0
+    threshold_db: float = 0.0
+    detector: str | None = None
+
+    @property
+    def text(self) -> str:
+        """One line for the log."""
+        if self.action is None:
+            return "all bands within their level without control"
+        return (f"{self.band} {self.rise_db:+.1f} dB over its level without control "
+                f"(threshold {self.threshold_db:.1f} dB, {self.detector}): {self.action}")
+
+
+class DivergenceGuard:
+    """Block-wise band levels of the error, a reference without control, verdicts with it.
+
+    Args:
+        channels: number of error channels C.
+        sample_rate_hz: loop rate fs (Hz).
+        tone_frequencies_hz: the controlled tones (Hz).
+        margin_db: rise over the reference that counts as worse (dB, > 0).
+        block_s: block length (s).
+        band_half_width_hz: half width of each tone's band (Hz).
+    """
+
+    def __init__(self, channels: int, sample_rate_hz: float,
+                 tone_frequencies_hz: Sequence[float], margin_db: float = 1.0,
+                 block_s: float = DEFAULT_BLOCK_S,
+                 band_half_width_hz: float = DEFAULT_BAND_HALF_WIDTH_HZ) -> None:
+        """Allocate the block buffer; no reference yet."""
+        if not np.isfinite(margin_db) or margin_db <= 0.0:
+            raise ValueError(f"guard_margin_db must be finite and > 0 dB, got {margin_db!r}")
+        self.fs = float(sample_rate_hz)
+        self.channels = int(channels)
+        self.margin_db = float(margin_db)
+        self.block = int(round(block_s * self.fs))
+        self.half_width_hz = float(band_half_width_hz)
+        self._buffer = np.zeros((self.block, self.channels))
+        self._window = np.hanning(self.block)[:, None]
+        self._freqs = np.fft.rfftfreq(self.block, 1.0 / self.fs)
+        self._n = 0
+        self.set_tones(tone_frequencies_hz)
+        self.action_count = 0
+        self._grace = 0
+
+    # ------------------------------------------------------------------ bands
+    def set_tones(self, tone_frequencies_hz: Sequence[float]) -> None:
+        """Bands for a new tone set; the reference and the judging start again."""
+        self.tones_hz = [float(f) for f in tone_frequencies_hz]
+        masks = [np.abs(self._freqs - f) <= self.half_width_hz for f in self.tones_hz]
+        masks.append(self._freqs >= BROADBAND_LOW_HZ)
+        names = [f"tone {f:g} Hz" for f in self.tones_hz] + ["broadband"]
+        near_tone = np.zeros(self._freqs.size, bool)
+        for f in self.tones_hz:        # the tones' own bands and their window's main lobe
+            near_tone |= np.abs(self._freqs - f) <= self.half_width_hz + 2.0 * self.fs / self.block
+        for centre, lo, hi in third_octave_bands_hz(THIRD_OCTAVE_LOW_HZ, 0.5 * self.fs):
+            sel = (self._freqs >= lo) & (self._freqs < hi) & ~near_tone
+            if np.count_nonzero(sel) >= 3:
+                masks.append(sel)
+                names.append(f"1/3 octave {centre:.0f} Hz")
+        self._masks = np.array(masks, dtype=float)                     # (B, F)
+        self.band_names = names
+        self._n_main = len(self.tones_hz) + 1            # the tones' bands and broadband
+        self.reset_reference()
+
+    def reset_reference(self) -> None:
+        """Forget the reference (new tones, new identification)."""
+        nb = len(self.band_names)
+        self._ref_sum = np.zeros(nb)
+        self._ref_db = []
+        self._slow = None
+        self.last_levels_db = np.full(nb, np.nan)
+
+    @property
+    def reference_blocks(self) -> int:
+        """Number of blocks in the reference."""
+        return len(self._ref_db)
+
+    @property
+    def has_reference(self) -> bool:
+        """True once at least one reference block was taken."""
+        return self.reference_blocks > 0
+
+    def reference_db(self) -> np.ndarray:
+        """Reference level of each band (dB re 1 (m/s^2)^2, summed over channels)."""
+        return 10.0 * np.log10(np.maximum(self._ref_sum / max(self.reference_blocks, 1),
+                                          1e-300))
+
+    def scatter_db(self) -> np.ndarray:
+        """Block-to-block scatter of each band's reference level (dB)."""
+        if self.reference_blocks < MIN_REFERENCE_BLOCKS:
+            return np.full(len(self.band_names), DEFAULT_SCATTER_DB)
+        return np.std(np.array(self._ref_db), axis=0, ddof=1)
+
+    def thresholds_db(self) -> tuple[np.ndarray, np.ndarray]:
+        """(fast, slow) rise over the reference (dB) that counts as divergence, per band.
+
+        Three standard deviations of the judged level (one block, or the slow mean) and of
+        the reference's own mean (``reference_blocks`` blocks) over the margin; the
+        one-third-octave bands are judged (finite thresholds) only once the reference
+        holds ``OCTAVE_REFERENCE_BLOCKS`` blocks: with fewer, ten noise bands would give
+        false alarms.
+        """
+        sigma = self.scatter_db()
+        ref = 1.0 / max(self.reference_blocks, 1)
+        fast = self.margin_db + np.maximum(3.0 * sigma * np.sqrt(1.0 + ref), FAST_EXTRA_MIN_DB)
+        slow = self.margin_db + 3.0 * sigma * np.sqrt(1.0 / SLOW_BLOCKS + ref)
+        if self.reference_blocks < OCTAVE_REFERENCE_BLOCKS:
+            fast[self._n_main:] = slow[self._n_main:] = np.inf
+        return fast, slow
+
+    # ------------------------------------------------------------------ per sample
+    def step(self, error: np.ndarray, recording: bool, judging: bool) -> GuardVerdict | None:
+        """Take one sample of the error (C,) (m/s^2); a verdict at the end of a judged block.
+
+        Args:
+            error: the DC-blocked error of this sample.
+            recording: control is off and nothing is injected: the block may go into the
+                reference.
+            judging: control is on: the block is judged.
+
+        A block counts for the reference (or is judged) only if every one of its samples
+        was recording (judging); a block that mixes the two is dropped.
+        """
+        if self._n == 0:
+            self._all_recording, self._all_judging = True, True
+        self._buffer[self._n] = error
+        self._all_recording &= bool(recording)
+        self._all_judging &= bool(judging)
+        self._n += 1
+        if self._n < self.block:
+            return None
+        self._n = 0
+        power = self._band_power()
+        if self._all_recording:
+            self._ref_sum += power
+            self._ref_db.append(10.0 * np.log10(np.maximum(power, 1e-300)))
+            return None
+        if self._all_judging and self.has_reference:
+            return self._judge(power)
+        return None
+
+    def _band_power(self) -> np.ndarray:
+        """Power of each band in the buffered block ((m/s^2)^2, channels summed)."""
+        spectrum = np.fft.rfft(self._buffer * self._window, axis=0)
+        bins = np.sum(np.abs(spectrum) ** 2, axis=1)                  # (F,)
+        return self._masks @ bins
+
+    def _judge(self, power: np.ndarray) -> GuardVerdict:
+        ref = self._ref_sum / self.reference_blocks
+        level = 10.0 * np.log10(np.maximum(power, 1e-300) / np.maximum(ref, 1e-300))
+        self.last_levels_db = level
+        alpha = 1.0 / SLOW_BLOCKS
+        if self._slow is None:
+            self._slow = power.copy()
+        else:
+            self._slow = (1.0 - alpha) * self._slow + alpha * power
+        slow = 10.0 * np.log10(np.maximum(self._slow, 1e-300) / np.maximum(ref, 1e-300))
+        fast_th, slow_th = self.thresholds_db()
+        detectors = [("fast", level, fast_th), ("slow", slow, slow_th)]
+        if self._grace > 0:
+            self._grace -= 1
+            detectors = detectors[1:]
+        for detector, rise, th in detectors:
+            over = np.flatnonzero(rise > th)
+            if over.size:
+                b = int(over[np.argmax(rise[over] - th[over])])
+                action = ACTIONS[min(self.action_count, len(ACTIONS) - 1)]
+                if b >= self._n_main:          # off the tones: a wrong model, not a rate
+                    action = ACTIONS[-1]
+                self.action_count += 1
+                self._slow = None                      # judge the next state afresh
+                self._grace = GRACE_BLOCKS
+                return GuardVerdict(action, self.band_names[b], float(rise[b]),
+                                    float(th[b]), detector)
+        return GuardVerdict(None)
+
+    def within_margin(self) -> bool:
+        """True if the tones' bands and the broadband were within reference + margin.
+
+        The last judged block's; the narrow bands' noise would say no half the time.
+        """
+        return bool(np.all(~(self.last_levels_db[:self._n_main] > self.margin_db)))
+
+    def restart(self) -> None:
+        """Control starts again from scratch (new settings): the action sequence restarts."""
+        self.action_count = 0
+        self._slow = None
+        self._grace = 0

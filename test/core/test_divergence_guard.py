@@ -1,0 +1,189 @@
+"""The divergence guard alone (synthetic, seeded signals) and inside the supervisor.
+
+Alone: a 40 Hz line plus white noise on six channels as the level without control; then the
+same statistics (no verdict), a rise (a verdict within one 0.25 s block, lower mu first,
+fade-out second), a small steady rise (the slow detector), a fall (control working: none).
+In the supervisor (the static plant of test_notch_supervisor): a plant whose sign flips
+after the identification makes the canceller diverge; the guard lowers mu, then
+fades out within 0.5 s of each divergence, and the weights never exceed the actuator rating.
+"""
+
+import numpy as np
+import pytest
+
+from hexapod_vibration.core.control.divergence_guard import (
+    GUARD_OFF,
+    DivergenceGuard,
+)
+from hexapod_vibration.core.control.notch import AdaptiveNotchCanceller
+from hexapod_vibration.core.control.notch_supervisor import (
+    NotchConfig,
+    NotchState,
+    NotchSupervisor,
+)
+
+FS = 1000.0
+TONE = 40.0
+BLOCK = 250
+
+
+def _signal(rng, samples, start, tone_amp=0.05, noise=0.002, tone_hz=TONE):
+    n = np.arange(start, start + samples)
+    mix = np.linspace(0.5, 1.5, 6)
+    line = tone_amp * mix[None, :] * np.cos(2 * np.pi * tone_hz * n / FS + 0.3)[:, None]
+    return line + noise * rng.standard_normal((samples, 6))
+
+
+def _feed(guard, x, recording, judging):
+    verdicts = []
+    for i, e in enumerate(x):
+        v = guard.step(e, recording, judging)
+        if v is not None:
+            verdicts.append((i, v))
+    return verdicts
+
+
+@pytest.fixture
+def referenced():
+    rng = np.random.default_rng(5)
+    guard = DivergenceGuard(6, FS, [TONE], margin_db=1.0)
+    _feed(guard, _signal(rng, 4000, 0), recording=True, judging=False)
+    assert guard.reference_blocks == 16
+    return guard, rng
+
+
+def test_the_same_statistics_under_control_give_no_verdict(referenced):
+    guard, rng = referenced
+    verdicts = _feed(guard, _signal(rng, 20000, 4000), recording=False, judging=True)
+    assert len(verdicts) == 80
+    assert all(v.action is None for _, v in verdicts)
+
+
+def test_a_rise_is_caught_within_one_block_lower_mu_first_then_fade_out(referenced):
+    guard, rng = referenced
+    worse = _signal(rng, 3 * BLOCK, 4000, tone_amp=0.05 * 10 ** (6 / 20))   # +6 dB
+    verdicts = _feed(guard, worse, recording=False, judging=True)
+    first, verdict = verdicts[0]
+    assert first == BLOCK - 1                      # at the end of the first block: 0.25 s
+    assert verdict.action == "lower_mu" and verdict.band == "tone 40 Hz"
+    assert verdict.detector == "fast" and 5.0 < verdict.rise_db < 7.0
+    assert verdicts[1][1].action == "fade_out"
+
+
+def test_a_steady_two_db_rise_is_caught_by_the_slow_detector(referenced):
+    guard, rng = referenced
+    worse = _signal(rng, 20 * BLOCK, 4000, tone_amp=0.05 * 10 ** (2 / 20))
+    verdicts = [(i, v) for i, v in _feed(guard, worse, False, True) if v.action]
+    assert verdicts and verdicts[0][1].detector == "slow"
+    assert verdicts[0][0] < 8 * BLOCK              # within the 2 s of the slow mean
+
+
+def test_a_fall_is_no_divergence_and_the_broadband_is_watched_too(referenced):
+    guard, rng = referenced
+    better = _signal(rng, 10 * BLOCK, 4000, tone_amp=0.0005)
+    assert all(v.action is None for _, v in _feed(guard, better, False, True))
+    assert guard.within_margin()
+    noisy = _signal(rng, 2 * BLOCK, 6500, tone_amp=0.0005, noise=0.2)       # broadband up
+    verdict = next(v for _, v in _feed(guard, noisy, False, True) if v.action)
+    assert verdict.band == "broadband" or verdict.band.startswith("1/3 octave")
+    assert guard.last_levels_db[guard.band_names.index("broadband")] > 10.0
+
+
+def test_a_harmonic_rising_in_a_third_octave_band_is_a_divergence(referenced):
+    """Off the tones: an 80 Hz line 20 dB over the noise (a harmonic control moved)."""
+    guard, rng = referenced
+    x = _signal(rng, 12 * BLOCK, 4000, tone_amp=0.0005)
+    n = np.arange(4000, 4000 + x.shape[0])
+    x += 0.003 * np.cos(2 * np.pi * 80.0 * n / FS)[:, None]
+    verdict = next(v for _, v in _feed(guard, x, False, True) if v.action)
+    assert verdict.band == "1/3 octave 79 Hz"
+
+
+def test_no_reference_no_verdict_and_a_mixed_block_counts_for_nothing():
+    rng = np.random.default_rng(1)
+    guard = DivergenceGuard(6, FS, [TONE])
+    assert _feed(guard, _signal(rng, 1000, 0), False, True) == []
+    x = _signal(rng, BLOCK, 0)
+    for i, e in enumerate(x):
+        guard.step(e, recording=i < 100, judging=False)
+    assert guard.reference_blocks == 0
+    with pytest.raises(ValueError, match="guard_margin_db"):
+        DivergenceGuard(6, FS, [TONE], margin_db=0.0)
+
+
+def test_limit_weights_keeps_each_strut_within_the_rating():
+    canceller = AdaptiveNotchCanceller(6, [40.0, 80.0], FS, 0.01)
+    w = np.zeros((2, 6), complex)
+    w[:, 0] = [30.0 + 30.0j, 20.0]                 # 42.4 + 20 N > 40 N on strut 0
+    w[:, 1] = [10.0, 10.0j]                        # 20 N: within
+    canceller.set_weights(w)
+    assert canceller.limit_weights(40.0)
+    limited = canceller.weights
+    assert np.isclose(np.abs(limited[:, 0]).sum(), 40.0)
+    assert np.allclose(limited[:, 1], w[:, 1])
+    assert np.allclose(np.angle(limited[:, 0]), np.angle(w[:, 0]))
+    assert not canceller.limit_weights(40.0)
+
+
+# ---------------------------------------------------------------------------- in the loop
+def _run(sup, k_of_n, samples, start=0, amplitude=0.05):
+    """The static plant a = g + d + K u_{n-1}; K may change with the sample (k_of_n)."""
+    u = np.zeros(6)
+    mix = np.linspace(0.5, 1.5, 6)
+    rng = np.random.default_rng(start)
+    peak = 0.0
+    for n in range(start, start + samples):
+        d = amplitude * mix * np.cos(2 * np.pi * TONE * n / FS + 0.3)
+        accel = 9.80665 + d + k_of_n(n) @ u + 1e-4 * rng.standard_normal(6)
+        command = sup.step(n, accel)
+        u = command.copy()
+        peak = max(peak, float(np.abs(sup.canceller.weights).sum(axis=0).max()))
+    return peak
+
+
+def test_supervisor_backs_off_a_diverging_canceller_and_clamps_the_weights():
+    sup = NotchSupervisor(NotchConfig(tone_frequencies_hz=(TONE,), enabled=False,
+                                      identify_delay_s=0.5, mu=0.01, weight_limit_n=5.0))
+    good = 0.1 * np.eye(6)
+    _run(sup, lambda n: good, 500 + 3200 + 2000)    # identified, 2 s without control
+    assert sup.guard.reference_blocks >= 4 and sup.guard_state == "referencing"
+    sup.apply({"enabled": True})
+    on = sup.last_sample + 1
+    flipped = -good                               # the plant changed sign: P is wrong
+    peak = _run(sup, lambda n: flipped, 4000, on)
+    assert peak <= 5.0 + 1e-9                     # anti-windup: never above the rating
+    assert sup.weight_clamps > 0
+    events = [e.message for e in sup.drain_events()]
+    lowered = [m for m in events if "mu lowered" in m]
+    assert lowered and sup.config.mu == pytest.approx(0.01 / 4)
+    assert sup.guard_state == GUARD_OFF and sup.state == NotchState.REFUSED
+    status = sup.status()
+    assert status["guard"] == "off" and "faded out" in status["refusal"]
+    assert "fade_out" in status["guard_action"]
+    assert sup.canceller.output_gain == 0.0
+
+
+def test_supervisor_does_not_act_while_control_works():
+    sup = NotchSupervisor(NotchConfig(tone_frequencies_hz=(TONE,), enabled=False,
+                                      identify_delay_s=0.5))
+    good = 0.1 * np.eye(6)
+    _run(sup, lambda n: good, 500 + 3200 + 1500)
+    sup.apply({"enabled": True})
+    _run(sup, lambda n: good, 5000, sup.last_sample + 1)
+    assert sup.guard_state == "watching" and sup.guard_action == ""
+    assert sup.state == NotchState.ADAPTING
+
+
+def test_a_faded_out_canceller_stays_off_until_a_new_mu_and_the_mirror_changes_nothing():
+    sup = NotchSupervisor(NotchConfig(tone_frequencies_hz=(TONE,), enabled=False,
+                                      identify_delay_s=0.5, mu=0.01))
+    good = 0.1 * np.eye(6)
+    _run(sup, lambda n: good, 500 + 3200 + 2000)
+    sup.apply({"enabled": True})
+    _run(sup, lambda n: -good, 3000, sup.last_sample + 1)
+    assert sup.guard_state == GUARD_OFF
+    sup.apply({"mu": sup.canceller.mu})           # the node mirroring the lowered mu
+    assert sup.guard_state == GUARD_OFF and sup.canceller.output_gain == 0.0
+    sup.apply({"mu": 0.001})                      # the user's new rate: control tries again
+    assert sup.guard_state == "watching" and sup.state == NotchState.ADAPTING
+    assert "refusal" not in sup.status()
