@@ -1148,7 +1148,13 @@ class _ToneFollowing:
             return
         try:
             g_old, g_new = response.at(self._p_at_hz), response.at(bank)
-            coefficients = adaptation.normalized_coefficients(g_new, self.sup.config.adaptation)
+            mode = self.sup.config.adaptation
+            coefficients = adaptation.normalized_coefficients(g_new, mode)
+            # keep each tone's own rate (a mu policy folds per-tone rates into P)
+            reference = adaptation.normalized_coefficients(g_old, mode)
+            scale = (np.linalg.norm(canceller.coefficients_view, axis=(1, 2))
+                     / np.maximum(np.linalg.norm(reference, axis=(1, 2)), 1e-300))
+            coefficients = coefficients * scale[:, None, None]
 
             def carry(weights: np.ndarray) -> np.ndarray:
                 carried = np.einsum("tij,tj->ti", g_old, weights)[:, :, None]
