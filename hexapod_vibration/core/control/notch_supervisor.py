@@ -979,6 +979,7 @@ class _ToneFollowing:
         self._previous_w: np.ndarray | None = None
         self._p_at_hz: np.ndarray | None = None
         self._detector_source: np.ndarray | None = None
+        self._rate_scale = 1.0
         self._adapting_since = -1
         self._detector: tuple[np.ndarray | None, np.ndarray | None] = (None, None)
 
@@ -1104,15 +1105,16 @@ class _ToneFollowing:
         elif self._adapting_since < 0:
             self._adapting_since = index
         plant, inverse = self._detector_matrices()
+        effective = rate * self._rate_scale               # a mu policy's per-tone rates
         if (previous is None or plant is None or rate <= 0.0
-                or index - self._adapting_since < SETTLE_TIME_CONSTANTS / rate):
-            return self.tracker.update(np.zeros(t), np.zeros(t, bool), rate)
+                or index - self._adapting_since < SETTLE_TIME_CONSTANTS / effective):
+            return self.tracker.update(np.zeros(t), np.zeros(t, bool), effective)
         error, strength = weight_phase_error(previous, weights, rate, self.block, plant,
                                              inverse)
         strength = np.where(canceller.adapting, strength, 0.0)
         fundamental_error, valid = combine_orders(error.reshape(-1, t),
                                                   strength.reshape(-1, t), self.orders)
-        return self.tracker.update(fundamental_error, valid, rate)
+        return self.tracker.update(fundamental_error, valid, effective)
 
     def _detector_matrices(self) -> tuple[np.ndarray | None, np.ndarray | None]:
         """G and P^-1 (T, C, C) at the oscillators for the phase detector (None: no G yet).
@@ -1130,8 +1132,14 @@ class _ToneFollowing:
                 return None, None
             try:
                 self._detector = (g, np.linalg.inv(p))
-            except np.linalg.LinAlgError:
+                normal = adaptation.normalized_coefficients(g, sup.config.adaptation)
+            except (ValueError, np.linalg.LinAlgError):
                 return None, None
+            # the rate each tone adapts at relative to mu: |P| / |P normalised on G|, the
+            # slowest of the fundamentals' orders (the settling waits for it)
+            scale = (np.linalg.norm(p, axis=(1, 2))
+                     / np.maximum(np.linalg.norm(normal, axis=(1, 2)), 1e-300))
+            self._rate_scale = float(np.clip(scale.min(), 1e-6, None))
             self._detector_source = p
         return self._detector
 
