@@ -57,6 +57,11 @@ direction of their noise and bias the estimate.)"""
 SETTLE_TIME_CONSTANTS = 2.0
 """Adaptation time constants (1/mu samples) after adaptation starts before the weights
 are measured: before that they are still converging from zero."""
+MAX_SLEW_HZ_PER_S = 4.0
+"""Fastest change of a tracked frequency (Hz/s): a rotor spinning up at 1 Hz/s moves its
+fundamental at 1 Hz/s; a loop pulling in from a large initial error (its phase detector
+saturated) would otherwise jump by Hz in a few blocks and splatter images of the tone at
+the block rate's multiples."""
 MAX_PHASE_ERROR_RAD = 0.5
 """A measured phase error above this (rad) is clipped: the linear loop holds to there."""
 
@@ -221,6 +226,7 @@ class FrequencyTracker:
         self._k1_rate = float('nan')                        # K1 = alpha - mu, cached
         self._k1 = self._alpha
         self._gamma_b = self._gamma * self.block_samples
+        self._max_step = TWO_PI * MAX_SLEW_HZ_PER_S * self.block_samples / self.fs ** 2
         self._lo = TWO_PI * self.lower_hz / self.fs         # bounds, rad/sample
         self._hi = TWO_PI * self.upper_hz / self.fs
         self._omega = TWO_PI * self.nominal_hz / self.fs     # integrator (rad/sample)
@@ -255,6 +261,7 @@ class FrequencyTracker:
         self._rate += self._gamma_b * e
         step = self._beta_b * e
         step += self._rate * (self.block_samples * gate)
+        np.clip(step, -self._max_step, self._max_step, out=step)
         omega = self._omega + step
         outside = (omega < lo) | (omega > hi)
         if outside.any():                               # anti-windup at the bounds
@@ -262,6 +269,8 @@ class FrequencyTracker:
             np.clip(omega, lo, hi, out=omega)
         self._omega = omega
         effective = omega + k1 * e
+        np.clip(effective, self._effective - self._max_step, self._effective + self._max_step,
+                out=effective)
         np.maximum(effective, lo, out=effective)
         np.minimum(effective, hi, out=effective)
         self._effective = effective
