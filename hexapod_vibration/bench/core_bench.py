@@ -47,6 +47,7 @@ from hexapod_vibration.baseline.fxlms import (
 from hexapod_vibration.contract import SAMPLE_RATE_HZ, STRUT_COUNT
 from hexapod_vibration.core import spectrum
 from hexapod_vibration.core.control.notch import AdaptiveNotchCanceller
+from hexapod_vibration.core.control.notch_supervisor import NotchConfig, NotchSupervisor
 from hexapod_vibration.core.model.config import load_model_config
 from hexapod_vibration.core.sim.closed_loop import CoreLoop
 from hexapod_vibration.core.sim.scenario import Scenario, load_scenario
@@ -74,6 +75,9 @@ COST_RATIO_TARGET = 10.0        # issue: FxLMS / notch 6x8 at least 10x, equal a
 # FxLMS attenuation within this of the notch's (or both floor-limited) counts as equal
 EQUAL_ATTENUATION_TOL_DB = 3.0
 TABLE1_SCENARIO = 'single_tone_harmonic'
+TRACKING_MODES = ('fixed', 'tracking', 'reference')
+TRACKING_TARGET_US = 5.0        # issue 11: tracking adds at most a few us per sample at 6x8
+TRACKING_WARMUP_SAMPLES = 2500  # > 2/mu at mu 1e-3: the tracker measures from then on
 
 
 @dataclasses.dataclass(frozen=True)
@@ -219,6 +223,39 @@ def make_notch(n_channels: int, n_tones: int, centralized: bool,
                                   coefficients=p)
 
 
+def make_tracking_supervisor(n_tones: int, mode: str) -> Step:
+    """The notch supervisor's step at 6 struts x ``n_tones`` in ``mode``.
+
+    ``fixed`` (nominal tones), ``tracking`` (frequency_tracking on) or ``reference`` (tones
+    following a tachometer value given every sample). Raw adaptation (P = I) adapts from
+    the first sample, so the step is the whole per-sample path (DC blocker, canceller,
+    tone following every block of 16 samples; warmed up past the weights' settling, so
+    the phase detector runs).
+    """
+    tones = tone_frequencies(n_tones).tolist()
+    changes = {'tone_frequencies_hz': tones, 'adaptation': 'raw', 'mu': 1e-3,
+               'frequency_tracking': mode == 'tracking'}
+    if mode == 'reference':
+        changes['reference_harmonics'] = [f / tones[0] for f in tones]
+    sup = NotchSupervisor(NotchConfig().replaced(changes), FS_HZ, STRUTS)
+    # a plant response for the phase detector (raw mode has no identification); the cost
+    # does not depend on its values
+    sup.plant_response = -2.0 * np.broadcast_to(np.eye(STRUTS, dtype=complex),
+                                                (n_tones, STRUTS, STRUTS)).copy()
+    reference = mode == 'reference'
+
+    def step(error: np.ndarray, out: np.ndarray) -> np.ndarray:
+        if reference:
+            sup.set_reference_frequency(tones[0], None)
+        out[...] = sup.step(None, error)
+        return out
+
+    rng = np.random.default_rng(1)
+    for error in 0.01 * rng.standard_normal((TRACKING_WARMUP_SAMPLES, STRUTS)):
+        step(error, np.zeros(STRUTS))          # past the settling: the detector runs
+    return step
+
+
 def make_fxlms(path_taps: int = DEFAULT_PATH_TAPS, control_taps: int = DEFAULT_CONTROL_TAPS,
                tones_hz: Sequence[float] = FXLMS_TONES_HZ, n_channels: int = STRUTS,
                seed: int = 0) -> FilteredXLMSController:
@@ -282,6 +319,9 @@ def cost_configurations(quick: bool) -> dict[str, tuple[Step, int]]:
             make_fxlms(n, DEFAULT_CONTROL_TAPS,
                        tones_hz=tuple(tone_frequencies(FXLMS_SAME_TONES))).step, STRUTS)
     configs['numpy_floor_6x8'] = (numpy_floor_step(STRUTS, RATIO_NOTCH_TONES), STRUTS)
+    for mode in TRACKING_MODES:
+        configs[f'supervisor_6x{RATIO_NOTCH_TONES}_{mode}'] = (
+            make_tracking_supervisor(RATIO_NOTCH_TONES, mode), STRUTS)
     return configs
 
 
@@ -326,7 +366,14 @@ def measure_costs(timing: TimingSettings, quick: bool) -> dict[str, Any]:
     large = {str(t): med[f'notch_dec_6x{t}'] for t in LARGE_TONES}
     fx_macs = multiply_adds_per_sample(STRUTS, STRUTS, DEFAULT_PATH_TAPS,
                                        DEFAULT_CONTROL_TAPS, len(FXLMS_TONES_HZ))
+    supervisor = {mode: med[f'supervisor_6x{RATIO_NOTCH_TONES}_{mode}']
+                  for mode in TRACKING_MODES}
     return {
+        'tracking_us_per_sample': {
+            'supervisor_6x8': supervisor,
+            'added_by_tracking': supervisor['tracking'] - supervisor['fixed'],
+            'added_by_reference': supervisor['reference'] - supervisor['fixed'],
+            'target_added_us': TRACKING_TARGET_US},
         'notch_us_per_sample': notch,
         'notch_centralized_us_per_sample': central,
         'fxlms_us_per_sample': fx,

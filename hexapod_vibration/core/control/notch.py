@@ -408,6 +408,26 @@ class AdaptiveNotchCanceller:
         self._fading.add(w_old[gone], phi_old[gone], self._dphi[gone], ramp)
         self._install(freqs, w, phi, p_full, adapting)
 
+    def retune(self, freqs_hz: np.ndarray) -> None:
+        """Move every tone to ``freqs_hz`` (Hz, (T,)) from the next sample on.
+
+        The oscillators' phases are continuous (no phase step) and weights, coefficients
+        and adapting flags are kept: this is how tracked tones follow their estimates, once
+        per block of samples. The tone set itself (its size and order) is unchanged.
+
+        Raises:
+            ValueError: wrong shape, or a frequency not in (0, fs/2); nothing changed.
+        """
+        f = np.asarray(freqs_hz, dtype=float)
+        if f.shape != self._freqs.shape:
+            raise ValueError(f'retune needs {self._freqs.size} frequencies, got {f.shape}')
+        if f.size and not (f.min() > 0.0 and f.max() < 0.5 * self._fs):
+            raise ValueError(f'tone frequencies must be in (0, {0.5 * self._fs:g}) Hz, '
+                             f'got {f.tolist()}')
+        self._freqs[...] = f
+        np.multiply(f, TWO_PI / self._fs, out=self._dphi)
+        self._osc.retune(self._dphi)
+
     def reset_weights(self, ramp_samples: int = DEFAULT_RAMP_SAMPLES) -> None:
         """Set every weight to 0; the present output fades out over ``ramp_samples``."""
         ramp = _validate_ramp(ramp_samples)
@@ -478,6 +498,11 @@ class AdaptiveNotchCanceller:
     def coefficients(self) -> np.ndarray:
         """Complex (T, C, C) adaptation matrices P_t, a copy."""
         return self._p_full.copy()
+
+    @property
+    def coefficients_view(self) -> np.ndarray:
+        """The (T, C, C) matrices P_t themselves (read only; a new object whenever P changes)."""
+        return self._p_full
 
     @property
     def is_diagonal(self) -> bool:

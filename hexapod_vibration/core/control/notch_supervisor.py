@@ -67,6 +67,14 @@ from hexapod_vibration.core.control.divergence_guard import (
     GuardVerdict,
 )
 from hexapod_vibration.core.control.filters import DCBlocker
+from hexapod_vibration.core.control.frequency_tracker import (
+    DEFAULT_BLOCK_SAMPLES,
+    SETTLE_TIME_CONSTANTS,
+    FrequencyTracker,
+    combine_orders,
+    loop_bandwidths_hz,
+    weight_phase_error,
+)
 from hexapod_vibration.core.control.mu_policy import DEFAULT_MAX_RISE_DB
 from hexapod_vibration.core.control.notch import (
     AdaptiveNotchCanceller,
@@ -80,7 +88,12 @@ from hexapod_vibration.core.control.plant_identification import (
 )
 
 MAX_TONES = 16
-"""Largest number of tones the controller accepts."""
+"""Largest number of tones the controller accepts (oscillators, harmonics included)."""
+MAX_HARMONICS = 7
+"""Largest ``harmonics`` setting (orders 2..8)."""
+P_RETUNE_HZ = 0.05
+"""A moved oscillator gets new coefficients from the broadband G(f) after this shift (Hz)."""
+REFERENCE_STATES = ("unused", "waiting", "following", "stale")
 IDENTIFICATION_METHODS = ("tones", "broadband")
 MAX_IDENTIFICATION_UNCERTAINTY = 0.1
 """An identification whose relative uncertainty at a tone exceeds this is refused (10 %:
@@ -205,6 +218,16 @@ def _tone_key(frequency_hz: float) -> float:
     return round(float(frequency_hz), 6)
 
 
+def bank_frequencies(tones_hz: np.ndarray | list[float], harmonics: int) -> np.ndarray:
+    """Every oscillator's frequency (Hz): orders 1..harmonics+1 of each tone, order-major.
+
+    Row ``k * T + t`` of the bank is order ``k + 1`` of tone ``t`` (T tones).
+    """
+    tones = np.asarray(tones_hz, dtype=float).reshape(-1)
+    orders = np.arange(1, int(harmonics) + 2, dtype=float)
+    return (orders[:, None] * tones[None, :]).reshape(-1)
+
+
 def coefficients_and_bound(response: np.ndarray, mode: str,
                            delay_samples: float) -> tuple[np.ndarray, float]:
     """Adaptation coefficients P (T, C, C) for ``mode`` and the bound on ``mu``.
@@ -248,7 +271,8 @@ class NotchSupervisor:
         self.output_weights = (None if output_weights is None
                                else np.asarray(output_weights, dtype=float))
         self._config = config
-        tones = list(config.tone_frequencies_hz)
+        self._follow = _ToneFollowing(self)
+        tones = bank_frequencies(config.tone_frequencies_hz, config.harmonics).tolist()
         raw = config.adaptation == "raw"
         # Raw (paper as printed, P = I) adapts at once; the normalised modes wait for the
         # identification to give them their coefficients.
@@ -288,8 +312,11 @@ class NotchSupervisor:
         self._guard_gave_up = False
         self._quiet_from_sample = -1
         self._last_clamp_event = -10**9
-        self.bound = self._plan({"mu": config.mu, "tone_frequencies_hz": tones,
-                                 "adaptation": config.adaptation}).bound
+        self.bound = self._plan({"mu": config.mu,
+                                 "tone_frequencies_hz": list(config.tone_frequencies_hz),
+                                 "adaptation": config.adaptation,
+                                 "harmonics": config.harmonics}).bound
+        self._follow.rebuild()
         if raw or not config.auto_identify:
             self.canceller.set_enabled(config.enabled, ramp_samples=0)
 
@@ -326,7 +353,7 @@ class NotchSupervisor:
         new_mu = "mu" in changes and float(changes["mu"]) != self.canceller.mu
         if "mu" in changes:
             self.canceller.set_mu(changes["mu"])
-        tones_changed = "tone_frequencies_hz" in changes
+        tones_changed = "tone_frequencies_hz" in changes or "harmonics" in changes
         mode_changed = "adaptation" in changes
         if "weight_limit_n" in changes:
             self.canceller.set_weight_limit(float(changes["weight_limit_n"]))
@@ -347,6 +374,8 @@ class NotchSupervisor:
             self._set_enabled(bool(changes["enabled"]))
         if tones_changed or mode_changed:
             self._after_tone_or_mode_change(plan, mode_changed)
+        if tones_changed or any(name in changes for name in _FOLLOW_SETTINGS):
+            self._follow.rebuild()
 
     def _clear_guard_refusal(self) -> None:
         """New settings: the guard's fade-out no longer holds; control may try again."""
@@ -369,6 +398,50 @@ class NotchSupervisor:
             validate_frequencies(tones, self.fs)
         except ValueError as exc:
             raise ValueError(f"tone_frequencies_hz rejected: {exc}") from None
+
+    def _bank_for(self, changes: Mapping[str, Any]) -> list[float]:
+        """The oscillators (Hz) of the settings after ``changes``; ValueError if refused.
+
+        Checks the tracking, reference and harmonics settings together with the tones:
+        at most :data:`MAX_TONES` oscillators, every order below fs/2 over the whole
+        tracking range, one reference order per tone.
+        """
+        try:
+            cfg = self._config.replaced(changes)
+        except (TypeError, ValueError) as exc:
+            raise ValueError(f"rejected: {exc}") from None
+        tones = np.asarray(cfg.tone_frequencies_hz, dtype=float)
+        harmonics = cfg.harmonics
+        if (isinstance(harmonics, bool) or int(harmonics) != harmonics
+                or not 0 <= harmonics <= MAX_HARMONICS):
+            raise ValueError(f"harmonics must be an integer in 0..{MAX_HARMONICS}, "
+                             f"got {harmonics!r}")
+        orders = int(harmonics) + 1
+        if tones.size * orders > MAX_TONES:
+            raise ValueError(f"{tones.size} tones x {orders} orders (harmonics={harmonics}) "
+                             f"= {tones.size * orders} oscillators: at most {MAX_TONES}")
+        span = float(cfg.tracking_range_hz)
+        if not np.isfinite(span) or span < 0.0:
+            raise ValueError(f"tracking_range_hz must be finite and >= 0, got {span}")
+        reach = tones + (span if cfg.frequency_tracking else 0.0)
+        if tones.size and orders * reach.max() >= 0.5 * self.fs:
+            raise ValueError(f"order {orders} of {tones[np.argmax(reach)]:g} Hz (tracked up "
+                             f"to {reach.max():g} Hz) reaches fs/2 = {0.5 * self.fs:g} Hz")
+        ref = np.asarray(cfg.reference_harmonics, dtype=float)
+        if ref.size and ref.size != tones.size:
+            raise ValueError(f"reference_harmonics needs one order per tone ({tones.size}), "
+                             f"got {ref.size}")
+        if ref.size and not np.all(np.isfinite(ref) & (ref > 0.0)):
+            raise ValueError(f"reference_harmonics must be finite and > 0, got {ref.tolist()}")
+        timeout = float(cfg.reference_timeout_s)
+        if not np.isfinite(timeout) or timeout <= 0.0:
+            raise ValueError(f"reference_timeout_s must be finite and > 0, got {timeout}")
+        bank = bank_frequencies(tones, harmonics)
+        try:
+            validate_frequencies(bank, self.fs)
+        except ValueError as exc:
+            raise ValueError(f"harmonics={harmonics} rejected: {exc}") from None
+        return bank.tolist()
 
     @staticmethod
     def _check_guard_settings(changes: Mapping[str, Any]) -> None:
@@ -398,15 +471,12 @@ class NotchSupervisor:
         """
         self._check_tones(changes)
         self._check_guard_settings(changes)
-        if "tone_frequencies_hz" in changes:
-            tones = [float(f) for f in changes["tone_frequencies_hz"] or []]
-        else:
-            tones = [float(f) for f in self.canceller.tone_frequencies_hz]
+        tones = self._bank_for(changes)
         mode = changes.get("adaptation", self._config.adaptation)
         if mode not in adaptation.COEFFICIENT_MODES:
             raise ValueError(f"adaptation must be one of {adaptation.COEFFICIENT_MODES}, "
                              f"got {mode!r}")
-        if "tone_frequencies_hz" in changes or "adaptation" in changes:
+        if any(k in changes for k in ("tone_frequencies_hz", "adaptation", "harmonics")):
             response = self._known_response(tones)
             try:
                 coefficients, bound = self._coefficients_for(tones, response, mode)
@@ -417,8 +487,8 @@ class NotchSupervisor:
         mu = changes.get("mu", self.canceller.mu)
         if not np.isfinite(mu) or mu < 0.0:
             raise ValueError(f"mu must be finite and >= 0, got {mu}")
-        if mu > 0.0 and mu >= bound and any(k in changes for k in ("mu", "adaptation",
-                                                                   "tone_frequencies_hz")):
+        if mu > 0.0 and mu >= bound and any(k in changes for k in (
+                "mu", "adaptation", "tone_frequencies_hz", "harmonics")):
             raise ValueError(f"mu={mu:g} is outside the stability bound {bound:.4g} ({mode} "
                              f"adaptation at {tones} Hz, eq. 18 with a "
                              f"{self._config.loop_delay_samples:g}-sample loop delay)")
@@ -705,6 +775,8 @@ class NotchSupervisor:
             self._weights_clamped()
         if self._config.divergence_guard:
             self._guard_step(error)
+        if self._follow.active:
+            self._follow.step(index)
         if self.identifier is not None:
             command += self.identifier.step(error)
             if self.identifier.done:
@@ -824,6 +896,7 @@ class NotchSupervisor:
             "identification_start_sample": self.identification_start_sample,
             "identification_end_sample": self.identification_end_sample,
             **self.counters}
+        values.update(self._follow.status())
         if self.refusal:
             values["refusal"] = self.refusal
         values.update(self._guard_status())
@@ -833,6 +906,22 @@ class NotchSupervisor:
             values["plant_phase_deg"] = np.round(np.rad2deg(np.angle(diag.mean(axis=1))),
                                                  2).tolist()
         return values
+
+    # ------------------------------------------------------------------ moving tones
+    @property
+    def tone_estimates_hz(self) -> np.ndarray:
+        """(T,) the frequency (Hz) each configured tone's oscillator runs at now."""
+        return self._follow.fundamentals_hz.copy()
+
+    def set_reference_frequency(self, frequency_hz: float, index: int | None = None) -> None:
+        """Take a tachometer value (Hz) that belongs to loop sample ``index``.
+
+        With ``reference_harmonics`` set, tone k runs at order_k x the reference while the
+        value is at most ``reference_timeout_s`` old; a value that is not finite and > 0 is
+        ignored (and reported once). ``index`` None: the last sample taken.
+        """
+        self._follow.set_reference(frequency_hz, self.last_sample if index is None
+                                   else int(index))
 
     def _guard_status(self) -> dict[str, Any]:
         """The status keys of the identification, the mu policy and the guard."""
@@ -858,3 +947,246 @@ class NotchSupervisor:
         """The events since the last call, oldest first (and forget them)."""
         events, self._events = self._events, []
         return events
+
+
+_FOLLOW_SETTINGS = ("frequency_tracking", "tracking_range_hz", "reference_harmonics",
+                    "reference_timeout_s", "harmonics", "tone_frequencies_hz")
+
+
+class _ToneFollowing:
+    """The tone set in force each block: nominal, tracked or reference-driven, + harmonics.
+
+    Every :data:`DEFAULT_BLOCK_SAMPLES` samples (when tracking or a reference is
+    configured) the fundamentals are chosen: ``order_k x reference`` while the reference
+    is fresh, else the :class:`FrequencyTracker` estimate when ``frequency_tracking`` is
+    on, else nominal; the canceller's oscillators (all orders) are retuned to them
+    phase-continuously. While the canceller is identifying, the tones hold.
+    """
+
+    def __init__(self, supervisor: NotchSupervisor) -> None:
+        """Idle until :meth:`rebuild` reads the supervisor's settings."""
+        self.sup = supervisor
+        self.active = False
+        self.block = DEFAULT_BLOCK_SAMPLES
+        self.count = 0
+        self.fundamentals_hz = np.zeros(0)
+        self.tracker: FrequencyTracker | None = None
+        self.reference_hz = float("nan")
+        self.reference_index = -1
+        self.reference_slope = 0.0             # Hz per sample, from the last two values
+        self.reference_state = "unused"
+        self._ignoring = False
+        self._previous_w: np.ndarray | None = None
+        self._p_at_hz: np.ndarray | None = None
+        self._detector_source: np.ndarray | None = None
+        self._rate_scale = 1.0
+        self._adapting_since = -1
+        self._detector: tuple[np.ndarray | None, np.ndarray | None] = (None, None)
+
+    def rebuild(self) -> None:
+        """Re-read the settings; the tracker restarts from where the tones are.
+
+        New tones or orders start at nominal; otherwise tracked tones keep their present
+        frequencies (within the new bounds) and untracked ones go back to nominal, with
+        the oscillators retuned phase-continuously.
+        """
+        cfg = self.sup.config
+        nominal = np.asarray(cfg.tone_frequencies_hz, dtype=float)
+        same = (np.array_equal(nominal, getattr(self, "nominal_hz", None))
+                and cfg.harmonics + 1 == getattr(self, "orders", np.zeros(0)).size)
+        present = self.fundamentals_hz.copy()
+        self.nominal_hz = nominal
+        self.orders = np.arange(1, cfg.harmonics + 2, dtype=float)
+        self.reference_orders = np.asarray(cfg.reference_harmonics, dtype=float)
+        self.timeout_samples = cfg.reference_timeout_s * self.sup.fs
+        self.tracker = (FrequencyTracker(nominal, cfg.tracking_range_hz, self.sup.fs,
+                                         loop_bandwidths_hz(nominal, self.orders),
+                                         block_samples=self.block)
+                        if cfg.frequency_tracking and nominal.size else None)
+        self.active = bool(nominal.size) and (self.tracker is not None
+                                               or self.reference_orders.size > 0)
+        self.reference_state = "waiting" if self.reference_orders.size else "unused"
+        self.count = 0
+        self._previous_w = None
+        self.fundamentals_hz = nominal.copy()
+        if not same:
+            self._p_at_hz = bank_frequencies(nominal, cfg.harmonics)
+            return
+        if self.tracker is not None:
+            self.tracker.reset(present)
+            target = self.tracker.frequencies_hz
+        else:
+            target = nominal
+        if self.sup.canceller.tone_frequencies_hz.size == target.size * self.orders.size:
+            self._retune(target)
+
+    def set_reference(self, frequency_hz: float, index: int) -> None:
+        """Store a tachometer value (Hz) of sample ``index``; slope from the previous one."""
+        try:
+            value = float(frequency_hz)
+        except (TypeError, ValueError):
+            value = float("nan")
+        if not np.isfinite(value) or value <= 0.0:
+            if not self._ignoring:         # once until a usable value comes (no flood)
+                self.sup._event("warn", f"reference frequency {frequency_hz!r} ignored: "
+                                        "not a finite frequency > 0 Hz")
+            self._ignoring = True
+            return
+        self._ignoring = False
+        if index > self.reference_index >= 0 and np.isfinite(self.reference_hz):
+            self.reference_slope = (value - self.reference_hz) / (index - self.reference_index)
+        self.reference_hz, self.reference_index = value, int(index)
+
+    def step(self, index: int) -> None:
+        """Count the sample; at a block's end choose and apply the tones of the next one."""
+        self.count += 1
+        if self.count < self.block:
+            return
+        self.count = 0
+        sup = self.sup
+        if sup.identifier is not None or not sup.canceller.tone_frequencies_hz.size:
+            self._previous_w, self._adapting_since = None, -1
+            return
+        fundamentals = self._from_reference(index)
+        if fundamentals is None:
+            fundamentals = self._from_tracking(index)
+        if fundamentals is None:
+            return
+        self._retune(fundamentals)
+
+    def _from_reference(self, index: int) -> np.ndarray | None:
+        """Order x reference (extrapolated to the block's middle) while fresh, else None."""
+        if not self.reference_orders.size:
+            return None
+        fresh = self.reference_index >= 0 and index - self.reference_index <= self.timeout_samples
+        state = "following" if fresh else ("stale" if self.reference_index >= 0 else "waiting")
+        if state != self.reference_state:
+            self._reference_changed(state)
+        if not fresh:
+            return None
+        ahead = index - self.reference_index + 0.5 * self.block
+        reference = self.reference_hz + self.reference_slope * ahead
+        nyquist = 0.5 * self.sup.fs
+        top = self.reference_orders * self.orders[-1]
+        fundamentals = np.clip(self.reference_orders * reference, 1e-3 * nyquist,
+                               0.999 * nyquist * self.reference_orders / top)
+        if self.tracker is not None:       # a stale reference hands over from here
+            self.tracker.reset(fundamentals)
+        self._previous_w = None
+        return fundamentals
+
+    def _reference_changed(self, state: str) -> None:
+        fallback = "tracking" if self.tracker is not None else "the nominal tones"
+        if state == "stale":
+            self.sup._event("warn", f"reference frequency stale (none for "
+                                    f"{self.sup.config.reference_timeout_s:g} s): tones fall "
+                                    f"back to {fallback}")
+            if self.tracker is None:
+                self._retune(self.nominal_hz)
+            else:
+                self.tracker.reset(self.fundamentals_hz)
+        elif state == "following":
+            self.sup._event("info", f"following the reference frequency "
+                                    f"({self.reference_hz:g} Hz): tones at "
+                                    f"{self.reference_orders.tolist()} x reference")
+        self.reference_state = state
+
+    def _from_tracking(self, index: int) -> np.ndarray | None:
+        """The tracker's frequencies for the next block (None: no tracker)."""
+        if self.tracker is None:
+            return None
+        canceller = self.sup.canceller
+        weights = canceller.weights
+        previous, self._previous_w = self._previous_w, weights
+        t = self.nominal_hz.size
+        rate = canceller.mu if canceller.enabled and not canceller.frozen else 0.0
+        if rate <= 0.0:
+            self._adapting_since = -1
+        elif self._adapting_since < 0:
+            self._adapting_since = index
+        plant, inverse = self._detector_matrices()
+        effective = rate * self._rate_scale               # a mu policy's per-tone rates
+        if (previous is None or plant is None or rate <= 0.0
+                or index - self._adapting_since < SETTLE_TIME_CONSTANTS / effective):
+            return self.tracker.update(np.zeros(t), np.zeros(t, bool), effective)
+        error, strength = weight_phase_error(previous, weights, rate, self.block, plant,
+                                             inverse)
+        strength = np.where(canceller.adapting, strength, 0.0)
+        fundamental_error, valid = combine_orders(error.reshape(-1, t),
+                                                  strength.reshape(-1, t), self.orders)
+        return self.tracker.update(fundamental_error, valid, effective)
+
+    def _detector_matrices(self) -> tuple[np.ndarray | None, np.ndarray | None]:
+        """G and P^-1 (T, C, C) at the oscillators for the phase detector (None: no G yet).
+
+        G is the broadband response at the frequencies P was last computed for, else the
+        tone-identified one; P^-1 is recomputed when the canceller's P changes.
+        """
+        sup, canceller = self.sup, self.sup.canceller
+        p = canceller.coefficients_view
+        if self._detector_source is not p:
+            g = sup.plant_response
+            if sup.plant_frequency_response is not None and g is not None:
+                g = sup.plant_frequency_response.at(self._p_at_hz)
+            if g is None or g.shape != p.shape:
+                return None, None
+            try:
+                self._detector = (g, np.linalg.inv(p))
+                normal = adaptation.normalized_coefficients(g, sup.config.adaptation)
+            except (ValueError, np.linalg.LinAlgError):
+                return None, None
+            # the rate each tone adapts at relative to mu: |P| / |P normalised on G|, the
+            # slowest of the fundamentals' orders (the settling waits for it)
+            scale = (np.linalg.norm(p, axis=(1, 2))
+                     / np.maximum(np.linalg.norm(normal, axis=(1, 2)), 1e-300))
+            self._rate_scale = float(np.clip(scale.min(), 1e-6, None))
+            self._detector_source = p
+        return self._detector
+
+    def _retune(self, fundamentals: np.ndarray) -> None:
+        """Move every oscillator to its order x fundamental; new P from G(f) if moved."""
+        self.fundamentals_hz = np.asarray(fundamentals, dtype=float).copy()
+        bank = (self.orders[:, None] * self.fundamentals_hz[None, :]).reshape(-1)
+        canceller = self.sup.canceller
+        canceller.retune(bank)
+        response = self.sup.plant_frequency_response
+        if (response is None or self.sup.plant_response is None
+                or np.max(np.abs(bank - self._p_at_hz)) < P_RETUNE_HZ
+                or not np.all(canceller.adapting)):     # tones waiting for identification
+            return
+        try:
+            g_old, g_new = response.at(self._p_at_hz), response.at(bank)
+            mode = self.sup.config.adaptation
+            coefficients = adaptation.normalized_coefficients(g_new, mode)
+            # keep each tone's own rate (a mu policy folds per-tone rates into P)
+            reference = adaptation.normalized_coefficients(g_old, mode)
+            scale = (np.linalg.norm(canceller.coefficients_view, axis=(1, 2))
+                     / np.maximum(np.linalg.norm(reference, axis=(1, 2)), 1e-300))
+            coefficients = coefficients * scale[:, None, None]
+
+            def carry(weights: np.ndarray) -> np.ndarray:
+                carried = np.einsum("tij,tj->ti", g_old, weights)[:, :, None]
+                return np.linalg.solve(g_new, carried)[:, :, 0]
+
+            moved = carry(canceller.weights)
+            previous = None if self._previous_w is None else carry(self._previous_w)
+        except (ValueError, np.linalg.LinAlgError):     # G(f) unusable there: keep P
+            return
+        # the converged weight is -G^-1 D: carried through the plant's change of response
+        # with the frequency, it stays converged while the tone moves (no lag to make up);
+        # the detector's previous weights are carried alike, so the carry is not read as
+        # a phase error (and no block goes unmeasured: a ramp moves P every few blocks)
+        if np.all(np.isfinite(moved)):
+            canceller.set_weights(moved)
+            self._previous_w = previous
+        else:
+            self._previous_w = None
+        canceller.set_coefficients(coefficients)
+        self._p_at_hz = bank
+
+    def status(self) -> dict[str, Any]:
+        """The status keys of the moving tones (for ``/diagnostics``)."""
+        return {"tone_estimates_hz": [float(f) for f in self.fundamentals_hz],
+                "frequency_tracking": self.tracker is not None,
+                "reference": self.reference_state,
+                "bank_tones_hz": [float(f) for f in self.sup.canceller.tone_frequencies_hz]}

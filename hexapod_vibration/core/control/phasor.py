@@ -49,6 +49,7 @@ class PhasorBank:
         # on one-element arrays; the spare phasor (1, rotated by 1) is never read
         self._rot = np.ones(max(t, 2), dtype=complex)
         self._rot[:t] = np.exp(1j * self._dphi)
+        self._rot_t = self._rot[:t]
         self._store = np.ones(max(t, 2), dtype=complex)
         self._scaled = bool(np.any(self._amp != 1.0))
         self._step = np.zeros(t)
@@ -69,6 +70,18 @@ class PhasorBank:
         self._since += int(samples)
         self._sync()
 
+    def retune(self, dphi_rad: np.ndarray) -> None:
+        """Change the phase increments from the next sample on; the phase is continuous.
+
+        The phase grid is first moved exactly by the samples since the last
+        re-synchronisation at the old increments, then the new increments (rad/sample,
+        (T,)) take over: no phase step, O(T) cost.
+        """
+        self._sync()
+        self._dphi[...] = dphi_rad
+        np.multiply(self._dphi, 1j, out=self._rot_t)
+        np.exp(self._rot_t, out=self._rot_t)
+
     def _sync(self) -> None:
         """Move the phase grid by the samples since the last sync; set z exactly (no alloc)."""
         if self._since:
@@ -86,6 +99,11 @@ class PhasorBank:
     def phases_rad(self) -> np.ndarray:
         """Phases phi_t (rad, in [0, 2 pi)) of the present sample, a new array."""
         return np.remainder(self._phi0 + self._since * self._dphi, TWO_PI)
+
+    @property
+    def dphi_rad(self) -> np.ndarray:
+        """Phase increments (rad/sample), a copy."""
+        return self._dphi.copy()
 
     @property
     def amplitudes(self) -> np.ndarray:

@@ -46,6 +46,7 @@ class LoopRecord:
     coefficients: np.ndarray | None = None
     mu_bound: float = float("nan")
     notes: list[str] = field(default_factory=list)
+    tone_estimates_hz: np.ndarray | None = None
 
 
 def strut_stiffness_n_per_m(config: ModelConfig) -> float:
@@ -96,6 +97,9 @@ class CoreLoop:
         z_row = np.linalg.inv(self.config.geometry.top_jacobian)[2]     # the report's z axis
         self.notch = (NotchSupervisor(notch_config(scenario), fs, output_weights=z_row)
                       if tones else None)
+        self.tachometer = self.rotor is not None and scenario.rotor.tachometer
+        """Whether the rotor's speed (the speed at the sample's time, Hz) is fed to the
+        notch as its reference frequency each sample, as the driver publishes it."""
 
     def _controller_step(self, n: int, accel_m_s2: np.ndarray,
                          record: LoopRecord) -> np.ndarray:
@@ -104,6 +108,8 @@ class CoreLoop:
             return np.zeros(STRUTS)
         if n == record.control_on_sample:
             self.notch.apply({"enabled": True})
+        if self.tachometer:
+            self.notch.set_reference_frequency(float(self.rotor.speed_hz((n + 1) / self.fs)), n)
         return self.notch.step(n, accel_m_s2)
 
     def _finish(self, record: LoopRecord) -> None:
@@ -120,9 +126,11 @@ class CoreLoop:
         """Simulate the whole scenario and return every sample."""
         sc, n_samples = self.scenario, self.scenario.samples
         tones = len(sc.notch.tone_frequencies_hz)
+        bank = 0 if self.notch is None else self.notch.canceller.tone_frequencies_hz.size
         rec = LoopRecord(*(np.zeros((n_samples, STRUTS)) for _ in range(7)),
-                         weights=np.zeros((n_samples, tones, STRUTS), complex),
-                         control_on_sample=int(round(sc.control_on_s * self.fs)))
+                         weights=np.zeros((n_samples, bank, STRUTS), complex),
+                         control_on_sample=int(round(sc.control_on_s * self.fs)),
+                         tone_estimates_hz=np.zeros((n_samples, tones)))
         sample = self.plant.step(np.zeros(STRUTS))
         sine = sc.test_sine
         for n in range(n_samples):
@@ -137,6 +145,7 @@ class CoreLoop:
             rec.top_accel_true[n] = sample.top_accel_true
             if self.notch is not None:
                 rec.weights[n] = self.notch.canceller.weights
+                rec.tone_estimates_hz[n] = self.notch.tone_estimates_hz
             sample = self.plant.step(applied)
         self._finish(rec)
         return rec

@@ -1,0 +1,265 @@
+"""Frequency tracking alone and in the notch supervisor, on a static plant (seeded, fast).
+
+The plant is ``a_n = g + d_n + K u_{n-1}`` (m/s^2), K a coupled 6x6 gain, with a disturbance
+``d`` whose frequency is given per sample; it starts after the supervisor's identification,
+so the identified G is exact and only the tracking is under test. The identification
+takes the first 3.2 s (one tone set).
+"""
+
+import numpy as np
+import pytest
+
+from hexapod_vibration.core.control import adaptation
+from hexapod_vibration.core.control.frequency_tracker import (
+    FrequencyTracker,
+    combine_orders,
+    tracking_bounds_hz,
+    weight_phase_error,
+)
+from hexapod_vibration.core.control.notch_supervisor import (
+    NotchConfig,
+    NotchState,
+    NotchSupervisor,
+)
+from hexapod_vibration.core.control.plant_identification import PlantFrequencyResponse
+
+FS = 1000.0
+GRAVITY = 9.80665
+K = 0.1 * (np.eye(6) + 0.1 * (np.ones((6, 6)) - np.eye(6)))
+MIX = np.linspace(0.5, 1.5, 6)
+
+
+def supervisor(tones, **changes) -> NotchSupervisor:
+    """A supervisor that identifies from the first sample (3.2 s) and is enabled."""
+    cfg = NotchConfig().replaced({"tone_frequencies_hz": tones, "identify_delay_s": 0.0,
+                                  "frequency_tracking": True, **changes})
+    return NotchSupervisor(cfg, FS)
+
+
+def run(sup, frequencies_hz, amplitudes, start_s: float, samples: int, seed: int = 0,
+        reference=None, first: int = 0):
+    """Close the loop; returns the disturbance-free residual (samples, 6) and estimates.
+
+    ``frequencies_hz(n)`` gives the disturbance tones' frequencies (Hz) at sample n; the
+    disturbance is 0 before ``start_s``. ``reference(n)``: a tachometer value or None.
+    """
+    rng = np.random.default_rng(seed)
+    u = np.zeros(6)
+    phase = rng.uniform(0, 2 * np.pi, len(amplitudes))
+    residual = np.zeros((samples, 6))
+    estimates = np.zeros((samples, len(sup.config.tone_frequencies_hz)))
+    start = int(start_s * FS)
+    for n in range(samples):
+        phase += 2 * np.pi * np.asarray(frequencies_hz(n)) / FS
+        d = MIX * float(np.sum(np.asarray(amplitudes) * np.cos(phase))) * (n >= start)
+        residual[n] = d + K @ u
+        if reference is not None and reference(n) is not None:
+            sup.set_reference_frequency(reference(n), n)
+        u = sup.step(first + n, GRAVITY + residual[n] + 1e-4 * rng.standard_normal(6)).copy()
+        estimates[n] = sup.tone_estimates_hz
+    return residual, estimates
+
+
+def demodulated_rms(x: np.ndarray, frequency_hz, first: int) -> float:
+    """RMS of the component of x[first:] (all channels) at the (moving) frequency."""
+    f = np.broadcast_to(np.asarray(frequency_hz, float), (x.shape[0],))
+    phase = 2 * np.pi * np.cumsum(f) / FS
+    z = x[first:] * np.exp(-1j * phase[first:, None])
+    kernel = np.hanning(400)
+    kernel /= kernel.sum()
+    base = np.array([np.convolve(z[:, i], kernel, mode="valid") for i in range(6)])
+    return float(np.sqrt(2 * np.mean(np.abs(base) ** 2)))
+
+
+# ------------------------------------------------------------------ the pure pieces
+def test_bounds_keep_close_tones_apart_and_within_the_range():
+    lower, upper = tracking_bounds_hz([40.0, 39.0, 80.0], 2.0, FS)
+    assert lower.tolist() == pytest.approx([39.6, 37.0, 78.0])
+    assert upper.tolist() == pytest.approx([42.0, 39.4, 82.0])
+    assert upper[1] < lower[0]
+    with pytest.raises(ValueError, match="tracking_range_hz"):
+        tracking_bounds_hz([40.0], -1.0, FS)
+
+
+def test_phase_error_is_the_weights_turn_over_mu_and_none_without_a_measurement():
+    w = np.exp(1j * np.linspace(0, 3, 12)).reshape(2, 6)
+    turned = w * np.exp(1j * np.array([[1e-3], [-2e-3]]))
+    g = np.broadcast_to(0.1 * np.exp(-0.7j) * np.eye(6), (2, 6, 6))
+    p_inv = np.linalg.inv(-2.0 * np.linalg.inv(g))            # decentralized P = -2/G_ii
+    error, strength = weight_phase_error(w, turned, 0.002, 8, g, p_inv)
+    assert error == pytest.approx([1e-3 / 0.016, -2e-3 / 0.016], rel=2e-3)
+    assert np.all(strength > 0)
+    for previous, current, rate in ((w, turned, 0.0), (0 * w, turned, 0.002),
+                                    (w, 2 * turned, 0.002)):   # frozen, zero, growing
+        error, strength = weight_phase_error(previous, current, rate, 8, g, p_inv)
+        assert not np.any(strength) and not np.any(error)
+
+
+def test_phase_error_is_measured_through_the_plant_on_a_coupled_one():
+    rng = np.random.default_rng(3)
+    g = (0.1 * np.eye(6) + 0.03 * rng.standard_normal((6, 6))
+         + 0.03j * rng.standard_normal((6, 6)))[None]
+    p = np.diag(-2.0 / np.diag(g[0]))[None]                   # decentralized
+    target = rng.standard_normal((1, 6)) + 1j * rng.standard_normal((1, 6))
+    w = target.copy()                                         # converged on T
+    psi = 0.01                                                # T turns by psi
+    residual = np.einsum("tij,tj->ti", g, w - target * np.exp(1j * psi))
+    moved = w + 0.002 * 8 * 0.5 * np.einsum("tij,tj->ti", p, residual)
+    error, _ = weight_phase_error(w, moved, 0.002, 8, g, np.linalg.inv(p))
+    assert error == pytest.approx([psi], rel=0.02)
+
+
+def test_orders_combine_to_one_fundamental_error():
+    error = np.array([[0.1, 0.0], [0.2, 0.0], [0.3, 0.0]])    # order k sees k x 0.1
+    strength = np.array([[1.0, 0.0], [4.0, 0.0], [0.5, 0.0]])
+    combined, valid = combine_orders(error, strength, np.array([1.0, 2.0, 3.0]))
+    assert combined[0] == pytest.approx(0.1) and valid.tolist() == [True, False]
+
+
+def test_the_loop_holds_without_measurements_and_stays_in_its_bounds():
+    tracker = FrequencyTracker([40.0], 1.0, FS)
+    for _ in range(100):
+        f = tracker.update(np.array([0.3]), np.array([False]), 0.002)
+    assert f == pytest.approx([40.0])
+    for _ in range(5000):
+        f = tracker.update(np.array([0.5]), np.array([True]), 0.002)
+    assert f == pytest.approx([41.0]) and tracker.estimates_hz == pytest.approx([41.0])
+
+
+# ------------------------------------------------------------------ in the supervisor
+def test_a_tone_off_by_0p4_hz_is_tracked_and_cancelled():
+    sup = supervisor([40.0])
+    residual, est = run(sup, lambda n: [40.4], [0.05], start_s=3.3, samples=12000)
+    assert sup.state == NotchState.ADAPTING
+    assert est[-1000:, 0].mean() == pytest.approx(40.4, abs=1e-3)
+    assert np.abs(est[-1000:, 0] - 40.4).max() < 0.02
+    status = sup.status()
+    assert status["frequency_tracking"] and status["reference"] == "unused"
+    assert status["tone_estimates_hz"] == pytest.approx(est[-1].tolist())
+    before = demodulated_rms(residual[:4000], 40.4, 3300)
+    after = demodulated_rms(residual, 40.4, 10000)
+    assert 20 * np.log10(before / after) > 40.0
+
+
+def test_without_tracking_the_same_offset_is_not_followed():
+    sup = supervisor([40.0], frequency_tracking=False)
+    _, est = run(sup, lambda n: [40.4], [0.05], start_s=3.3, samples=5000)
+    assert est[-1, 0] == 40.0 and sup.canceller.tone_frequencies_hz.tolist() == [40.0]
+
+
+def test_close_tones_are_tracked_each_to_its_own_frequency():
+    sup = supervisor([39.0, 40.0])
+    _, est = run(sup, lambda n: [39.2, 40.25], [0.05, 0.05], start_s=3.3, samples=17000)
+    assert est[-1000:].mean(axis=0) == pytest.approx([39.2, 40.25], abs=5e-3)
+    assert np.all(np.diff(est, axis=1) > 0.2)          # never met
+
+
+def test_a_tone_outside_the_range_stops_at_its_edge():
+    sup = supervisor([40.0], tracking_range_hz=0.3)
+    _, est = run(sup, lambda n: [40.45], [0.05], start_s=3.3, samples=8000)
+    assert est.max() == pytest.approx(40.3)
+
+
+def test_frozen_weights_hold_the_frequency():
+    sup = supervisor([40.0])
+    run(sup, lambda n: [40.4], [0.05], start_s=3.3, samples=7000)
+    sup.canceller.set_frozen(True)
+    held = sup._follow.tracker.estimates_hz        # the proportional correction ends
+    _, est = run(sup, lambda n: [40.9], [0.05], start_s=0.0, samples=1000, first=7000)
+    assert np.all(est[8:] == held)
+
+
+def test_the_oscillators_move_phase_continuously_and_keep_their_weights():
+    sup = supervisor([40.0])
+    run(sup, lambda n: [40.0], [0.05], start_s=3.3, samples=4000)
+    canceller = sup.canceller
+    w, phase = canceller.weights, canceller.phases_rad
+    canceller.retune(np.array([40.5]))
+    assert np.array_equal(canceller.weights, w)
+    assert canceller.phases_rad == pytest.approx(phase, abs=1e-12)
+    for _ in range(10):
+        canceller.step(np.zeros(6))
+    assert canceller.phases_rad == pytest.approx(
+        np.remainder(phase + 10 * 2 * np.pi * 40.5 / FS, 2 * np.pi), abs=1e-9)
+
+
+# ------------------------------------------------------------------ settings, reference
+@pytest.mark.parametrize("changes, reason", [
+    ({"tone_frequencies_hz": [40.0, 50.0, 60.0, 70.0, 90.0, 110.0], "harmonics": 2},
+     "at most 16"),
+    ({"tone_frequencies_hz": [260.0], "harmonics": 1, "frequency_tracking": False},
+     "reaches fs/2"),
+    ({"tone_frequencies_hz": [160.0], "harmonics": 2, "tracking_range_hz": 7.0},
+     "reaches fs/2"),
+    ({"tone_frequencies_hz": [40.0, 80.0], "harmonics": 1}, "duplicate"),
+    ({"reference_harmonics": [1.0]}, "one order per tone"),
+    ({"reference_harmonics": [1.0, -2.0]}, "> 0"),
+    ({"harmonics": 8}, "0..7"),
+    ({"tracking_range_hz": -1.0}, "tracking_range_hz"),
+    ({"reference_timeout_s": 0.0}, "reference_timeout_s"),
+])
+def test_bad_moving_tone_settings_are_refused_and_change_nothing(changes, reason):
+    sup = supervisor([40.0, 80.0])
+    before = sup.config
+    with pytest.raises(ValueError, match=reason):
+        sup.check(changes)
+    with pytest.raises(ValueError, match=reason):
+        sup.apply(changes)
+    assert sup.config == before
+    assert sup.canceller.tone_frequencies_hz.tolist() == [40.0, 80.0]
+
+
+def test_harmonics_put_orders_in_the_bank_and_identify_them():
+    sup = supervisor([40.0, 50.0], harmonics=2)
+    assert sup.canceller.tone_frequencies_hz.tolist() == [40.0, 50.0, 80.0, 100.0, 120.0, 150.0]
+    assert sup.status()["bank_tones_hz"] == [40.0, 50.0, 80.0, 100.0, 120.0, 150.0]
+    sup.step(0, np.full(6, GRAVITY))
+    assert "[40.0, 50.0, 80.0, 100.0, 120.0, 150.0]" in sup.drain_events()[0].message
+    sup.apply({"harmonics": 0})
+    assert sup.canceller.tone_frequencies_hz.tolist() == [40.0, 50.0]
+
+
+def test_tones_follow_the_reference_and_fall_back_when_it_goes_stale():
+    sup = supervisor([30.0, 45.0], reference_harmonics=[1.0, 1.5], harmonics=1,
+                     frequency_tracking=False, reference_timeout_s=0.05)
+    assert sup.status()["reference"] == "waiting"
+    speed = lambda n: 30.5 + 0.5e-3 * max(n - 3300, 0)          # noqa: E731  (0.5 Hz/s)
+    residual, est = run(sup, lambda n: [speed(n), 3 * speed(n)], [0.05, 0.03], 3.3, 8000,
+                        reference=lambda n: speed(n) if n < 7000 else None)
+    # the tones are set once per 16-sample block, for its middle: within 1.5 x 0.5 Hz/s x 16 ms
+    assert est[6990] == pytest.approx([speed(6990), 1.5 * speed(6990)], abs=0.012)
+    assert sup.canceller.tone_frequencies_hz.tolist() == [30.0, 45.0, 60.0, 90.0]
+    status = sup.status()
+    assert status["reference"] == "stale" and status["tone_estimates_hz"] == [30.0, 45.0]
+    messages = " | ".join(e.message for e in sup.drain_events())
+    assert "following the reference" in messages and "stale" in messages
+    ramp = demodulated_rms(residual[:6990], [speed(n) for n in range(6990)], 6000)
+    assert 20 * np.log10(0.05 / ramp) > 40.0     # at nominal tones: 3 dB (measured)
+
+
+def static_plant_response(delay_samples: int = 1):
+    """The harness plant's exact G(f) = K e^{-j 2 pi f d / fs} as a broadband response."""
+    lines = np.arange(1.0, 500.0, 1.0)
+    phase = np.exp(-2j * np.pi * lines * delay_samples / FS)[:, None]
+    return PlantFrequencyResponse(FS, tuple(lines for _ in range(6)),
+                                  tuple(K[:, j][None, :] * phase for j in range(6)),
+                                  tuple(np.zeros(lines.size) for _ in range(6)))
+
+
+def test_a_moved_tone_takes_p_and_carries_its_weights_through_the_broadband_response():
+    sup = supervisor([30.0], reference_harmonics=[1.0], frequency_tracking=False)
+    response = static_plant_response()
+    speed = lambda n: 30.0 + 2e-3 * max(n - 5000, 0)           # noqa: E731  (2 Hz/s)
+
+    def reference(n):                 # the broadband G(f) once the tone identification ends
+        if sup.plant_response is not None:
+            sup.plant_frequency_response = response
+        return speed(n)
+
+    residual, _ = run(sup, lambda n: [speed(n)], [0.05], 3.3, 10000, reference=reference)
+    g = sup.plant_frequency_response.at(sup.canceller.tone_frequencies_hz)
+    p_expected = adaptation.normalized_coefficients(g, "decentralized")
+    assert sup.canceller.tone_frequencies_hz[0] == pytest.approx(speed(9999), abs=0.02)
+    assert np.abs(sup.canceller.coefficients - p_expected).max() < 0.01 * np.abs(p_expected).max()
+    ramp = demodulated_rms(residual, [speed(n) for n in range(10000)], 7000)
+    assert 20 * np.log10(0.05 / ramp) > 40.0
