@@ -454,7 +454,7 @@ NOTCH_CONTROLLER = NodeSpec("notch_controller", summary="six decentralized Adapt
                   "stale: the tones fall back to tracking or their nominal frequencies",
                   unit="s", low=0.002, high=10.0),
     ParameterSpec("harmonics", "int", 0, "also cancel orders 2..harmonics+1 of every "
-                  "tone, following it", low=0, high=7,
+                  "tone, following it", low=0, high=MAX_NOTCH_TONES - 1,
                   constraints=f"tones x (harmonics + 1) <= {MAX_NOTCH_TONES}"),
     ParameterSpec("mu_policy", "string", "manual", "manual = every tone at mu, a warning "
                   "when the predicted rise exceeds max_rise_db; auto = per tone the largest "

@@ -43,10 +43,22 @@ def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
             item.add_marker(pytest.mark.ros)
 
 
+def _worker() -> tuple[int, int]:
+    """(this pytest-xdist worker's number, the number of workers); (0, 1) without xdist."""
+    name = os.environ.get('PYTEST_XDIST_WORKER', 'gw0')
+    return int(name.removeprefix('gw') or 0), int(os.environ.get('PYTEST_XDIST_WORKER_COUNT', 1))
+
+
 def next_domain_id() -> int:
-    """A ROS domain id not used before in this test session, in [DOMAIN_MIN, DOMAIN_LIMIT)."""
-    span = DOMAIN_LIMIT - DOMAIN_MIN
-    return DOMAIN_MIN + (_domain_base - DOMAIN_MIN + next(_domain_counter)) % span
+    """A ROS domain id not used before in this test session, in [DOMAIN_MIN, DOMAIN_LIMIT).
+
+    With pytest-xdist, worker k of W takes the ids congruent to k modulo W, so that
+    parallel workers never share a domain.
+    """
+    worker, workers = _worker()
+    span = (DOMAIN_LIMIT - DOMAIN_MIN) // workers * workers
+    return DOMAIN_MIN + (_domain_base - DOMAIN_MIN + workers * next(_domain_counter)
+                         + worker) % span
 
 
 # UDP only, for the test process and every node it starts: the tests SIGKILL nodes on

@@ -94,8 +94,9 @@ def test_nodes_exchange_contract_topics_and_cancel_the_tone(ros_context, node_pr
         and diagnostics.value(NOTCH, 'identified_tones_hz') == f'[{TONE_HZ}]'
         and diagnostics.value(NOTCH, 'state') == 'disabled'))
     assert identified and running(), (diagnostics.values(DRIVER_STATUS), logs())
-    identified_at = min(int(v['last_sample']) for v in diagnostics.history_values(NOTCH)
-                        if v.get('identified_tones_hz') == f'[{TONE_HZ}]')
+    # The sample the identification ended on, as the notch reports it (the sample of the
+    # first report that shows it depends on when /diagnostics went out: wall time).
+    identified_at = diagnostics.int_value(NOTCH, 'identification_end_sample')
     off_start = CONTROL_ON_SAMPLE - WINDOW_SAMPLES
     assert identified_at < off_start, identified_at
     # Control on (ros2 param set /notch_controller enabled true): converge, then measure.

@@ -70,9 +70,10 @@ def _check_resumed(mode: str, stream: str, commands: dict[int, np.ndarray],
         return
     assert answered == list(window), (first, sorted(set(window) - set(answered))[:20])
     # Lockstep pairs them: the driver applied each one at its sample. (A restarted driver's
-    # first forces may be published before it has discovered this listener.)
-    seen = [n for n in window if n in force]
-    assert len(seen) > CHECKED_SAMPLES // 2, len(seen)
+    # first forces may be published before it has discovered this listener, on a loaded
+    # machine for longer than the window: every force seen of the new run is checked.)
+    seen = [n for n in sorted(force) if n in commands]
+    assert len(seen) >= 100, len(seen)
     for n in seen:
         np.testing.assert_allclose(force[n], _applied(stream, commands[n]),
                                    rtol=0, atol=1e-12, err_msg=str(n))

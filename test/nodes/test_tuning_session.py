@@ -99,7 +99,12 @@ def test_readme_tuning_session(ros_context, node_processes, tmp_path):
         return (min(both.values()) > 0.2 * before[40.0]
                 and 0.5 < both[39.0] / both[40.0] < 2.0)
 
-    assert wait_until(ros_context, lambda: accel.last_index > 2500, HANG_GUARD_S), \
+    def full_window() -> bool:
+        """2000 samples received in a row (the listener may have matched the loop late)."""
+        idx, _ = accel.window(accel.last_index - 1999, accel.last_index + 1)
+        return accel.last_index > 2500 and len(idx) == 2000
+
+    assert wait_until(ros_context, full_window, HANG_GUARD_S), \
         '\n'.join(p.output() for p in processes)
     before = tone_levels()
     assert before[39.0] < 0.1 * before[40.0], before

@@ -89,8 +89,8 @@ from hexapod_vibration.core.control.plant_identification import (
 
 MAX_TONES = 16
 """Largest number of tones the controller accepts (oscillators, harmonics included)."""
-MAX_HARMONICS = 7
-"""Largest ``harmonics`` setting (orders 2..8)."""
+MAX_HARMONICS = MAX_TONES - 1
+"""Largest ``harmonics`` setting (orders 2..16 of one tone; tones x orders <= MAX_TONES)."""
 P_RETUNE_HZ = 0.05
 """A moved oscillator gets new coefficients from the broadband G(f) after this shift (Hz)."""
 REFERENCE_STATES = ("unused", "waiting", "following", "stale")
