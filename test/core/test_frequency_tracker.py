@@ -219,7 +219,7 @@ def test_harmonics_put_orders_in_the_bank_and_identify_them():
     assert sup.canceller.tone_frequencies_hz.tolist() == [40.0, 50.0]
 
 
-def test_tones_follow_the_reference_and_fall_back_when_it_goes_stale():
+def test_tones_follow_the_reference_and_hold_when_it_goes_stale():
     sup = supervisor([30.0, 45.0], reference_harmonics=[1.0, 1.5], harmonics=1,
                      frequency_tracking=False, reference_timeout_s=0.05)
     assert sup.status()["reference"] == "waiting"
@@ -228,11 +228,17 @@ def test_tones_follow_the_reference_and_fall_back_when_it_goes_stale():
                         reference=lambda n: speed(n) if n < 7000 else None)
     # the tones are set once per 16-sample block, for its middle: within 1.5 x 0.5 Hz/s x 16 ms
     assert est[6990] == pytest.approx([speed(6990), 1.5 * speed(6990)], abs=0.012)
-    assert sup.canceller.tone_frequencies_hz.tolist() == [30.0, 45.0, 60.0, 90.0]
+    # stale from 7050 on: the tones hold where the reference (extrapolated along its slope
+    # while fresh) had them, not back to nominal
+    held = sup.tone_estimates_hz
+    assert held == pytest.approx([speed(7050), 1.5 * speed(7050)], abs=0.012)
+    assert sup.canceller.tone_frequencies_hz == pytest.approx(
+        [held[0], held[1], 2 * held[0], 2 * held[1]])
     status = sup.status()
-    assert status["reference"] == "stale" and status["tone_estimates_hz"] == [30.0, 45.0]
+    assert status["reference"] == "stale" and status["tone_estimates_hz"] == held.tolist()
     messages = " | ".join(e.message for e in sup.drain_events())
     assert "following the reference" in messages and "stale" in messages
+    assert f"hold at {np.round(held, 3).tolist()} Hz" in messages
     ramp = demodulated_rms(residual[:6990], [speed(n) for n in range(6990)], 6000)
     assert 20 * np.log10(0.05 / ramp) > 40.0     # at nominal tones: 3 dB (measured)
 

@@ -71,6 +71,7 @@ from hexapod_vibration.core.control.frequency_tracker import (
     DEFAULT_BLOCK_SAMPLES,
     SETTLE_TIME_CONSTANTS,
     FrequencyTracker,
+    acquisition_frequencies,
     combine_orders,
     loop_bandwidths_hz,
     weight_phase_error,
@@ -85,6 +86,7 @@ from hexapod_vibration.core.control.plant_identification import (
     BroadbandIdentifier,
     DisturbanceSpectrum,
     PlantFrequencyResponse,
+    RemovedLine,
 )
 
 MAX_TONES = 16
@@ -133,8 +135,8 @@ class NotchConfig:
         reference_harmonics: one order per tone (may be non-integer): tone k follows
             order_k x the reference frequency (tachometer, Hz) while it arrives; empty:
             no reference.
-        reference_timeout_s: a reference older than this is stale: the tones fall back to
-            tracking or their nominal frequencies (s).
+        reference_timeout_s: a reference older than this is stale: the tones hold where
+            the reference had them and, with ``frequency_tracking``, track from there (s).
         harmonics: also cancel orders 2..harmonics+1 of every tone, following it.
         mu_policy: ``manual`` (every tone at ``mu``, a warning when the predicted rise
             exceeds ``max_rise_db``) or ``auto`` (per tone the largest rate within it).
@@ -615,7 +617,7 @@ class NotchSupervisor:
         ``identifying``).
         """
         response, uncertainty, limit, what = self._measured_response()
-        self.identifier = None
+        identifier, self.identifier = self.identifier, None
         self.identification_end_sample = self.last_sample
         self._quiet_from_sample = self.last_sample + int(round(GUARD_SETTLE_S * self.fs))
         self.identification_confidence = float(max(0.0, 1.0 - uncertainty))
@@ -630,6 +632,9 @@ class NotchSupervisor:
                          f"{100 * limit:.0f} % (a disturbance "
                          "next to a tone?); control stays off")
             return
+        if self._follow.tracker is not None and isinstance(identifier, BroadbandIdentifier):
+            self._follow.acquire(identifier.disturbance_lines())
+            tones = [float(f) for f in self.canceller.tone_frequencies_hz]
         current = response if tones == self._identifying_tones else self._known_response(
             tones)
         try:
@@ -970,6 +975,7 @@ class _ToneFollowing:
         self.block = DEFAULT_BLOCK_SAMPLES
         self.count = 0
         self.fundamentals_hz = np.zeros(0)
+        self.acquired_hz = np.zeros(0)
         self.tracker: FrequencyTracker | None = None
         self.reference_hz = float("nan")
         self.reference_index = -1
@@ -1009,6 +1015,7 @@ class _ToneFollowing:
         self.count = 0
         self._previous_w = None
         self.fundamentals_hz = nominal.copy()
+        self.acquired_hz = np.full(nominal.size, np.nan)
         if not same:
             self._p_at_hz = bank_frequencies(nominal, cfg.harmonics)
             return
@@ -1076,15 +1083,15 @@ class _ToneFollowing:
         return fundamentals
 
     def _reference_changed(self, state: str) -> None:
-        fallback = "tracking" if self.tracker is not None else "the nominal tones"
         if state == "stale":
+            held = np.round(self.fundamentals_hz, 3).tolist()
+            then = ("tracking from there" if self.tracker is not None
+                    else "held there until it comes back")
             self.sup._event("warn", f"reference frequency stale (none for "
-                                    f"{self.sup.config.reference_timeout_s:g} s): tones fall "
-                                    f"back to {fallback}")
-            if self.tracker is None:
-                self._retune(self.nominal_hz)
-            else:
-                self.tracker.reset(self.fundamentals_hz)
+                                    f"{self.sup.config.reference_timeout_s:g} s): tones "
+                                    f"hold at {held} Hz, {then}")
+            if self.tracker is not None:   # not back to nominal: a spin-up is far from it
+                self.tracker.recentre(self.fundamentals_hz)
         elif state == "following":
             self.sup._event("info", f"following the reference frequency "
                                     f"({self.reference_hz:g} Hz): tones at "
@@ -1143,12 +1150,45 @@ class _ToneFollowing:
             self._detector_source = p
         return self._detector
 
+    def acquire(self, lines: list[RemovedLine]) -> None:
+        """Start each tone at the strongest disturbance line within its tracking bounds.
+
+        After a broadband identification (the lines it fitted and removed, and those on
+        its grid): the oscillators (all orders) and the tracker move there at once, the
+        caller computes P from G(f) at them; a tone with no line there stays put. Reported
+        as an event and in ``acquired_hz`` (NaN: none).
+        """
+        cfg = self.sup.config
+        freqs = np.array([line.frequency_hz for line in lines], dtype=float)
+        strength = np.array([float(np.linalg.norm(line.amplitude)) for line in lines])
+        found = acquisition_frequencies(self.nominal_hz, cfg.tracking_range_hz, self.sup.fs,
+                                        freqs, strength)
+        self.acquired_hz = found
+        if not np.any(np.isfinite(found)):
+            self.sup._event("info", "acquisition: no disturbance line within the tracking "
+                                    "range of the tones; tracking starts at "
+                                    f"{self.fundamentals_hz.tolist()} Hz")
+            return
+        target = np.where(np.isfinite(found), found, self.fundamentals_hz)
+        self.tracker.reset(target)
+        self.fundamentals_hz = self.tracker.frequencies_hz
+        self._previous_w = None
+        bank = (self.orders[:, None] * self.fundamentals_hz[None, :]).reshape(-1)
+        self.sup.canceller.retune(bank)
+        self.sup.guard.follow_tones(bank)
+        self._p_at_hz = bank
+        self.sup._event("info", "acquisition: tones " + ", ".join(
+            f"{n:g} -> {f:.3f} Hz" if np.isfinite(a) else f"{n:g} Hz (no line)"
+            for n, f, a in zip(self.nominal_hz, self.fundamentals_hz, found, strict=True))
+            + " (strongest disturbance line within the tracking range)")
+
     def _retune(self, fundamentals: np.ndarray) -> None:
         """Move every oscillator to its order x fundamental; new P from G(f) if moved."""
         self.fundamentals_hz = np.asarray(fundamentals, dtype=float).copy()
         bank = (self.orders[:, None] * self.fundamentals_hz[None, :]).reshape(-1)
         canceller = self.sup.canceller
         canceller.retune(bank)
+        self.sup.guard.follow_tones(bank)
         response = self.sup.plant_frequency_response
         if (response is None or self.sup.plant_response is None
                 or np.max(np.abs(bank - self._p_at_hz)) < P_RETUNE_HZ
@@ -1187,6 +1227,9 @@ class _ToneFollowing:
     def status(self) -> dict[str, Any]:
         """The status keys of the moving tones (for ``/diagnostics``)."""
         return {"tone_estimates_hz": [float(f) for f in self.fundamentals_hz],
+                "acquired_hz": [float(f) for f in self.acquired_hz],
+                "guard_bands": ("fixed" if not self.sup.guard.following else
+                                "moved away" if self.sup.guard.moved_away else "following"),
                 "frequency_tracking": self.tracker is not None,
                 "reference": self.reference_state,
                 "bank_tones_hz": [float(f) for f in self.sup.canceller.tone_frequencies_hz]}
