@@ -12,7 +12,9 @@ import pytest
 from hexapod_vibration.core.control import adaptation
 from hexapod_vibration.core.control.frequency_tracker import (
     FrequencyTracker,
+    acquisition_frequencies,
     combine_orders,
+    strongest_lines_hz,
     tracking_bounds_hz,
     weight_phase_error,
 )
@@ -269,3 +271,32 @@ def test_a_moved_tone_takes_p_and_carries_its_weights_through_the_broadband_resp
     assert np.abs(sup.canceller.coefficients - p_expected).max() < 0.01 * np.abs(p_expected).max()
     ramp = demodulated_rms(residual, [speed(n) for n in range(10000)], 7000)
     assert 20 * np.log10(0.05 / ramp) > 40.0
+
+
+def test_acquisition_takes_the_strongest_line_within_each_tones_bounds():
+    """Close tones 39 and 40 Hz: each takes only lines on its own side of 39.5 Hz."""
+    lines = np.array([38.6, 39.45, 40.4, 41.0, 45.0])
+    strength = np.array([1.0, 5.0, 3.0, 2.0, 9.0])
+    found = acquisition_frequencies([39.0, 40.0], 2.0, FS, lines, strength)
+    assert found.tolist() == [38.6, 40.4]       # 39.45 is past the midpoint less 0.1 Hz
+    assert np.isnan(acquisition_frequencies([30.0], 2.0, FS, lines, strength)).all()
+
+
+def test_strongest_line_of_a_record_to_a_hundredth_of_a_hertz():
+    rng = np.random.default_rng(7)
+    n = np.arange(1000)
+    record = (0.05 * MIX * np.cos(2 * np.pi * 40.43 * n / FS + 0.2)[:, None]
+              + 0.004 * np.cos(2 * np.pi * 47.0 * n / FS)[:, None]
+              + 1e-3 * rng.standard_normal((1000, 6)))
+    found = strongest_lines_hz(record, FS, np.array([38.0, 60.0]), np.array([42.0, 70.0]))
+    assert found[0] == pytest.approx(40.43, abs=0.01)
+    assert np.isnan(found[1])                              # noise only: no line
+
+
+def test_a_recentred_tracker_is_bounded_around_its_new_place():
+    tracker = FrequencyTracker([30.0, 60.0], 2.0, FS)
+    tracker.reset([45.0, 90.0])
+    assert tracker.frequencies_hz.tolist() == [32.0, 62.0]        # clamped to nominal +- 2
+    tracker.recentre([45.0, 90.0])
+    assert tracker.frequencies_hz.tolist() == [45.0, 90.0]
+    assert tracker.upper_hz.tolist() == [47.0, 92.0]

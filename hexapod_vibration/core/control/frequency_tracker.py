@@ -333,3 +333,55 @@ def acquisition_frequencies(nominal_hz: Sequence[float] | np.ndarray, range_hz: 
         found = np.isfinite(score[np.arange(lower.size), best])
         out[found] = f[best[found]]
     return out
+
+
+ACQUISITION_RECORD_S = 1.0
+"""Error record (s) the tones are acquired from when adaptation starts: long enough for a
+line's frequency to a few hundredths of a hertz, short enough that a drifting line (0.3 Hz/s
+in ``drift``) moves little over it."""
+ACQUISITION_LINE_FACTOR = 100.0
+"""A peak counts as a line when its power exceeds this times the record's median bin."""
+ACQUISITION_GRID_HZ = 0.1
+
+
+def strongest_lines_hz(record: np.ndarray, sample_rate_hz: float, lower_hz: np.ndarray,
+                       upper_hz: np.ndarray) -> np.ndarray:
+    """The frequency (Hz) of the strongest line within each ``[lower, upper]`` of a record.
+
+    The Hann-windowed DTFT power of the (N, C) record (channels summed) on a
+    :data:`ACQUISITION_GRID_HZ` grid over each interval, refined to its maximum by a
+    bounded search; a maximum below :data:`ACQUISITION_LINE_FACTOR` times the median power
+    of the record's FFT bins is no line (NaN).
+
+    Args:
+        record: (N, C) error samples (m/s^2), oldest first.
+        sample_rate_hz: fs (Hz).
+        lower_hz: (T,) the intervals' lower ends (Hz).
+        upper_hz: (T,) their upper ends (Hz).
+
+    Returns:
+        (T,) line frequencies (Hz), NaN where there is none.
+    """
+    from scipy.optimize import minimize_scalar
+
+    x = np.asarray(record, dtype=float)
+    x = (x - x.mean(axis=0)) * np.hanning(x.shape[0])[:, None]
+    n = np.arange(x.shape[0])
+    floor = float(np.median(np.sum(np.abs(np.fft.rfft(x, axis=0)) ** 2, axis=1)))
+
+    def power(f: np.ndarray) -> np.ndarray:
+        kernel = np.exp(-2j * np.pi * np.outer(np.atleast_1d(f), n) / sample_rate_hz)
+        return np.sum(np.abs(kernel @ x) ** 2, axis=1)
+
+    out = np.full(np.size(lower_hz), np.nan)
+    for t, (lo, hi) in enumerate(zip(np.atleast_1d(lower_hz), np.atleast_1d(upper_hz),
+                                     strict=True)):
+        grid = np.linspace(lo, hi, max(2, int(np.ceil((hi - lo) / ACQUISITION_GRID_HZ)) + 1))
+        p = power(grid)
+        best = int(np.argmax(p))
+        fit = minimize_scalar(lambda f: -power(f)[0], method="bounded", bounds=(
+            grid[max(best - 1, 0)], grid[min(best + 1, grid.size - 1)]),
+            options={"xatol": 1e-4})
+        if -fit.fun > ACQUISITION_LINE_FACTOR * floor:
+            out[t] = float(fit.x)
+    return out

@@ -68,12 +68,14 @@ from hexapod_vibration.core.control.divergence_guard import (
 )
 from hexapod_vibration.core.control.filters import DCBlocker
 from hexapod_vibration.core.control.frequency_tracker import (
+    ACQUISITION_RECORD_S,
     DEFAULT_BLOCK_SAMPLES,
     SETTLE_TIME_CONSTANTS,
     FrequencyTracker,
     acquisition_frequencies,
     combine_orders,
     loop_bandwidths_hz,
+    strongest_lines_hz,
     weight_phase_error,
 )
 from hexapod_vibration.core.control.mu_policy import DEFAULT_MAX_RISE_DB
@@ -781,7 +783,7 @@ class NotchSupervisor:
         if self._config.divergence_guard:
             self._guard_step(error)
         if self._follow.active:
-            self._follow.step(index)
+            self._follow.step(index, error)
         if self.identifier is not None:
             command += self.identifier.step(error)
             if self.identifier.done:
@@ -977,6 +979,9 @@ class _ToneFollowing:
         self.fundamentals_hz = np.zeros(0)
         self.acquired_hz = np.zeros(0)
         self.tracker: FrequencyTracker | None = None
+        self._record: np.ndarray | None = None
+        self._record_n = 0
+        self._record_broken = False
         self.reference_hz = float("nan")
         self.reference_index = -1
         self.reference_slope = 0.0             # Hz per sample, from the last two values
@@ -1009,6 +1014,9 @@ class _ToneFollowing:
                                          loop_bandwidths_hz(nominal, self.orders),
                                          block_samples=self.block)
                         if cfg.frequency_tracking and nominal.size else None)
+        self._record = (np.zeros((int(round(ACQUISITION_RECORD_S * self.sup.fs)),
+                                  self.sup.channels)) if self.tracker is not None else None)
+        self._record_n = 0
         self.active = bool(nominal.size) and (self.tracker is not None
                                                or self.reference_orders.size > 0)
         self.reference_state = "waiting" if self.reference_orders.size else "unused"
@@ -1044,8 +1052,22 @@ class _ToneFollowing:
             self.reference_slope = (value - self.reference_hz) / (index - self.reference_index)
         self.reference_hz, self.reference_index = value, int(index)
 
-    def step(self, index: int) -> None:
-        """Count the sample; at a block's end choose and apply the tones of the next one."""
+    def step(self, index: int, error: np.ndarray) -> None:
+        """Count the sample; at a block's end choose and apply the tones of the next one.
+
+        With tracking, the error (C,) (m/s^2) of samples without control output and
+        without excitation goes into a ring buffer: the record the tones are acquired
+        from when adaptation starts (:meth:`_acquire_from_record`).
+        """
+        if self._record is not None:
+            sup = self.sup
+            if sup.identifier is None and sup.canceller.output_gain == 0.0:
+                if self._record_broken:        # a new quiet stretch starts the record
+                    self._record_n, self._record_broken = 0, False
+                self._record[self._record_n % self._record.shape[0]] = error
+                self._record_n += 1
+            else:                              # kept: the stretch just before control on
+                self._record_broken = True
         self.count += 1
         if self.count < self.block:
             return
@@ -1111,6 +1133,8 @@ class _ToneFollowing:
             self._adapting_since = -1
         elif self._adapting_since < 0:
             self._adapting_since = index
+            self._acquire_from_record()
+            return self.tracker.frequencies_hz
         plant, inverse = self._detector_matrices()
         effective = rate * self._rate_scale               # a mu policy's per-tone rates
         if (previous is None or plant is None or rate <= 0.0
@@ -1149,6 +1173,33 @@ class _ToneFollowing:
             self._rate_scale = float(np.clip(scale.min(), 1e-6, None))
             self._detector_source = p
         return self._detector
+
+    def _acquire_from_record(self) -> None:
+        """Adaptation starts: each tone at the strongest line of the last record, if any.
+
+        The record (:data:`ACQUISITION_RECORD_S` of error without control output or
+        excitation, just before) says where the disturbance is now (a drifting line has
+        moved since the identification); the tones and the tracker start there and the
+        phase-locked loop only fine-tracks. Reported as an event (``acquired_hz``).
+        """
+        size = self._record.shape[0]
+        if self._record_n < size:
+            return
+        start = self._record_n % size
+        record = np.concatenate([self._record[start:], self._record[:start]])
+        found = strongest_lines_hz(record, self.sup.fs, self.tracker.lower_hz,
+                                   self.tracker.upper_hz)
+        if not np.any(np.isfinite(found)):
+            return
+        self.acquired_hz = found
+        target = np.where(np.isfinite(found), found, self.fundamentals_hz)
+        self.tracker.reset(target)
+        self._retune(self.tracker.frequencies_hz)
+        self._previous_w = None
+        self.sup._event("info", "acquisition at control on: tones " + ", ".join(
+            f"{n:g} -> {f:.3f} Hz" if np.isfinite(a) else f"{n:g} Hz (no line)"
+            for n, f, a in zip(self.nominal_hz, self.fundamentals_hz, found, strict=True))
+            + f" (strongest line of the last {ACQUISITION_RECORD_S:g} s)")
 
     def acquire(self, lines: list[RemovedLine]) -> None:
         """Start each tone at the strongest disturbance line within its tracking bounds.
