@@ -159,6 +159,7 @@ class DivergenceGuard:
                            + [f"1/3 octave {c:.0f} Hz" for c, _, _ in self._octaves])
         self._n_main = len(self.tones_hz) + 1            # the tones' bands and broadband
         self._following = tones.copy()
+        self._cancelled = np.zeros(tones.size)
         self._moved = False
         self.reset_reference()
 
@@ -211,6 +212,18 @@ class DivergenceGuard:
             return
         self._moved = True
         self._following = tones.copy()
+
+    def set_cancelled(self, amplitude: np.ndarray) -> None:
+        """The canceller's output at each tone as error, (T, C) phasors (m/s^2): ``G W``.
+
+        While the tones are away from where the reference was taken (a spin-up: the
+        disturbance there is louder or softer than in the reference), each tone's band
+        counts as no worse than off up to the power this output makes in it: the
+        disturbance a converged canceller cancels is as large as its output.
+        """
+        a = np.asarray(amplitude)
+        self._cancelled = (np.sum(np.abs(a) ** 2, axis=1)
+                           * (self.block * np.sum(self._window ** 2) / 4.0))
 
     @property
     def following(self) -> bool:
@@ -338,6 +351,9 @@ class DivergenceGuard:
             ref_blocks[r, :t] = tone_masks.astype(float) @ block_bins
         if self.moved_away:
             judged[self._n_main:] = False
+            # the tone's level without control where it is now is at least what the
+            # canceller cancels there (its output through the plant, |G W|)
+            ref_blocks[:, :t] = np.maximum(ref_blocks[:, :t], self._cancelled[None, :t])
         return masks @ bins, ref_blocks.mean(axis=0), 10.0 * np.log10(
             np.maximum(ref_blocks, 1e-300)), judged
 

@@ -36,6 +36,16 @@ the supervisor finds it):
   lowers ``mu``, then fades out, when a band rises above that level; the
   canceller clamps its weights to ``weight_limit_n`` after every update (anti-windup).
 
+Moving tones (``frequency_tracking``, ``reference_harmonics``): the phase-locked tracker
+pulls a tone in only from about the canceller's own bandwidth, so the tones are first
+*acquired*: after a broadband identification at the strongest disturbance line it fitted
+within each tone's tracking bounds (P from G(f) there), and again when adaptation starts at
+the strongest line of the last second of error without output (a drifting line has moved
+since); the tracker then fine-tracks. The guard's tone bands follow the oscillators (its
+reference is kept). A stale tachometer leaves the tones where it had them (tracking goes
+on from there); reported in the events and ``status()`` (``acquired_hz``, ``guard_bands``,
+``reference``).
+
 Missing samples (a gap in the indices) move the phases on as if the samples had been
 there (:meth:`AdaptiveNotchCanceller.advance`); a gap during an identification restarts it.
 
@@ -634,7 +644,8 @@ class NotchSupervisor:
                          f"{100 * limit:.0f} % (a disturbance "
                          "next to a tone?); control stays off")
             return
-        if self._follow.tracker is not None and isinstance(identifier, BroadbandIdentifier):
+        if (self._follow.tracker is not None and isinstance(identifier, BroadbandIdentifier)
+                and self._follow.reference_state != "following"):
             self._follow.acquire(identifier.disturbance_lines())
             tones = [float(f) for f in self.canceller.tone_frequencies_hz]
         current = response if tones == self._identifying_tones else self._known_response(
@@ -1073,6 +1084,9 @@ class _ToneFollowing:
             return
         self.count = 0
         sup = self.sup
+        if sup.guard.moved_away and self._detector[0] is not None:
+            sup.guard.set_cancelled(np.einsum("tij,tj->ti", self._detector[0],
+                                              sup.canceller.weights))
         if sup.identifier is not None or not sup.canceller.tone_frequencies_hz.size:
             self._previous_w, self._adapting_since = None, -1
             return
