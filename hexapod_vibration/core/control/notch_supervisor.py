@@ -1203,6 +1203,12 @@ class _ToneFollowing:
         record = np.concatenate([self._record[start:], self._record[:start]])
         found = strongest_lines_hz(record, self.sup.fs, self.tracker.lower_hz,
                                    self.tracker.upper_hz)
+        # the record's window does not resolve lines closer than its main lobe's half
+        # width (2 / record length): a tone with a neighbour that close keeps its place
+        # (close_tones, 39 and 40 Hz: the 1 s record put them at 38.70 and 40.33 Hz)
+        others = np.abs(found[:, None] - self.fundamentals_hz[None, :])
+        np.fill_diagonal(others, np.inf)
+        found[np.min(others, axis=1, initial=np.inf) < 2.0 / ACQUISITION_RECORD_S] = np.nan
         if not np.any(np.isfinite(found)):
             return
         self.acquired_hz = found
