@@ -300,3 +300,19 @@ def test_a_recentred_tracker_is_bounded_around_its_new_place():
     tracker.recentre([45.0, 90.0])
     assert tracker.frequencies_hz.tolist() == [45.0, 90.0]
     assert tracker.upper_hz.tolist() == [47.0, 92.0]
+
+
+def test_a_tone_0_4_hz_off_is_acquired_from_the_broadband_identification():
+    """Issue 11 pull-in: 40.4 Hz told 40 Hz at a rate whose lock range is ~0.1 Hz.
+
+    The broadband identification's fitted line puts the oscillator at 40.4 Hz (event,
+    ``acquired_hz``), P from G(f) there; the tracker only fine-tracks: >= 40 dB.
+    """
+    sup = supervisor([40.0], identification="broadband", mu=0.001)
+    residual, est = run(sup, lambda n: [40.4], [0.05], 0.0, 19000)
+    assert sup.status()["acquired_hz"] == pytest.approx([40.4], abs=0.005)
+    assert "acquisition: tones 40 -> 40.400 Hz" in " | ".join(
+        e.message for e in sup.drain_events())
+    assert est[-1] == pytest.approx([40.4], abs=0.01)
+    assert sup.status()["guard_bands"] == "following" and sup.state == NotchState.ADAPTING
+    assert 20 * np.log10(0.05 / demodulated_rms(residual, 40.4, 16000)) > 40.0
