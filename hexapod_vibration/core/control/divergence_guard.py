@@ -180,6 +180,11 @@ class DivergenceGuard:
         usable[tones.size + 1:] = out[tones.size + 1:].sum(axis=1) >= 3
         return out, usable
 
+    def _tone_masks(self, tones: np.ndarray) -> np.ndarray:
+        """(T, F) float masks of the tones' bands."""
+        return (np.abs(self._freqs[None, :] - np.asarray(tones)[:, None])
+                <= self.half_width_hz).astype(float)
+
     def _near(self, tones: np.ndarray) -> np.ndarray:
         """(F,) bins within a tone's band or its window's main lobe."""
         if not len(tones):
@@ -245,6 +250,7 @@ class DivergenceGuard:
         self._ref_db = []
         self._ref_bins: list[np.ndarray] = []         # per reference block (F,) powers
         self._ref_tones: list[np.ndarray] = []        # and where the tones were
+        self._ref_tone_power: list[np.ndarray] = []   # their bands' power there (T,)
         self._slow = None
         self.last_levels_db = np.full(nb, np.nan)
 
@@ -320,6 +326,7 @@ class DivergenceGuard:
             self._ref_db.append(10.0 * np.log10(np.maximum(power, 1e-300)))
             self._ref_bins.append(bins)
             self._ref_tones.append(self._following.copy())
+            self._ref_tone_power.append(self._tone_masks(self._following) @ bins)
             return None
         if self._all_judging and self.has_reference:
             if self._moved:
@@ -345,10 +352,7 @@ class DivergenceGuard:
         ref_bins = np.array(self._ref_bins)                              # (R, F)
         ref_blocks = ref_bins @ masks.T                                  # (R, B)
         t = tones.size
-        for r, (block_tones, block_bins) in enumerate(zip(self._ref_tones, ref_bins,
-                                                          strict=True)):
-            tone_masks = np.abs(self._freqs[None, :] - block_tones[:, None]) <= self.half_width_hz
-            ref_blocks[r, :t] = tone_masks.astype(float) @ block_bins
+        ref_blocks[:, :t] = np.array(self._ref_tone_power)     # each at its own tones
         if self.moved_away:
             judged[self._n_main:] = False
             # the tone's level without control where it is now is at least what the
