@@ -187,3 +187,25 @@ def test_a_faded_out_canceller_stays_off_until_a_new_mu_and_the_mirror_changes_n
     sup.apply({"mu": 0.001})                      # the user's new rate: control tries again
     assert sup.guard_state == "watching" and sup.state == NotchState.ADAPTING
     assert "refusal" not in sup.status()
+
+
+def test_tone_bands_follow_a_moving_tone_and_keep_their_reference(referenced):
+    """A spin-up: the 40 Hz line moves to 60 Hz at its uncontrolled level.
+
+    Bands fixed on 40 Hz see the moved line in the 63 Hz third octave and call it a
+    divergence; bands following the oscillator judge the tone against its own level without
+    control (taken at 40 Hz) and leave the third octaves unjudged while it is away.
+    """
+    guard, rng = referenced
+    fixed = DivergenceGuard(6, FS, [TONE], margin_db=1.0)
+    _feed(fixed, _signal(np.random.default_rng(5), 4000, 0), recording=True, judging=False)
+    moved = _signal(rng, 8 * BLOCK, 4000, tone_hz=60.0)
+    assert any(v.action and "octave 63" in v.band for _, v in _feed(fixed, moved, False, True))
+    guard.follow_tones(np.array([60.0]))
+    assert guard.following and guard.moved_away
+    assert all(v.action is None for _, v in _feed(guard, moved, False, True))
+    louder = _signal(rng, 4 * BLOCK, 6000, tone_amp=0.2, tone_hz=60.0)      # +12 dB
+    verdict = next(v for _, v in _feed(guard, louder, False, True) if v.action)
+    assert verdict.band == "tone 40 Hz (at 60.00 Hz)" and verdict.rise_db > 10.0
+    guard.follow_tones(np.array([40.3]))                  # back near its reference place:
+    assert not guard.moved_away                           # the third octaves are judged

@@ -12,7 +12,9 @@ import pytest
 from hexapod_vibration.core.control import adaptation
 from hexapod_vibration.core.control.frequency_tracker import (
     FrequencyTracker,
+    acquisition_frequencies,
     combine_orders,
+    strongest_lines_hz,
     tracking_bounds_hz,
     weight_phase_error,
 )
@@ -219,7 +221,7 @@ def test_harmonics_put_orders_in_the_bank_and_identify_them():
     assert sup.canceller.tone_frequencies_hz.tolist() == [40.0, 50.0]
 
 
-def test_tones_follow_the_reference_and_fall_back_when_it_goes_stale():
+def test_tones_follow_the_reference_and_hold_when_it_goes_stale():
     sup = supervisor([30.0, 45.0], reference_harmonics=[1.0, 1.5], harmonics=1,
                      frequency_tracking=False, reference_timeout_s=0.05)
     assert sup.status()["reference"] == "waiting"
@@ -228,11 +230,17 @@ def test_tones_follow_the_reference_and_fall_back_when_it_goes_stale():
                         reference=lambda n: speed(n) if n < 7000 else None)
     # the tones are set once per 16-sample block, for its middle: within 1.5 x 0.5 Hz/s x 16 ms
     assert est[6990] == pytest.approx([speed(6990), 1.5 * speed(6990)], abs=0.012)
-    assert sup.canceller.tone_frequencies_hz.tolist() == [30.0, 45.0, 60.0, 90.0]
+    # stale from 7050 on: the tones hold where the reference (extrapolated along its slope
+    # while fresh) had them, not back to nominal
+    held = sup.tone_estimates_hz
+    assert held == pytest.approx([speed(7050), 1.5 * speed(7050)], abs=0.012)
+    assert sup.canceller.tone_frequencies_hz == pytest.approx(
+        [held[0], held[1], 2 * held[0], 2 * held[1]])
     status = sup.status()
-    assert status["reference"] == "stale" and status["tone_estimates_hz"] == [30.0, 45.0]
+    assert status["reference"] == "stale" and status["tone_estimates_hz"] == held.tolist()
     messages = " | ".join(e.message for e in sup.drain_events())
     assert "following the reference" in messages and "stale" in messages
+    assert f"hold at {np.round(held, 3).tolist()} Hz" in messages
     ramp = demodulated_rms(residual[:6990], [speed(n) for n in range(6990)], 6000)
     assert 20 * np.log10(0.05 / ramp) > 40.0     # at nominal tones: 3 dB (measured)
 
@@ -263,3 +271,48 @@ def test_a_moved_tone_takes_p_and_carries_its_weights_through_the_broadband_resp
     assert np.abs(sup.canceller.coefficients - p_expected).max() < 0.01 * np.abs(p_expected).max()
     ramp = demodulated_rms(residual, [speed(n) for n in range(10000)], 7000)
     assert 20 * np.log10(0.05 / ramp) > 40.0
+
+
+def test_acquisition_takes_the_strongest_line_within_each_tones_bounds():
+    """Close tones 39 and 40 Hz: each takes only lines on its own side of 39.5 Hz."""
+    lines = np.array([38.6, 39.45, 40.4, 41.0, 45.0])
+    strength = np.array([1.0, 5.0, 3.0, 2.0, 9.0])
+    found = acquisition_frequencies([39.0, 40.0], 2.0, FS, lines, strength)
+    assert found.tolist() == [38.6, 40.4]       # 39.45 is past the midpoint less 0.1 Hz
+    assert np.isnan(acquisition_frequencies([30.0], 2.0, FS, lines, strength)).all()
+
+
+def test_strongest_line_of_a_record_to_a_hundredth_of_a_hertz():
+    rng = np.random.default_rng(7)
+    n = np.arange(1000)
+    record = (0.05 * MIX * np.cos(2 * np.pi * 40.43 * n / FS + 0.2)[:, None]
+              + 0.004 * np.cos(2 * np.pi * 47.0 * n / FS)[:, None]
+              + 1e-3 * rng.standard_normal((1000, 6)))
+    found = strongest_lines_hz(record, FS, np.array([38.0, 60.0]), np.array([42.0, 70.0]))
+    assert found[0] == pytest.approx(40.43, abs=0.01)
+    assert np.isnan(found[1])                              # noise only: no line
+
+
+def test_a_recentred_tracker_is_bounded_around_its_new_place():
+    tracker = FrequencyTracker([30.0, 60.0], 2.0, FS)
+    tracker.reset([45.0, 90.0])
+    assert tracker.frequencies_hz.tolist() == [32.0, 62.0]        # clamped to nominal +- 2
+    tracker.recentre([45.0, 90.0])
+    assert tracker.frequencies_hz.tolist() == [45.0, 90.0]
+    assert tracker.upper_hz.tolist() == [47.0, 92.0]
+
+
+def test_a_tone_0_4_hz_off_is_acquired_from_the_broadband_identification():
+    """Issue 11 pull-in: 40.4 Hz told 40 Hz at a rate whose lock range is ~0.1 Hz.
+
+    The broadband identification's fitted line puts the oscillator at 40.4 Hz (event,
+    ``acquired_hz``), P from G(f) there; the tracker only fine-tracks: >= 40 dB.
+    """
+    sup = supervisor([40.0], identification="broadband", mu=0.001)
+    residual, est = run(sup, lambda n: [40.4], [0.05], 0.0, 19000)
+    assert sup.status()["acquired_hz"] == pytest.approx([40.4], abs=0.005)
+    assert "acquisition: tones 40 -> 40.400 Hz" in " | ".join(
+        e.message for e in sup.drain_events())
+    assert est[-1] == pytest.approx([40.4], abs=0.01)
+    assert sup.status()["guard_bands"] == "following" and sup.state == NotchState.ADAPTING
+    assert 20 * np.log10(0.05 / demodulated_rms(residual, 40.4, 16000)) > 40.0

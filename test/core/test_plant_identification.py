@@ -190,3 +190,10 @@ def test_the_tone_identification_sees_that_the_disturbance_moved():
     assert disturbed.baseline_change()[0] > 0.25                # refused by the supervisor
     error = np.abs(np.diagonal(disturbed.result()[0]) / np.diagonal(quiet.result()[0]) - 1)
     assert np.max(error) > 0.1
+
+
+def test_disturbance_lines_hold_the_lines_on_and_off_the_grid(coupled_run):
+    _, ident = coupled_run
+    lines = sorted(ident.disturbance_lines(), key=lambda line: line.frequency_hz)
+    assert [round(line.frequency_hz, 2) for line in lines] == [40.0, 63.3]
+    assert np.allclose([np.max(line.amplitude) for line in lines], [0.5, 0.2], rtol=0.3)

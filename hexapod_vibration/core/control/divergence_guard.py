@@ -139,6 +139,7 @@ class DivergenceGuard:
         self._window = np.hanning(self.block)[:, None]
         self._freqs = np.fft.rfftfreq(self.block, 1.0 / self.fs)
         self._n = 0
+        self._lobe_hz = self.half_width_hz + 2.0 * self.fs / self.block
         self.set_tones(tone_frequencies_hz)
         self.action_count = 0
         self._grace = 0
@@ -147,27 +148,109 @@ class DivergenceGuard:
     def set_tones(self, tone_frequencies_hz: Sequence[float]) -> None:
         """Bands for a new tone set; the reference and the judging start again."""
         self.tones_hz = [float(f) for f in tone_frequencies_hz]
-        masks = [np.abs(self._freqs - f) <= self.half_width_hz for f in self.tones_hz]
-        masks.append(self._freqs >= BROADBAND_LOW_HZ)
-        names = [f"tone {f:g} Hz" for f in self.tones_hz] + ["broadband"]
-        near_tone = np.zeros(self._freqs.size, bool)
-        for f in self.tones_hz:        # the tones' own bands and their window's main lobe
-            near_tone |= np.abs(self._freqs - f) <= self.half_width_hz + 2.0 * self.fs / self.block
-        for centre, lo, hi in third_octave_bands_hz(THIRD_OCTAVE_LOW_HZ, 0.5 * self.fs):
-            sel = (self._freqs >= lo) & (self._freqs < hi) & ~near_tone
-            if np.count_nonzero(sel) >= 3:
-                masks.append(sel)
-                names.append(f"1/3 octave {centre:.0f} Hz")
-        self._masks = np.array(masks, dtype=float)                     # (B, F)
-        self.band_names = names
+        tones = np.asarray(self.tones_hz, dtype=float)
+        near_tone = self._near(tones)
+        self._octaves = [(centre, lo, hi) for centre, lo, hi
+                         in third_octave_bands_hz(THIRD_OCTAVE_LOW_HZ, 0.5 * self.fs)
+                         if np.count_nonzero((self._freqs >= lo) & (self._freqs < hi)
+                                             & ~near_tone) >= 3]
+        self._masks, _ = self._band_masks(tones)
+        self.band_names = ([f"tone {f:g} Hz" for f in self.tones_hz] + ["broadband"]
+                           + [f"1/3 octave {c:.0f} Hz" for c, _, _ in self._octaves])
         self._n_main = len(self.tones_hz) + 1            # the tones' bands and broadband
+        self._following = tones.copy()
+        self._cancelled = np.zeros(tones.size)
+        self._moved = False
         self.reset_reference()
+
+    def _band_masks(self, tones: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(B, F) bin masks of the tones' bands, broadband and the third octaves; (B,) usable.
+
+        The third-octave bands (those ``set_tones`` kept) leave out the bins within the
+        tones' bands and their window's main lobe (a converging tone is no rise); one left
+        with fewer than three bins is not usable.
+        """
+        masks = [np.abs(self._freqs - f) <= self.half_width_hz for f in tones]
+        masks.append(self._freqs >= BROADBAND_LOW_HZ)
+        near_tone = self._near(tones)
+        for _, lo, hi in self._octaves:
+            masks.append((self._freqs >= lo) & (self._freqs < hi) & ~near_tone)
+        out = np.array(masks, dtype=float).reshape(len(masks), self._freqs.size)
+        usable = np.ones(out.shape[0], bool)
+        usable[tones.size + 1:] = out[tones.size + 1:].sum(axis=1) >= 3
+        return out, usable
+
+    def _tone_masks(self, tones: np.ndarray) -> np.ndarray:
+        """(T, F) float masks of the tones' bands."""
+        return (np.abs(self._freqs[None, :] - np.asarray(tones)[:, None])
+                <= self.half_width_hz).astype(float)
+
+    def _near(self, tones: np.ndarray) -> np.ndarray:
+        """(F,) bins within a tone's band or its window's main lobe."""
+        if not len(tones):
+            return np.zeros(self._freqs.size, bool)
+        return np.any(np.abs(self._freqs[None, :] - np.asarray(tones)[:, None])
+                      <= self._lobe_hz, axis=0)
+
+    def follow_tones(self, tone_frequencies_hz: np.ndarray) -> None:
+        """The tones moved (tracking, a tachometer): their bands follow; the reference stays.
+
+        From the first move on, each tone's band is judged around where its oscillator
+        runs now against the reference level of the band around where it ran in each
+        reference block (the tone's level without control, wherever it was), and the
+        third-octave bands leave out the bins near the present tones. While a tone is more
+        than ``band_half_width_hz`` from where it was when the reference was taken (a
+        spin-up), the third-octave bands are not judged (their reference holds another
+        disturbance: :attr:`moved_away`); the tones' bands and the broadband are. The
+        third octaves are then judged by the slow detector only: retuning the oscillators
+        every few samples splatters single blocks a few dB over the noise of a band far
+        from the tones (measured: +3.9 dB in one 0.25 s block of 224-282 Hz on
+        ``mismatch`` tracked, +1.7 dB over its second), while a runaway shows in the
+        tones' bands and the broadband at once and a steady rise (a harmonic the
+        nonlinear plant makes) in the slow mean. A tone set that never moves is judged
+        exactly as without this (``set_tones``' bands).
+        """
+        tones = np.asarray(tone_frequencies_hz, dtype=float)
+        if tones.shape != self._following.shape:
+            return
+        if not self._moved and np.array_equal(tones, self._following):
+            return
+        self._moved = True
+        self._following = tones.copy()
+
+    def set_cancelled(self, amplitude: np.ndarray) -> None:
+        """The canceller's output at each tone as error, (T, C) phasors (m/s^2): ``G W``.
+
+        While the tones are away from where the reference was taken (a spin-up: the
+        disturbance there is louder or softer than in the reference), each tone's band
+        counts as no worse than off up to the power this output makes in it: the
+        disturbance a converged canceller cancels is as large as its output.
+        """
+        a = np.asarray(amplitude)
+        self._cancelled = (np.sum(np.abs(a) ** 2, axis=1)
+                           * (self.block * np.sum(self._window ** 2) / 4.0))
+
+    @property
+    def following(self) -> bool:
+        """True once the tones moved: their bands follow them (:meth:`follow_tones`)."""
+        return self._moved
+
+    @property
+    def moved_away(self) -> bool:
+        """True while a tone is more than a band's half width from its reference place."""
+        if not self._moved or not self._ref_tones:
+            return False
+        return bool(np.max(np.abs(self._following - self._ref_tones[-1]), initial=0.0)
+                    > self.half_width_hz)
 
     def reset_reference(self) -> None:
         """Forget the reference (new tones, new identification)."""
         nb = len(self.band_names)
         self._ref_sum = np.zeros(nb)
         self._ref_db = []
+        self._ref_bins: list[np.ndarray] = []         # per reference block (F,) powers
+        self._ref_tones: list[np.ndarray] = []        # and where the tones were
+        self._ref_tone_power: list[np.ndarray] = []   # their bands' power there (T,)
         self._slow = None
         self.last_levels_db = np.full(nb, np.nan)
 
@@ -186,13 +269,18 @@ class DivergenceGuard:
         return 10.0 * np.log10(np.maximum(self._ref_sum / max(self.reference_blocks, 1),
                                           1e-300))
 
-    def scatter_db(self) -> np.ndarray:
-        """Block-to-block scatter of each band's reference level (dB)."""
+    def scatter_db(self, ref_db: np.ndarray | None = None) -> np.ndarray:
+        """Block-to-block scatter of each band's reference level (dB).
+
+        ``ref_db``: (R, B) the reference blocks' band levels (dB); None: the bands of
+        ``set_tones``.
+        """
         if self.reference_blocks < MIN_REFERENCE_BLOCKS:
             return np.full(len(self.band_names), DEFAULT_SCATTER_DB)
-        return np.std(np.array(self._ref_db), axis=0, ddof=1)
+        return np.std(np.array(self._ref_db) if ref_db is None else ref_db, axis=0, ddof=1)
 
-    def thresholds_db(self) -> tuple[np.ndarray, np.ndarray]:
+    def thresholds_db(self, ref_db: np.ndarray | None = None
+                      ) -> tuple[np.ndarray, np.ndarray]:
         """(fast, slow) rise over the reference (dB) that counts as divergence, per band.
 
         Three standard deviations of the judged level (one block, or the slow mean) and of
@@ -201,7 +289,7 @@ class DivergenceGuard:
         holds ``OCTAVE_REFERENCE_BLOCKS`` blocks: with fewer, ten noise bands would give
         false alarms.
         """
-        sigma = self.scatter_db()
+        sigma = self.scatter_db(ref_db)
         ref = 1.0 / max(self.reference_blocks, 1)
         fast = self.margin_db + np.maximum(3.0 * sigma * np.sqrt(1.0 + ref), FAST_EXTRA_MIN_DB)
         slow = self.margin_db + 3.0 * sigma * np.sqrt(1.0 / SLOW_BLOCKS + ref)
@@ -231,23 +319,53 @@ class DivergenceGuard:
         if self._n < self.block:
             return None
         self._n = 0
-        power = self._band_power()
+        bins = self._bin_power()
+        power = self._masks @ bins
         if self._all_recording:
             self._ref_sum += power
             self._ref_db.append(10.0 * np.log10(np.maximum(power, 1e-300)))
+            self._ref_bins.append(bins)
+            self._ref_tones.append(self._following.copy())
+            self._ref_tone_power.append(self._tone_masks(self._following) @ bins)
             return None
         if self._all_judging and self.has_reference:
+            if self._moved:
+                return self._judge(*self._following_levels(bins))
             return self._judge(power)
         return None
 
-    def _band_power(self) -> np.ndarray:
-        """Power of each band in the buffered block ((m/s^2)^2, channels summed)."""
+    def _bin_power(self) -> np.ndarray:
+        """(F,) power of each bin of the buffered block ((m/s^2)^2, channels summed)."""
         spectrum = np.fft.rfft(self._buffer * self._window, axis=0)
-        bins = np.sum(np.abs(spectrum) ** 2, axis=1)                  # (F,)
-        return self._masks @ bins
+        return np.sum(np.abs(spectrum) ** 2, axis=1)
 
-    def _judge(self, power: np.ndarray) -> GuardVerdict:
-        ref = self._ref_sum / self.reference_blocks
+    def _following_levels(self, bins: np.ndarray
+                          ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Block power, reference power, reference blocks' dB and judged bands, moved tones.
+
+        See :meth:`follow_tones`: the tones' bands around the present tones against each
+        reference block's band around its own tones; the other bands with the present
+        tones' bins left out, on both.
+        """
+        tones = self._following
+        masks, judged = self._band_masks(tones)
+        ref_bins = np.array(self._ref_bins)                              # (R, F)
+        ref_blocks = ref_bins @ masks.T                                  # (R, B)
+        t = tones.size
+        ref_blocks[:, :t] = np.array(self._ref_tone_power)     # each at its own tones
+        if self.moved_away:
+            judged[self._n_main:] = False
+            # the tone's level without control where it is now is at least what the
+            # canceller cancels there (its output through the plant, |G W|)
+            ref_blocks[:, :t] = np.maximum(ref_blocks[:, :t], self._cancelled[None, :t])
+        return masks @ bins, ref_blocks.mean(axis=0), 10.0 * np.log10(
+            np.maximum(ref_blocks, 1e-300)), judged
+
+    def _judge(self, power: np.ndarray, ref: np.ndarray | None = None,
+               ref_db: np.ndarray | None = None,
+               judged: np.ndarray | None = None) -> GuardVerdict:
+        if ref is None:
+            ref = self._ref_sum / self.reference_blocks
         level = 10.0 * np.log10(np.maximum(power, 1e-300) / np.maximum(ref, 1e-300))
         self.last_levels_db = level
         alpha = 1.0 / SLOW_BLOCKS
@@ -256,7 +374,10 @@ class DivergenceGuard:
         else:
             self._slow = (1.0 - alpha) * self._slow + alpha * power
         slow = 10.0 * np.log10(np.maximum(self._slow, 1e-300) / np.maximum(ref, 1e-300))
-        fast_th, slow_th = self.thresholds_db()
+        fast_th, slow_th = self.thresholds_db(ref_db)
+        if judged is not None:         # following moving tones (see follow_tones)
+            fast_th[~judged] = slow_th[~judged] = np.inf
+            fast_th[self._n_main:] = np.inf
         detectors = [("fast", level, fast_th), ("slow", slow, slow_th)]
         if self._grace > 0:
             self._grace -= 1
@@ -271,9 +392,15 @@ class DivergenceGuard:
                 self.action_count += 1
                 self._slow = None                      # judge the next state afresh
                 self._grace = GRACE_BLOCKS
-                return GuardVerdict(action, self.band_names[b], float(rise[b]),
+                return GuardVerdict(action, self._band_name(b), float(rise[b]),
                                     float(th[b]), detector)
         return GuardVerdict(None)
+
+    def _band_name(self, b: int) -> str:
+        """Band ``b``'s name; a tone's band that follows its tone says where it is now."""
+        if self._moved and b < self._n_main - 1:
+            return f"tone {self.tones_hz[b]:g} Hz (at {self._following[b]:.2f} Hz)"
+        return self.band_names[b]
 
     def within_margin(self) -> bool:
         """True if the tones' bands and the broadband were within reference + margin.

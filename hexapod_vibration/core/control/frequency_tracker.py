@@ -212,6 +212,7 @@ class FrequencyTracker:
         """Start every tone at its nominal frequency."""
         self.fs = float(sample_rate_hz)
         self.nominal_hz = np.asarray(nominal_hz, dtype=float).reshape(-1).copy()
+        self.range_hz = float(range_hz)
         self.lower_hz, self.upper_hz = tracking_bounds_hz(self.nominal_hz, range_hz, self.fs)
         if int(block_samples) < 1:
             raise ValueError(f'block_samples must be >= 1, got {block_samples!r}')
@@ -239,6 +240,20 @@ class FrequencyTracker:
         self._omega = TWO_PI * f / self.fs
         self._effective = self._omega.copy()
         self._rate = np.zeros(self.nominal_hz.size)
+
+    def recentre(self, frequencies_hz: Sequence[float] | np.ndarray) -> None:
+        """Track from ``frequencies_hz`` (Hz, (T,)) within ``range_hz`` of them from now on.
+
+        A tachometer that goes stale leaves the tones wherever the reference had them (a
+        spin-up: far outside nominal +- range); the loops continue from there, bounded
+        around there (:func:`tracking_bounds_hz` of those frequencies, so that the tones
+        still never merge).
+        """
+        f = np.asarray(frequencies_hz, dtype=float).reshape(self.nominal_hz.shape)
+        self.lower_hz, self.upper_hz = tracking_bounds_hz(f, self.range_hz, self.fs)
+        self._lo = TWO_PI * self.lower_hz / self.fs
+        self._hi = TWO_PI * self.upper_hz / self.fs
+        self.reset(f)
 
     def update(self, error_rad: np.ndarray, valid: np.ndarray, rate: float) -> np.ndarray:
         """Take one block's phase errors; the frequencies (Hz) for the next block.
@@ -285,3 +300,88 @@ class FrequencyTracker:
     def estimates_hz(self) -> np.ndarray:
         """The loops' frequency estimates (Hz, the integrators), a new array."""
         return self._omega * (self.fs / TWO_PI)
+
+
+def acquisition_frequencies(nominal_hz: Sequence[float] | np.ndarray, range_hz: float,
+                            sample_rate_hz: float, line_frequencies_hz: np.ndarray,
+                            line_strengths: np.ndarray) -> np.ndarray:
+    """Where each tone should start: the strongest disturbance line within its bounds.
+
+    The phase detector pulls a tone in only from about the canceller's own bandwidth
+    (a 0.4 Hz offset at mu 0.0009 is never acquired), so a tone starts at the strongest
+    line (largest ``line_strengths``) that lies within its :func:`tracking_bounds_hz`
+    and only fine-tracks from there.
+
+    Args:
+        nominal_hz: (T,) the tones' nominal frequencies (Hz).
+        range_hz: tracking range (Hz).
+        sample_rate_hz: loop rate fs (Hz).
+        line_frequencies_hz: (L,) the disturbance lines' frequencies (Hz).
+        line_strengths: (L,) their strengths (any unit, larger is stronger).
+
+    Returns:
+        (T,) the start frequencies (Hz), NaN for a tone with no line within its bounds.
+    """
+    lower, upper = tracking_bounds_hz(nominal_hz, range_hz, sample_rate_hz)
+    f = np.asarray(line_frequencies_hz, dtype=float).reshape(-1)
+    s = np.asarray(line_strengths, dtype=float).reshape(-1)
+    inside = (f[None, :] >= lower[:, None]) & (f[None, :] <= upper[:, None])   # (T, L)
+    score = np.where(inside, s[None, :], -np.inf)
+    out = np.full(lower.size, np.nan)
+    if f.size:
+        best = np.argmax(score, axis=1)
+        found = np.isfinite(score[np.arange(lower.size), best])
+        out[found] = f[best[found]]
+    return out
+
+
+ACQUISITION_RECORD_S = 1.0
+"""Error record (s) the tones are acquired from when adaptation starts: long enough for a
+line's frequency to a few hundredths of a hertz, short enough that a drifting line (0.3 Hz/s
+in ``drift``) moves little over it."""
+ACQUISITION_LINE_FACTOR = 100.0
+"""A peak counts as a line when its power exceeds this times the record's median bin."""
+ACQUISITION_GRID_HZ = 0.1
+
+
+def strongest_lines_hz(record: np.ndarray, sample_rate_hz: float, lower_hz: np.ndarray,
+                       upper_hz: np.ndarray) -> np.ndarray:
+    """The frequency (Hz) of the strongest line within each ``[lower, upper]`` of a record.
+
+    The Hann-windowed DTFT power of the (N, C) record (channels summed) on a
+    :data:`ACQUISITION_GRID_HZ` grid over each interval, refined to its maximum by a
+    bounded search; a maximum below :data:`ACQUISITION_LINE_FACTOR` times the median power
+    of the record's FFT bins is no line (NaN).
+
+    Args:
+        record: (N, C) error samples (m/s^2), oldest first.
+        sample_rate_hz: fs (Hz).
+        lower_hz: (T,) the intervals' lower ends (Hz).
+        upper_hz: (T,) their upper ends (Hz).
+
+    Returns:
+        (T,) line frequencies (Hz), NaN where there is none.
+    """
+    from scipy.optimize import minimize_scalar
+
+    x = np.asarray(record, dtype=float)
+    x = (x - x.mean(axis=0)) * np.hanning(x.shape[0])[:, None]
+    n = np.arange(x.shape[0])
+    floor = float(np.median(np.sum(np.abs(np.fft.rfft(x, axis=0)) ** 2, axis=1)))
+
+    def power(f: np.ndarray) -> np.ndarray:
+        kernel = np.exp(-2j * np.pi * np.outer(np.atleast_1d(f), n) / sample_rate_hz)
+        return np.sum(np.abs(kernel @ x) ** 2, axis=1)
+
+    out = np.full(np.size(lower_hz), np.nan)
+    for t, (lo, hi) in enumerate(zip(np.atleast_1d(lower_hz), np.atleast_1d(upper_hz),
+                                     strict=True)):
+        grid = np.linspace(lo, hi, max(2, int(np.ceil((hi - lo) / ACQUISITION_GRID_HZ)) + 1))
+        p = power(grid)
+        best = int(np.argmax(p))
+        fit = minimize_scalar(lambda f: -power(f)[0], method="bounded", bounds=(
+            grid[max(best - 1, 0)], grid[min(best + 1, grid.size - 1)]),
+            options={"xatol": 1e-4})
+        if -fit.fun > ACQUISITION_LINE_FACTOR * floor:
+            out[t] = float(fit.x)
+    return out

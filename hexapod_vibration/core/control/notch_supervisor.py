@@ -36,6 +36,16 @@ the supervisor finds it):
   lowers ``mu``, then fades out, when a band rises above that level; the
   canceller clamps its weights to ``weight_limit_n`` after every update (anti-windup).
 
+Moving tones (``frequency_tracking``, ``reference_harmonics``): the phase-locked tracker
+pulls a tone in only from about the canceller's own bandwidth, so the tones are first
+*acquired*: after a broadband identification at the strongest disturbance line it fitted
+within each tone's tracking bounds (P from G(f) there), and again when adaptation starts at
+the strongest line of the last second of error without output (a drifting line has moved
+since); the tracker then fine-tracks. The guard's tone bands follow the oscillators (its
+reference is kept). A stale tachometer leaves the tones where it had them (tracking goes
+on from there); reported in the events and ``status()`` (``acquired_hz``, ``guard_bands``,
+``reference``).
+
 Missing samples (a gap in the indices) move the phases on as if the samples had been
 there (:meth:`AdaptiveNotchCanceller.advance`); a gap during an identification restarts it.
 
@@ -68,11 +78,14 @@ from hexapod_vibration.core.control.divergence_guard import (
 )
 from hexapod_vibration.core.control.filters import DCBlocker
 from hexapod_vibration.core.control.frequency_tracker import (
+    ACQUISITION_RECORD_S,
     DEFAULT_BLOCK_SAMPLES,
     SETTLE_TIME_CONSTANTS,
     FrequencyTracker,
+    acquisition_frequencies,
     combine_orders,
     loop_bandwidths_hz,
+    strongest_lines_hz,
     weight_phase_error,
 )
 from hexapod_vibration.core.control.mu_policy import DEFAULT_MAX_RISE_DB
@@ -85,6 +98,7 @@ from hexapod_vibration.core.control.plant_identification import (
     BroadbandIdentifier,
     DisturbanceSpectrum,
     PlantFrequencyResponse,
+    RemovedLine,
 )
 
 MAX_TONES = 16
@@ -133,8 +147,8 @@ class NotchConfig:
         reference_harmonics: one order per tone (may be non-integer): tone k follows
             order_k x the reference frequency (tachometer, Hz) while it arrives; empty:
             no reference.
-        reference_timeout_s: a reference older than this is stale: the tones fall back to
-            tracking or their nominal frequencies (s).
+        reference_timeout_s: a reference older than this is stale: the tones hold where
+            the reference had them and, with ``frequency_tracking``, track from there (s).
         harmonics: also cancel orders 2..harmonics+1 of every tone, following it.
         mu_policy: ``manual`` (every tone at ``mu``, a warning when the predicted rise
             exceeds ``max_rise_db``) or ``auto`` (per tone the largest rate within it).
@@ -615,7 +629,7 @@ class NotchSupervisor:
         ``identifying``).
         """
         response, uncertainty, limit, what = self._measured_response()
-        self.identifier = None
+        identifier, self.identifier = self.identifier, None
         self.identification_end_sample = self.last_sample
         self._quiet_from_sample = self.last_sample + int(round(GUARD_SETTLE_S * self.fs))
         self.identification_confidence = float(max(0.0, 1.0 - uncertainty))
@@ -630,6 +644,10 @@ class NotchSupervisor:
                          f"{100 * limit:.0f} % (a disturbance "
                          "next to a tone?); control stays off")
             return
+        if (self._follow.tracker is not None and isinstance(identifier, BroadbandIdentifier)
+                and self._follow.reference_state != "following"):
+            self._follow.acquire(identifier.disturbance_lines())
+            tones = [float(f) for f in self.canceller.tone_frequencies_hz]
         current = response if tones == self._identifying_tones else self._known_response(
             tones)
         try:
@@ -776,7 +794,7 @@ class NotchSupervisor:
         if self._config.divergence_guard:
             self._guard_step(error)
         if self._follow.active:
-            self._follow.step(index)
+            self._follow.step(index, error)
         if self.identifier is not None:
             command += self.identifier.step(error)
             if self.identifier.done:
@@ -970,7 +988,11 @@ class _ToneFollowing:
         self.block = DEFAULT_BLOCK_SAMPLES
         self.count = 0
         self.fundamentals_hz = np.zeros(0)
+        self.acquired_hz = np.zeros(0)
         self.tracker: FrequencyTracker | None = None
+        self._record: np.ndarray | None = None
+        self._record_n = 0
+        self._record_broken = False
         self.reference_hz = float("nan")
         self.reference_index = -1
         self.reference_slope = 0.0             # Hz per sample, from the last two values
@@ -1003,12 +1025,16 @@ class _ToneFollowing:
                                          loop_bandwidths_hz(nominal, self.orders),
                                          block_samples=self.block)
                         if cfg.frequency_tracking and nominal.size else None)
+        self._record = (np.zeros((int(round(ACQUISITION_RECORD_S * self.sup.fs)),
+                                  self.sup.channels)) if self.tracker is not None else None)
+        self._record_n = 0
         self.active = bool(nominal.size) and (self.tracker is not None
                                                or self.reference_orders.size > 0)
         self.reference_state = "waiting" if self.reference_orders.size else "unused"
         self.count = 0
         self._previous_w = None
         self.fundamentals_hz = nominal.copy()
+        self.acquired_hz = np.full(nominal.size, np.nan)
         if not same:
             self._p_at_hz = bank_frequencies(nominal, cfg.harmonics)
             return
@@ -1037,13 +1063,30 @@ class _ToneFollowing:
             self.reference_slope = (value - self.reference_hz) / (index - self.reference_index)
         self.reference_hz, self.reference_index = value, int(index)
 
-    def step(self, index: int) -> None:
-        """Count the sample; at a block's end choose and apply the tones of the next one."""
+    def step(self, index: int, error: np.ndarray) -> None:
+        """Count the sample; at a block's end choose and apply the tones of the next one.
+
+        With tracking, the error (C,) (m/s^2) of samples without control output and
+        without excitation goes into a ring buffer: the record the tones are acquired
+        from when adaptation starts (:meth:`_acquire_from_record`).
+        """
+        if self._record is not None:
+            sup = self.sup
+            if sup.identifier is None and sup.canceller.output_gain == 0.0:
+                if self._record_broken:        # a new quiet stretch starts the record
+                    self._record_n, self._record_broken = 0, False
+                self._record[self._record_n % self._record.shape[0]] = error
+                self._record_n += 1
+            else:                              # kept: the stretch just before control on
+                self._record_broken = True
         self.count += 1
         if self.count < self.block:
             return
         self.count = 0
         sup = self.sup
+        if sup.guard.moved_away and self._detector[0] is not None:
+            sup.guard.set_cancelled(np.einsum("tij,tj->ti", self._detector[0],
+                                              sup.canceller.weights))
         if sup.identifier is not None or not sup.canceller.tone_frequencies_hz.size:
             self._previous_w, self._adapting_since = None, -1
             return
@@ -1076,15 +1119,15 @@ class _ToneFollowing:
         return fundamentals
 
     def _reference_changed(self, state: str) -> None:
-        fallback = "tracking" if self.tracker is not None else "the nominal tones"
         if state == "stale":
+            held = np.round(self.fundamentals_hz, 3).tolist()
+            then = ("tracking from there" if self.tracker is not None
+                    else "held there until it comes back")
             self.sup._event("warn", f"reference frequency stale (none for "
-                                    f"{self.sup.config.reference_timeout_s:g} s): tones fall "
-                                    f"back to {fallback}")
-            if self.tracker is None:
-                self._retune(self.nominal_hz)
-            else:
-                self.tracker.reset(self.fundamentals_hz)
+                                    f"{self.sup.config.reference_timeout_s:g} s): tones "
+                                    f"hold at {held} Hz, {then}")
+            if self.tracker is not None:   # not back to nominal: a spin-up is far from it
+                self.tracker.recentre(self.fundamentals_hz)
         elif state == "following":
             self.sup._event("info", f"following the reference frequency "
                                     f"({self.reference_hz:g} Hz): tones at "
@@ -1104,6 +1147,8 @@ class _ToneFollowing:
             self._adapting_since = -1
         elif self._adapting_since < 0:
             self._adapting_since = index
+            self._acquire_from_record()
+            return self.tracker.frequencies_hz
         plant, inverse = self._detector_matrices()
         effective = rate * self._rate_scale               # a mu policy's per-tone rates
         if (previous is None or plant is None or rate <= 0.0
@@ -1143,12 +1188,78 @@ class _ToneFollowing:
             self._detector_source = p
         return self._detector
 
+    def _acquire_from_record(self) -> None:
+        """Adaptation starts: each tone at the strongest line of the last record, if any.
+
+        The record (:data:`ACQUISITION_RECORD_S` of error without control output or
+        excitation, just before) says where the disturbance is now (a drifting line has
+        moved since the identification); the tones and the tracker start there and the
+        phase-locked loop only fine-tracks. Reported as an event (``acquired_hz``).
+        """
+        size = self._record.shape[0]
+        if self._record_n < size:
+            return
+        start = self._record_n % size
+        record = np.concatenate([self._record[start:], self._record[:start]])
+        found = strongest_lines_hz(record, self.sup.fs, self.tracker.lower_hz,
+                                   self.tracker.upper_hz)
+        # the record's window does not resolve lines closer than its main lobe's half
+        # width (2 / record length): a tone with a neighbour that close keeps its place
+        # (close_tones, 39 and 40 Hz: the 1 s record put them at 38.70 and 40.33 Hz)
+        others = np.abs(found[:, None] - self.fundamentals_hz[None, :])
+        np.fill_diagonal(others, np.inf)
+        found[np.min(others, axis=1, initial=np.inf) < 2.0 / ACQUISITION_RECORD_S] = np.nan
+        if not np.any(np.isfinite(found)):
+            return
+        self.acquired_hz = found
+        target = np.where(np.isfinite(found), found, self.fundamentals_hz)
+        self.tracker.reset(target)
+        self._retune(self.tracker.frequencies_hz)
+        self._previous_w = None
+        self.sup._event("info", "acquisition at control on: tones " + ", ".join(
+            f"{n:g} -> {f:.3f} Hz" if np.isfinite(a) else f"{n:g} Hz (no line)"
+            for n, f, a in zip(self.nominal_hz, self.fundamentals_hz, found, strict=True))
+            + f" (strongest line of the last {ACQUISITION_RECORD_S:g} s)")
+
+    def acquire(self, lines: list[RemovedLine]) -> None:
+        """Start each tone at the strongest disturbance line within its tracking bounds.
+
+        After a broadband identification (the lines it fitted and removed, and those on
+        its grid): the oscillators (all orders) and the tracker move there at once, the
+        caller computes P from G(f) at them; a tone with no line there stays put. Reported
+        as an event and in ``acquired_hz`` (NaN: none).
+        """
+        cfg = self.sup.config
+        freqs = np.array([line.frequency_hz for line in lines], dtype=float)
+        strength = np.array([float(np.linalg.norm(line.amplitude)) for line in lines])
+        found = acquisition_frequencies(self.nominal_hz, cfg.tracking_range_hz, self.sup.fs,
+                                        freqs, strength)
+        self.acquired_hz = found
+        if not np.any(np.isfinite(found)):
+            self.sup._event("info", "acquisition: no disturbance line within the tracking "
+                                    "range of the tones; tracking starts at "
+                                    f"{self.fundamentals_hz.tolist()} Hz")
+            return
+        target = np.where(np.isfinite(found), found, self.fundamentals_hz)
+        self.tracker.reset(target)
+        self.fundamentals_hz = self.tracker.frequencies_hz
+        self._previous_w = None
+        bank = (self.orders[:, None] * self.fundamentals_hz[None, :]).reshape(-1)
+        self.sup.canceller.retune(bank)
+        self.sup.guard.follow_tones(bank)
+        self._p_at_hz = bank
+        self.sup._event("info", "acquisition: tones " + ", ".join(
+            f"{n:g} -> {f:.3f} Hz" if np.isfinite(a) else f"{n:g} Hz (no line)"
+            for n, f, a in zip(self.nominal_hz, self.fundamentals_hz, found, strict=True))
+            + " (strongest disturbance line within the tracking range)")
+
     def _retune(self, fundamentals: np.ndarray) -> None:
         """Move every oscillator to its order x fundamental; new P from G(f) if moved."""
         self.fundamentals_hz = np.asarray(fundamentals, dtype=float).copy()
         bank = (self.orders[:, None] * self.fundamentals_hz[None, :]).reshape(-1)
         canceller = self.sup.canceller
         canceller.retune(bank)
+        self.sup.guard.follow_tones(bank)
         response = self.sup.plant_frequency_response
         if (response is None or self.sup.plant_response is None
                 or np.max(np.abs(bank - self._p_at_hz)) < P_RETUNE_HZ
@@ -1187,6 +1298,9 @@ class _ToneFollowing:
     def status(self) -> dict[str, Any]:
         """The status keys of the moving tones (for ``/diagnostics``)."""
         return {"tone_estimates_hz": [float(f) for f in self.fundamentals_hz],
+                "acquired_hz": [float(f) for f in self.acquired_hz],
+                "guard_bands": ("fixed" if not self.sup.guard.following else
+                                "moved away" if self.sup.guard.moved_away else "following"),
                 "frequency_tracking": self.tracker is not None,
                 "reference": self.reference_state,
                 "bank_tones_hz": [float(f) for f in self.sup.canceller.tone_frequencies_hz]}

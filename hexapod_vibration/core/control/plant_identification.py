@@ -537,10 +537,39 @@ class BroadbandIdentifier(SampledRun):
         """The disturbance lines subtracted before the DFT (:func:`remove_strong_lines`)."""
         return self._cleaned_periods()[1]
 
+    def disturbance_lines(self) -> list[RemovedLine]:
+        """Every strong disturbance line of the record: off the DFT grid and on it.
+
+        The lines :func:`remove_strong_lines` fitted and removed (off the grid), and the
+        unexcited bins of the cleaned record that are local maxima above
+        ``STRONG_LINE_FACTOR`` times the unexcited bins' median power (a line on the grid,
+        e.g. a shaker tone at a multiple of the record's resolution), with their peak
+        amplitudes (C,) (m/s^2).
+
+        Raises:
+            RuntimeError: if the run is not finished.
+        """
+        if not self.done:
+            raise RuntimeError(f'identification not finished ({100 * self.progress:.0f} %)')
+        _, removed = self._cleaned_periods()
+        record = self._cleaned_record
+        n = record.shape[0]
+        spectrum = np.fft.rfft(record, axis=0)
+        k = np.arange(spectrum.shape[0])
+        excited = (k % self._periods == 0) & ((k // self._periods) % 2 == 1)
+        free = np.flatnonzero(~excited & (k > 1))
+        power = np.sum(np.abs(spectrum[free]) ** 2, axis=1)
+        peak = np.flatnonzero((power[1:-1] > power[:-2]) & (power[1:-1] >= power[2:])) + 1
+        strong = peak[power[peak] > STRONG_LINE_FACTOR * np.median(power)]
+        on_grid = [RemovedLine(float(free[i] * self._fs / n),
+                               2.0 * np.abs(spectrum[free[i]]) / n) for i in strong]
+        return list(removed) + on_grid
+
     def _cleaned_periods(self) -> tuple[np.ndarray, list[RemovedLine]]:
         """The aligned periods with the strong disturbance lines removed (cached)."""
         if getattr(self, '_cleaned', None) is None:
             record, removed = remove_strong_lines(self._record, self._fs, self.design)
+            self._cleaned_record = record
             self._cleaned = (self._align(record), removed)
         return self._cleaned
 
