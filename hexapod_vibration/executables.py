@@ -19,13 +19,25 @@ from hexapod_vibration import cli
 LOOP_NODES = ("pph_driver", "notch_controller", "pointing_controller")
 
 
+def _import_main(module: str):
+    """The module's ``main``; a stop signal during the import ends it once it is done.
+
+    The signal is held back while the import runs (``cli.deferred``): raised inside an
+    extension module's initialisation it would turn into an ImportError with a traceback
+    (seen: numpy's ``PyCapsule_Import could not import module "datetime"``).
+    """
+    with cli.deferred():
+        main = importlib.import_module(module).main
+    cli.exit_if_stopped()
+    return main
+
+
 def _node(executable: str, module: str, nodes: Sequence[str], argv: Sequence[str] | None
           ) -> None:
     cli.install_stop_handlers()
     args = cli.node_command_line(executable, nodes, argv)
     try:
-        main = importlib.import_module(module).main
-        cli.exit_if_stopped()
+        main = _import_main(module)
         main(args)
     except cli.StopSignal as stop:
         cli.exit_now(stop.exit_code)
@@ -35,8 +47,7 @@ def _node(executable: str, module: str, nodes: Sequence[str], argv: Sequence[str
 def _tool(module: str, argv: Sequence[str] | None) -> None:
     cli.install_stop_handlers()
     try:
-        main = importlib.import_module(module).main
-        cli.exit_if_stopped()
+        main = _import_main(module)
         code = main(None if argv is None else list(argv))
     except cli.StopSignal as stop:
         code = stop.exit_code
