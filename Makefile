@@ -23,10 +23,11 @@ $(STAMP): requirements.txt setup.py setup.cfg package.xml | $(PY)
 	touch $@
 
 # Each run picks its own base ROS_DOMAIN_ID (test/conftest.py adds a per-test offset), so
-# concurrent runs on one machine do not see each other's nodes.
+# concurrent runs on one machine do not see each other's nodes; the two pytest-xdist
+# workers (-n 2, one per core) take disjoint domains.
 test: venv
 	HEXAPOD_TEST_DOMAIN_BASE=$${HEXAPOD_TEST_DOMAIN_BASE:-$$((20 + RANDOM % 181))} \
-	  $(PY) -m pytest -q test
+	  $(PY) -m pytest -q -n 2 test
 
 lint: venv
 	$(VENV)/bin/ruff check .
