@@ -510,14 +510,8 @@ def decode_strut_message(data: bytes | memoryview) -> tuple[np.ndarray, int | No
         InvalidStrutMessage: Undecodable bytes, not six finite values, a garbled or
             out-of-range sample label.
     """
-    raw = bytes(data)
     try:
-        if raw[:2] in _LE_CDR:
-            values, labels = _decode_le(raw)
-        else:
-            msg = typestore().deserialize_cdr(raw, STRUT_MSGTYPE)
-            values = np.asarray(msg.data, dtype=np.float64)
-            labels = [d.label for d in msg.layout.dim]
+        values, labels = _decode_array(data)
     except _DECODE_ERRORS as err:
         raise InvalidStrutMessage(f'undecodable message ({err.__class__.__name__})') from None
     if values.shape != (STRUT_COUNT,):
@@ -708,6 +702,18 @@ def _stream(reader: Any, struts: list[Connection], others: list[Connection],
                       bad, {t: v.arrays() for t, v in vectors.items() if v.rows}, sensitivity)
 
 
+def _decode_array(data: bytes | memoryview) -> tuple[np.ndarray, list[str]]:
+    """Values and dimension labels of a serialized Float64MultiArray.
+
+    Little-endian CDR is decoded directly; other encapsulations go through rosbags.
+    """
+    raw = bytes(data)
+    if raw[:2] in _LE_CDR:
+        return _decode_le(raw)
+    msg = typestore().deserialize_cdr(raw, STRUT_MSGTYPE)
+    return np.asarray(msg.data, dtype=np.float64), [d.label for d in msg.layout.dim]
+
+
 class _VectorStream:
     """Messages of a frequency topic: values (Hz) per sample, first message per sample kept."""
 
@@ -715,13 +721,7 @@ class _VectorStream:
         self.rows: dict[int, np.ndarray] = {}
 
     def add(self, data: bytes | memoryview) -> None:
-        raw = bytes(data)
-        if raw[:2] in _LE_CDR:
-            values, labels = _decode_le(raw)
-        else:
-            msg = typestore().deserialize_cdr(raw, STRUT_MSGTYPE)
-            values = np.asarray(msg.data, dtype=np.float64)
-            labels = [d.label for d in msg.layout.dim]
+        values, labels = _decode_array(data)
         if len(labels) < 2 or not np.all(np.isfinite(values)):
             raise ValueError('no sample index, or a non-finite value')
         self.rows.setdefault(parse_sample_label(labels[1]), values)
