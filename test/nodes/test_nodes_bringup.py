@@ -82,10 +82,13 @@ def test_nodes_exchange_contract_topics_and_cancel_the_tone(ros_context, node_pr
     driver_params = ParameterClient(ros_context, node, 'pph_driver')
 
     def held_at(sample: int) -> bool:
-        """The driver holds before ``sample`` and every topic has reached the one before."""
+        """The driver says it holds before ``sample``.
+
+        The hold is re-announced every 0.5 s; a topic's last samples may have gone out
+        before this listener matched its publisher.
+        """
         return (diagnostics.value(DRIVER_STATUS, 'held') == 'true'
-                and diagnostics.int_value(DRIVER_STATUS, 'sample') == sample
-                and all(t.last_index >= sample - 1 for t in topics.values()))
+                and diagnostics.int_value(DRIVER_STATUS, 'sample') == sample)
 
     # Control off: the controller identifies the plant (test tones), then stays disabled;
     # the driver holds at CONTROL_ON_SAMPLE, after a window of control off.

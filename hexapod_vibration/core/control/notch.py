@@ -224,6 +224,7 @@ class AdaptiveNotchCanceller:
         self._fading = _FadingTones(self._c)
         self._u = np.zeros(self._c)
         self._weight_limit: float | None = None
+        self._limit_scratch: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
         self.clamped_samples = 0
         self._install(freqs, np.zeros((freqs.size, self._c), dtype=complex),
                       np.zeros(freqs.size), p_full, np.ones(freqs.size, dtype=bool))
@@ -464,8 +465,14 @@ class AdaptiveNotchCanceller:
         clamp the canceller never asks for more than ``limit_n``. Returns True if a weight
         was scaled.
         """
-        peak = np.abs(self._v).sum(axis=1)                   # (C,) largest output (N)
-        over = peak > limit_n
+        v = self._v
+        if self._limit_scratch is None or self._limit_scratch[0].shape != v.shape:
+            self._limit_scratch = (np.empty(v.shape), np.empty(v.shape[0]),
+                                   np.empty(v.shape[0], dtype=bool))
+        magnitude, peak, over = self._limit_scratch          # per-sample path: no allocation
+        np.abs(v, out=magnitude)
+        magnitude.sum(axis=1, out=peak)                      # (C,) largest output (N)
+        np.greater(peak, limit_n, out=over)
         if not over.any():
             return False
         self._v[over] *= (limit_n / peak[over])[:, None]
