@@ -268,14 +268,18 @@ def test_step_does_not_allocate_arrays_across_phasor_resyncs(centralized):
     e, out = np.full(6, 0.1), np.zeros(6)
     for _ in range(10):
         anc.step(e, out=out)
-    tracemalloc.start()
-    tracemalloc.reset_peak()
-    base = tracemalloc.get_traced_memory()[0]
-    for _ in range(600):                   # two re-synchronisations of the phasors
-        anc.step(e, out=out)
-    peak = tracemalloc.get_traced_memory()[1] - base
-    tracemalloc.stop()
-    assert peak < 1024     # a (400, 6) complex temporary alone would be 38400 bytes
+    peaks = []
+    # tracemalloc counts every thread (pytest-xdist's I/O thread allocates now and then):
+    # the least of three measurements; an allocating step would show in every one.
+    for _ in range(3):
+        tracemalloc.start()
+        tracemalloc.reset_peak()
+        base = tracemalloc.get_traced_memory()[0]
+        for _ in range(600):               # two re-synchronisations of the phasors
+            anc.step(e, out=out)
+        peaks.append(tracemalloc.get_traced_memory()[1] - base)
+        tracemalloc.stop()
+    assert min(peaks) < 1024, peaks  # a (400, 6) complex temporary alone: 38400 bytes
 
 
 def test_output_is_exactly_the_weighted_phasors_over_a_long_run():
