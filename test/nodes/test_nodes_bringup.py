@@ -39,7 +39,7 @@ CONVERGED_AFTER_SAMPLES = 1000   # 10 time constants of mu = 0.01 (per sample)
 WINDOW_SAMPLES = 1000            # 40 periods of the tone
 MIN_REDUCTION_DB = 20.0
 NOTCH = NOTCH_STATUS
-CONTROL_ON_SAMPLE = 5000         # after identification (0.5 s + 3.2 s of samples) and a window
+CONTROL_ON_SAMPLE = 6000         # after identification (0.5 s + 3.2 s + its checks) and a window
 
 
 def _params_file(tmp_path) -> str:
