@@ -9,6 +9,8 @@ measures or asserts time: every wait has a generous hang guard only.
 from __future__ import annotations
 
 import math
+import subprocess
+import sys
 import time
 from collections.abc import Sequence
 from typing import Any
@@ -243,3 +245,11 @@ def assert_close(actual: Any, expected: Any) -> None:
         assert list(actual) == list(expected), (actual, expected)
     else:
         assert actual == expected, (actual, expected)
+
+
+def run_experiment(env, scenario, out, *extra, timeout: float = 400.0
+                   ) -> subprocess.CompletedProcess:
+    """``experiment --scenario SCENARIO --out OUT [extra]`` in a child process (text output)."""
+    cmd = [sys.executable, "-m", "hexapod_vibration.tools.experiment", "--scenario", str(scenario),
+           "--out", str(out), *extra]
+    return subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=timeout)

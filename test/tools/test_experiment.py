@@ -9,6 +9,7 @@ from pathlib import Path
 
 import pytest
 import yaml
+from node_graph import run_experiment
 
 from hexapod_vibration.analysis.bag_io import read_strut_topics
 
@@ -32,12 +33,6 @@ def scenario_file(tmp_path: Path) -> Path:
     path = tmp_path / "short.yaml"
     path.write_text(yaml.safe_dump(SCENARIO))
     return path
-
-
-def run_experiment(env, scenario, out, *extra, timeout=400):
-    cmd = [sys.executable, "-m", "hexapod_vibration.tools.experiment", "--scenario", str(scenario),
-           "--out", str(out), *extra]
-    return subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=timeout)
 
 
 def test_lockstep_run_records_a_bag_and_reports_the_reduction(ros_env, scenario_file, tmp_path):

@@ -14,12 +14,11 @@ samples are not asserted here: a lockstep timeout depends on the machine's load.
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 
 import numpy as np
 import pytest
 import yaml
+from node_graph import run_experiment
 
 from hexapod_vibration.analysis.bag_io import read_bag
 from hexapod_vibration.core.control.notch_supervisor import NotchSupervisor
@@ -58,9 +57,7 @@ def _run(ros_env, tmp_path, scenario: dict) -> dict:
     path = tmp_path / "scenario.yaml"
     path.write_text(yaml.safe_dump(scenario))
     out = tmp_path / "run"
-    result = subprocess.run([sys.executable, "-m", "hexapod_vibration.tools.experiment",
-                             "--scenario", str(path), "--out", str(out)], env=ros_env,
-                            capture_output=True, text=True, timeout=600)
+    result = run_experiment(ros_env, path, out, timeout=600)
     assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
     report = json.loads((out / "report.json").read_text())
     assert (out / "frequencies.png").stat().st_size > 10_000

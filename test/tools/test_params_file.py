@@ -10,12 +10,9 @@ params.yaml header says what the runner did on top: the breakpoints and the swit
 
 from __future__ import annotations
 
-import subprocess
-import sys
-
 import numpy as np
 import yaml
-from node_graph import HANG_GUARD_S, StrutTopic, wait_until
+from node_graph import HANG_GUARD_S, StrutTopic, run_experiment, wait_until
 
 from hexapod_vibration.analysis.bag_io import read_strut_topics
 
@@ -33,9 +30,7 @@ def test_params_yaml_starts_the_same_run(ros_env, ros_context, node_processes, t
     scenario = tmp_path / 'scenario.yaml'
     scenario.write_text(yaml.safe_dump(SCENARIO))
     out = tmp_path / 'run'
-    result = subprocess.run([sys.executable, '-m', 'hexapod_vibration.tools.experiment',
-                             '--scenario', str(scenario), '--out', str(out)], env=ros_env,
-                            capture_output=True, text=True, timeout=600)
+    result = run_experiment(ros_env, scenario, out, timeout=600)
     assert result.returncode == 0, result.stdout[-2000:] + result.stderr[-2000:]
     params_file = out / 'params.yaml'
     text = params_file.read_text()
