@@ -42,6 +42,7 @@ CONTROLLERS = {
 
 
 SETTLE_SAMPLES = 100
+MIN_CHECKED_FORCES = 100
 
 
 def _driver_args(mode: str, stream: str) -> list[str]:
@@ -78,7 +79,7 @@ def _check_resumed(mode: str, stream: str, commands: dict[int, np.ndarray],
     # after the first SETTLE_SAMPLES, where a controller still taking up the new run may
     # answer after the 0.5 s lockstep wait and the driver applies the safe zero instead.)
     seen = [n for n in sorted(force) if n in commands and n >= first + SETTLE_SAMPLES]
-    assert len(seen) >= 100, len(seen)
+    assert len(seen) >= MIN_CHECKED_FORCES, len(seen)
     for n in seen:
         np.testing.assert_allclose(force[n], _applied(stream, commands[n]),
                                    rtol=0, atol=1e-12, err_msg=str(n))
@@ -107,9 +108,20 @@ def test_restarted_driver_is_answered_within_a_second(ros_context, node_processe
     def new_run():
         return next((r for r in _runs(commands) if r != old_run), None)
 
-    resumed = wait_until(ros_context, lambda: not pointing.running() or (
-        new_run() is not None and new_run() in force.by_run
-        and max(force.by_run[new_run()]) >= RESUME_WITHIN_SAMPLES + CHECKED_SAMPLES))
+    def checked_forces_seen() -> bool:
+        # The listener may discover the restarted driver's force topic late on a loaded
+        # machine (samples published before that are never seen): wait for the forces
+        # _check_resumed judges, not for one force index past the window.
+        run = new_run()
+        if run is None or run not in force.by_run or run not in commands.by_run:
+            return False
+        first = min(commands.by_run[run])
+        seen = [n for n in force.by_run[run]
+                if n in commands.by_run[run] and n >= first + SETTLE_SAMPLES]
+        return ((mode == 'realtime' or len(seen) >= MIN_CHECKED_FORCES)
+                and max(commands.by_run[run]) >= first + CHECKED_SAMPLES)
+
+    resumed = wait_until(ros_context, lambda: not pointing.running() or checked_forces_seen())
     assert resumed and pointing.running() and again.running(), logs()
     run = new_run()
     first = min(commands.by_run[run])
