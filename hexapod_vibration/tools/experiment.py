@@ -60,6 +60,8 @@ PAPER_REDUCTION_DB = {
 }
 DEMO_SCENARIOS = ("single_tone_harmonic", "close_tones", "plant_response")
 STOP_TIMEOUT_S = 15.0
+EXPERIMENT_LOCKSTEP_TIMEOUT_S = 10.0
+"""The driver's ``lockstep_timeout_s`` in an experiment (s, wall): the parameter's maximum."""
 DRIVER_TOPICS = ("/pph/accel", "/pph/eddy", "/pph/actuator_force", "/clock",
                  DISTURBANCE_FREQUENCIES_TOPIC)
 NOTCH_TOPICS = ("/pph/notch_command", "/pph/notch_weights", NOTCH_FREQUENCIES_TOPIC,
@@ -72,8 +74,13 @@ class ExperimentError(RuntimeError):
 
 
 # ---------------------------------------------------------------------------- parameters
-def node_parameters(scenario: Scenario, mode: str) -> dict[str, dict[str, Any]]:
-    """The ROS params file content (``{node: {"ros__parameters": {...}}}``) of a scenario."""
+def node_parameters(scenario: Scenario, mode: str, model_file: str = ""
+                    ) -> dict[str, dict[str, Any]]:
+    """The ROS params file content (``{node: {"ros__parameters": {...}}}``) of a scenario.
+
+    ``model_file``: the model YAML of a scenario with ``model_overrides`` (see
+    :func:`model_file_text`), given to the nodes that simulate or use the physical model.
+    """
     sh, notch = scenario.shaker, scenario.notch
     has_notch = bool(notch.tone_frequencies_hz)
     driver: dict[str, Any] = {
@@ -85,6 +92,9 @@ def node_parameters(scenario: Scenario, mode: str) -> dict[str, dict[str, Any]]:
         "test_sine_frequency_hz": scenario.test_sine.frequency_hz or 40.0,
         "test_sine_amplitude_n": scenario.test_sine.amplitude_n,
         "lockstep_controllers": ["notch", "pointing"] if has_notch else ["pointing"],
+        # A recorded run waits for a late answer rather than apply a zero command in its
+        # place (a loaded machine; the runner itself stops the run if a process dies).
+        "lockstep_timeout_s": EXPERIMENT_LOCKSTEP_TIMEOUT_S,
     }
     if sh.phases_rad:
         driver["shaker_phases_rad"] = list(sh.phases_rad)
@@ -99,6 +109,9 @@ def node_parameters(scenario: Scenario, mode: str) -> dict[str, dict[str, Any]]:
             "target_twist_deg": pose[2],
         },
     }
+    if model_file:
+        for node in ("pph_driver", "pointing_controller"):
+            params[node]["model_file"] = model_file
     if has_notch:
         params["notch_controller"] = {
             **{k: list(v) if isinstance(v, tuple) else v for k, v in notch.settings.items()},
@@ -133,7 +146,30 @@ PARAMS_FILE_HEADER = """\
 """
 
 
-def params_file_text(scenario: Scenario, mode: str) -> str:
+def model_file_text(scenario: Scenario) -> str:
+    """The scenario's physical model as a model YAML: the packaged one with its overrides.
+
+    Empty when the scenario has no ``model_overrides`` (the nodes use the packaged model).
+    Raises ``ValueError`` on an override the model does not have or an invalid value.
+    """
+    import yaml
+
+    from hexapod_vibration.core.model.config import merged_model_mapping, model_config_from_dict
+
+    if not scenario.model_overrides:
+        return ""
+    source = config_path("pph_model.yaml")
+    with open(source, encoding="utf-8") as stream:
+        packaged = yaml.safe_load(stream)
+    merged = merged_model_mapping(packaged, scenario.model_overrides, f"{scenario.name}")
+    model_config_from_dict(merged, source=scenario.name)        # every value checked
+    header = (f"# The physical model of scenario {scenario.name}, written by `experiment`:\n"
+              f"# the packaged pph_model.yaml with the scenario's model_overrides\n"
+              f"# {scenario.model_overrides}\n")
+    return header + yaml.safe_dump(merged, sort_keys=False)
+
+
+def params_file_text(scenario: Scenario, mode: str, model_file: str = "") -> str:
     """``params.yaml``: the nodes' parameters of a scenario, reusable with the launch file.
 
     The recorder's section carries the run record (what ``analyze`` needs to report the run
@@ -144,7 +180,7 @@ def params_file_text(scenario: Scenario, mode: str) -> str:
     header = PARAMS_FILE_HEADER.format(
         scenario=scenario.name, mode=mode, control_on_s=scenario.control_on_s,
         duration_s=scenario.duration_s, control_on_sample=round(scenario.control_on_s * 1e3))
-    params = node_parameters(scenario, mode)
+    params = node_parameters(scenario, mode, model_file)
     params["pph_recorder"] = {"ros__parameters": {
         "run_record": run_record(scenario, mode).to_json()}}
     return header + yaml.safe_dump(params, sort_keys=False)
@@ -373,8 +409,13 @@ class ExperimentRun:
         if self.bag.exists():
             raise ExperimentError(f"{self.bag} exists: choose another --out or remove it")
         options.out.mkdir(parents=True, exist_ok=True)
+        model_text = model_file_text(options.scenario)
+        self.model_file = (options.out / "model.yaml").resolve() if model_text else None
+        if self.model_file is not None:
+            outputs.write_text(self.model_file, model_text)
         self.params_file = options.out / "params.yaml"
-        outputs.write_text(self.params_file, params_file_text(options.scenario, options.mode))
+        outputs.write_text(self.params_file, params_file_text(
+            options.scenario, options.mode, str(self.model_file or "")))
         self.record = run_record(options.scenario, options.mode)
         self.children: list[Child] = []
         self.sup: Supervisor | None = None
@@ -506,7 +547,7 @@ def run_scenario(options: RunOptions) -> Any:
     from hexapod_vibration.analysis.report import analyze_bag
     from hexapod_vibration.core.model.config import load_model_config
 
-    model = load_model_config(config_path("pph_model.yaml"))
+    model = load_model_config(run.model_file or config_path("pph_model.yaml"))
     with outputs.staged(options.out) as staging:     # every file complete, or none
         return analyze_bag(run.bag, staging, model)
 
@@ -547,6 +588,7 @@ def _scenario(name: str, duration: float | None, control_on: float | None) -> Sc
     if not path.is_file():
         raise FileNotFoundError(f"argument --scenario: {path} does not exist")
     scenario = load_scenario(path)
+    model_file_text(scenario)                  # its model_overrides, checked before any work
     if duration is not None or control_on is not None:
         _check_timeline(scenario, duration, control_on)
     return scenario.with_timeline(duration, control_on)

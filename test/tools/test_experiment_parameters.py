@@ -24,3 +24,30 @@ def test_the_rotor_goes_to_the_driver_as_its_parameters():
 def test_no_rotor_section_sets_no_rotor_parameter():
     driver = node_parameters(scenario_from_dict(BASE), "lockstep")["pph_driver"]
     assert not any(k.startswith("rotor_") for k in driver["ros__parameters"])
+
+
+def test_model_overrides_reach_the_nodes_as_a_model_file(tmp_path):
+    """harmonic_rise's payload-mounted shaker: the driver simulates the overridden model."""
+    import pytest
+    import yaml
+
+    from hexapod_vibration.core.model.config import load_model_config
+    from hexapod_vibration.core.sim.scenario import load_scenario
+    from hexapod_vibration.paths import config_path, scenario_path
+    from hexapod_vibration.tools.experiment import model_file_text
+
+    scenario = load_scenario(scenario_path("harmonic_rise"))
+    path = tmp_path / "model.yaml"
+    path.write_text(model_file_text(scenario))
+    written = load_model_config(path)
+    expected = load_model_config(config_path("pph_model.yaml"), scenario.model_overrides)
+    assert repr(written) == repr(expected)
+    assert written.shaker.mounted_on == "top_plate"
+    params = node_parameters(scenario, "lockstep", str(path))
+    for node in ("pph_driver", "pointing_controller"):
+        assert params[node]["ros__parameters"]["model_file"] == str(path)
+    assert model_file_text(scenario_from_dict(BASE)) == ""
+    bad = scenario_from_dict({**BASE, "model_overrides": {"shaker": {"mass_kg": 1.0}}})
+    with pytest.raises(ValueError, match="mass_kg"):
+        model_file_text(bad)
+    assert "model_file" not in yaml.safe_dump(node_parameters(bad, "lockstep"))

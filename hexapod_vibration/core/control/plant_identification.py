@@ -95,13 +95,11 @@ class MultisineDesign:
 
     def period_table(self) -> np.ndarray:
         """The commands of one period (P, C) (N), exactly periodic."""
-        n = np.arange(self.period_samples)
-        table = np.zeros((self.period_samples, self.n_channels))
-        phase = 2.0 * np.pi * np.outer(n, self.bins) / self.period_samples
-        lines = (self.phasors_n[None, :] * np.exp(1j * phase)).real
-        for j in range(self.n_channels):
-            table[:, j] = lines[:, self.channel_of_bin == j].sum(axis=1)
-        return table
+        # sum over the lines b of channel j of Re(A_b exp(2 pi i n b / P)), as one inverse
+        # DFT per channel (the lines' bins are below P/2)
+        spectrum = np.zeros((self.period_samples, self.n_channels), dtype=complex)
+        np.add.at(spectrum, (self.bins, self.channel_of_bin), self.phasors_n)
+        return self.period_samples * np.fft.ifft(spectrum, axis=0).real
 
 
 def zippered_odd_multisine(n_channels: int, sample_rate_hz: float,
@@ -292,12 +290,13 @@ def remove_strong_lines(record: np.ndarray, fs: float, design: MultisineDesign,
         spectrum = np.fft.fft(x, axis=0)
         power = np.sum(np.abs(spectrum[free]) ** 2, axis=1)
         local = np.flatnonzero((power[1:-1] > power[:-2]) & (power[1:-1] >= power[2:])) + 1
+        threshold = STRONG_LINE_FACTOR * np.median(power)
         local = [int(c) for c in local[np.argsort(power[local])[::-1]]
-                 if power[c] > STRONG_LINE_FACTOR * np.median(power) and int(c) not in skipped]
+                 if power[c] > threshold and int(c) not in skipped]
         if not local:
             break
         k0 = int(free[local[0]])
-        strong = free[power > STRONG_LINE_FACTOR * np.median(power)]
+        strong = free[power > threshold]
         others = strong[np.abs(strong - k0) > 2]
         near = free[(np.abs(free - k0) <= span) & ~np.isin(free, others)]
         fit = minimize_scalar(lambda nu, near=near, sp=spectrum: _kernel_fit(sp, near, nu, n)[1],

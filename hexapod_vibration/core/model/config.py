@@ -172,7 +172,7 @@ def load_model_config(path: str | Path, overrides: dict[str, Any] | None = None)
 def model_config_from_dict(data: dict[str, Any], overrides: dict[str, Any] | None = None,
                            source: str = "model") -> ModelConfig:
     """Build a :class:`ModelConfig` from nested dicts, validating every value."""
-    merged = _merge(copy.deepcopy(data), overrides or {}, source)
+    merged = merged_model_mapping(data, overrides, source)
     sections = {}
     for name, cls in _SECTIONS.items():
         if name not in merged:
@@ -185,6 +185,16 @@ def model_config_from_dict(data: dict[str, Any], overrides: dict[str, Any] | Non
     if config.simulation.internal_rate_hz % config.simulation.sample_rate_hz:
         raise ValueError(f"{source}: internal_rate_hz must be a multiple of sample_rate_hz")
     return config
+
+
+def merged_model_mapping(data: dict[str, Any], overrides: dict[str, Any] | None = None,
+                         source: str = "model") -> dict[str, Any]:
+    """A copy of the model mapping ``data`` with nested ``overrides`` applied.
+
+    Only keys the model has may be overridden (``ValueError`` names the first that is not).
+    The values are checked when the mapping is built: :func:`model_config_from_dict`.
+    """
+    return _merge(copy.deepcopy(data), overrides or {}, source)
 
 
 def _merge(base: dict[str, Any], overrides: dict[str, Any], source: str) -> dict[str, Any]:
