@@ -60,6 +60,8 @@ PAPER_REDUCTION_DB = {
 }
 DEMO_SCENARIOS = ("single_tone_harmonic", "close_tones", "plant_response")
 STOP_TIMEOUT_S = 15.0
+STALL_TIMEOUT_S = 120.0
+"""The run fails when neither sim time nor the recorder moves for this long (s, wall)."""
 EXPERIMENT_LOCKSTEP_TIMEOUT_S = 10.0
 """The driver's ``lockstep_timeout_s`` in an experiment (s, wall): the parameter's maximum."""
 DRIVER_TOPICS = ("/pph/accel", "/pph/eddy", "/pph/actuator_force", "/clock",
@@ -333,6 +335,7 @@ class RunOptions:
     mode: str = "lockstep"
     storage: str = "mcap"
     wall_timeout_s: float = 0.0
+    """Longest wall time of the whole run (s; 0 = none: only a stalled loop fails it)."""
     composed: bool = False
     """Driver and controllers in one process (``pph_graph``) instead of three."""
 
@@ -423,8 +426,10 @@ class ExperimentRun:
         self.has_notch = bool(sc.notch.tone_frequencies_hz)
         self.n_on = int(round(sc.control_on_s * 1000)) if sc.control_on_s < sc.duration_s else -1
         self.n_end = sc.samples
-        default_timeout = 60.0 + 10.0 * sc.duration_s
-        self.deadline = time.monotonic() + (options.wall_timeout_s or default_timeout)
+        now = time.monotonic()
+        self.deadline = now + options.wall_timeout_s if options.wall_timeout_s > 0 else math.inf
+        self._progress_key: tuple = ()
+        self._progress_at = now
         self.progress = Progress(sc.name, sc.duration_s)
 
     def start(self) -> None:
@@ -460,17 +465,29 @@ class ExperimentRun:
         """Lockstep: the driver starts held before sample 0 (after the params file: wins)."""
         return ["-p", f"{prefix}hold_at_time_s:=0.0"] if self.o.mode == "lockstep" else []
 
-    def _check(self) -> None:
+    def _check(self, what: str) -> None:
         for child in self.children:
             if not child.alive():
                 raise ExperimentError(f"{child.name} exited with {child.process.returncode}:\n"
                                       f"{child.tail()}")
-        if time.monotonic() > self.deadline:
-            raise ExperimentError("wall-clock timeout: the loop is not advancing")
+        now = time.monotonic()
+        if now > self.deadline:
+            raise ExperimentError(f"wall-clock timeout ({self.o.wall_timeout_s:g} s) while "
+                                  f"{what}")
+        # Progress: sim time, what is awaited, or the recorder's counts changed. A loaded
+        # machine only slows them down; nothing changing for STALL_TIMEOUT_S is a hang.
+        sup = self.sup
+        key = (sup.sim_time_s, what, tuple(sorted(sup.recorder.items())),
+               sup.driver.get("sample"))
+        if key != self._progress_key:
+            self._progress_key, self._progress_at = key, now
+        elif now - self._progress_at > STALL_TIMEOUT_S:
+            raise ExperimentError(f"the loop is not advancing: nothing changed for "
+                                  f"{STALL_TIMEOUT_S:g} s while {what}")
 
     def _wait(self, predicate, what: str) -> None:
         while not predicate():
-            self._check()
+            self._check(what)
             self.sup.spin(0.05)
             self._progress(what)
 

@@ -24,7 +24,7 @@ from hexapod_vibration.paths import config_path
 STRUT = load_model_config(config_path('pph_model.yaml')).strut
 RESUME_WITHIN_SAMPLES = 1000      # 1 s of simulated progress
 CHECKED_SAMPLES = 1000
-REALTIME_MIN_ANSWERS = 100        # of CHECKED_SAMPLES: answers come back (load-tolerant)
+REALTIME_MIN_ANSWERS = 100        # answers of the new run or process come back (load-tolerant)
 BEFORE_SAMPLES = 500
 CATCH_UP_SAMPLES = 20
 """A restarted controller first answers what its queue (10 deep) holds, samples the
@@ -43,6 +43,8 @@ CONTROLLERS = {
 
 SETTLE_SAMPLES = 100
 MIN_CHECKED_FORCES = 100
+LISTENER_LOSS_ALLOWED = 5
+"""Of CHECKED_SAMPLES: messages this test's own listener may miss on a loaded machine."""
 
 
 def _driver_args(mode: str, stream: str) -> list[str]:
@@ -65,14 +67,44 @@ def _runs(topic: StrutTopic) -> list:
     return [run for run in topic.by_run if run is not None]
 
 
+def _timeouts_over(diagnostics: Diagnostics, run: int, first: int) -> list[int] | None:
+    """The driver's lockstep ``timeouts`` count at two reports of ``run`` 1000 samples apart.
+
+    The driver reports every 1000 samples: the first report at or after ``first`` and the
+    one CHECKED_SAMPLES later (None until both came). Equal counts = no sample between
+    them was advanced without its command, by the driver's own account, whatever this
+    listener received.
+    """
+    reports = {int(v['sample']): int(v['timeouts'])
+               for v in diagnostics.history_values(DRIVER_STATUS)
+               if v.get('run') == str(run) and 'timeouts' in v and 'sample' in v}
+    start = min((n for n in reports if n >= first), default=None)
+    if start is None or start + CHECKED_SAMPLES not in reports:
+        return None
+    return [reports[start], reports[start + CHECKED_SAMPLES]]
+
+
+def _answers_from(commands: dict[int, np.ndarray], first: int) -> int:
+    return sum(1 for n in commands if n >= first)
+
+
 def _check_resumed(mode: str, stream: str, commands: dict[int, np.ndarray],
-                   force: dict[int, np.ndarray], first: int) -> None:
+                   force: dict[int, np.ndarray], first: int,
+                   timeouts: list[int] | None = None) -> None:
     window = range(first, first + CHECKED_SAMPLES)
     answered = [n for n in window if n in commands]
     if mode == 'realtime':
-        assert len(answered) >= REALTIME_MIN_ANSWERS, (first, len(answered))
+        # answers come back (the callers waited for them): at load 8 a controller can
+        # answer none of one second of samples and catch up later
+        assert _answers_from(commands, first) >= REALTIME_MIN_ANSWERS, first
         return
-    assert answered == list(window), (first, sorted(set(window) - set(answered))[:20])
+    # Every sample answered, by the driver's account (its timeout count does not move over
+    # the window); this listener, a slow reader on a loaded machine, may itself miss a few
+    # of the messages (DDS drops them for it, not for the driver: CI lost sample 1704 of
+    # 1000 checked).
+    assert timeouts is not None and timeouts[0] == timeouts[1], timeouts
+    missing = sorted(set(window) - set(answered))
+    assert len(missing) <= LISTENER_LOSS_ALLOWED, (first, missing[:20])
     # Lockstep pairs them: the driver applied each one at its sample. (A restarted driver's
     # first forces may be published before it has discovered this listener, on a loaded
     # machine for longer than the window: every force seen of the new run is checked,
@@ -94,6 +126,7 @@ def test_restarted_driver_is_answered_within_a_second(ros_context, node_processe
     node = ros_context.create_node('restart_listener')
     commands = StrutTopic(node, CONTROLLERS[stream][1])
     force = StrutTopic(node, '/pph/actuator_force')
+    diagnostics = Diagnostics(node)
 
     def logs() -> str:
         return '\n'.join(p.output() for p in node_processes.started)
@@ -118,7 +151,10 @@ def test_restarted_driver_is_answered_within_a_second(ros_context, node_processe
         first = min(commands.by_run[run])
         seen = [n for n in force.by_run[run]
                 if n in commands.by_run[run] and n >= first + SETTLE_SAMPLES]
-        return ((mode == 'realtime' or len(seen) >= MIN_CHECKED_FORCES)
+        if mode == 'realtime':
+            return _answers_from(commands.by_run[run], first) >= REALTIME_MIN_ANSWERS
+        return (len(seen) >= MIN_CHECKED_FORCES
+                and _timeouts_over(diagnostics, run, first + SETTLE_SAMPLES) is not None
                 and max(commands.by_run[run]) >= first + CHECKED_SAMPLES)
 
     resumed = wait_until(ros_context, lambda: not pointing.running() or checked_forces_seen())
@@ -127,7 +163,8 @@ def test_restarted_driver_is_answered_within_a_second(ros_context, node_processe
     first = min(commands.by_run[run])
     print(f'{mode}: new run answered from sample {first}')
     assert first <= RESUME_WITHIN_SAMPLES, first
-    _check_resumed(mode, stream, commands.by_run[run], force.by_run[run], first)
+    _check_resumed(mode, stream, commands.by_run[run], force.by_run[run], first,
+                   _timeouts_over(diagnostics, run, first + SETTLE_SAMPLES))
     for process in (again, pointing):
         assert process.stop() == 130, process.output()     # SIGINT: 128 + 2
 
@@ -160,15 +197,23 @@ def test_restarted_controller_is_waited_for_again(ros_context, node_processes, m
         return next((n for n, c in sorted(commands.by_run.get(run, {}).items())
                      if n > before and not np.any(c)), None)
 
-    resumed = wait_until(ros_context, lambda: not driver.running() or (
-        first_new() is not None
-        and force.last_index >= first_new() + CATCH_UP_SAMPLES + CHECKED_SAMPLES))
+    def checked() -> bool:
+        if first_new() is None:
+            return False
+        first = first_new() + CATCH_UP_SAMPLES
+        if mode == 'realtime':
+            return _answers_from(commands.by_run[run], first) >= REALTIME_MIN_ANSWERS
+        return (force.last_index >= first + CHECKED_SAMPLES
+                and _timeouts_over(diagnostics, run, first) is not None)
+
+    resumed = wait_until(ros_context, lambda: not driver.running() or checked())
     assert resumed and driver.running() and again.running(), logs()
     old_last = max(n for n, c in commands.by_run[run].items() if np.any(c))
     print(f'{mode}: last answer of the killed process {old_last}, answered again from '
           f'{first_new()}')
     assert first_new() > old_last
-    _check_resumed(mode, stream, commands.by_run[run], force.by_run[run],
-                   first_new() + CATCH_UP_SAMPLES)
+    first = first_new() + CATCH_UP_SAMPLES
+    _check_resumed(mode, stream, commands.by_run[run], force.by_run[run], first,
+                   _timeouts_over(diagnostics, run, first))
     for process in (driver, again):
         assert process.stop() == 130, process.output()     # SIGINT: 128 + 2
