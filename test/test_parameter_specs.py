@@ -49,6 +49,8 @@ def test_spec_constants_are_the_cores():
         expected = list(value) if isinstance(value, tuple) else value
         assert notch[name] == expected, name
     assert analyze.DEFAULT_WINDOW_S == DEFAULT_WINDOW_S
+    from hexapod_vibration.analysis import twin
+    assert analyze.DEFAULT_TWIN_SEGMENT_S == twin.DEFAULT_SEGMENT_S
 
 
 def test_descriptors_state_the_true_range():

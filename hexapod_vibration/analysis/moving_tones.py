@@ -106,6 +106,29 @@ def spectrum_ratio_db(controlled: np.ndarray, uncontrolled: np.ndarray, fs: floa
     return f, 10.0 * np.log10(np.maximum(on, 1e-300) / np.maximum(off, 1e-300))
 
 
+def transfer_function_db(x: np.ndarray, y: np.ndarray, fs: float
+                         ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(f Hz, 20 log10 |H1| dB, coherence) of the transfer function from ``x`` to ``y``.
+
+    H1 = Pxy / Pxx (scipy.signal.csd / welch), with the segment and window of
+    :func:`spectrum_ratio_db`. With ``x`` a run without control and ``y`` the same samples of
+    its twin with control (same disturbance, same noise), H1 is the measured |S(f)|: the
+    noise common to both cancels instead of scattering the ratio of two spectra.
+    """
+    x = np.asarray(x, dtype=float) - np.mean(x)
+    y = np.asarray(y, dtype=float) - np.mean(y)
+    nperseg = int(round(ratio_segment_s(y, x, fs) * fs))
+    options = {"fs": fs, "window": RATIO_WINDOW, "nperseg": nperseg, "noverlap": nperseg // 2,
+               "detrend": "constant"}
+    f, pxy = signal.csd(x, y, **options)
+    _, pxx = signal.welch(x, **options)
+    _, pyy = signal.welch(y, **options)
+    tiny = 1e-300
+    h1 = np.abs(pxy) / np.maximum(pxx, tiny)
+    coherence = np.abs(pxy) ** 2 / np.maximum(pxx * pyy, tiny)
+    return f, 20.0 * np.log10(np.maximum(h1, tiny)), coherence
+
+
 def near_tones_mask(f_hz: np.ndarray, tones_hz: list[float], lines_hz: list[float],
                     exclusion_hz: float) -> np.ndarray:
     """Frequencies within ``NEAR_TONE_HZ`` of a tone, more than ``exclusion_hz`` from lines."""

@@ -15,8 +15,9 @@
   each tone (``/pph/notch_frequencies``) against the true frequency of every sounding tone
   (``/pph/disturbance_frequencies``) and the tachometer (``/pph/reference_frequency``) over
   time, and the estimation error of each controlled tone.
-- ``sensitivity.png`` (when ``/pph/notch_sensitivity`` was recorded): the predicted |S| and
-  the measured ratio of the controlled to the uncontrolled z spectrum, in dB.
+- ``sensitivity.png`` (when ``/pph/notch_sensitivity`` was recorded, or with a twin): the
+  predicted |S|, the measured ratio of the controlled to the uncontrolled z spectrum and,
+  with a twin (``analyze --twin``), the H1 estimate from the twin's z to the controlled z, in dB.
 """
 
 from __future__ import annotations
@@ -416,7 +417,10 @@ def _errors_panel(ax: plt.Axes, signals: BagSignals, result: Analysis) -> None:
 
 # ---------------------------------------------------------------------------- sensitivity
 def sensitivity_figure(path: Path, result: Analysis) -> Path:
-    """Predicted |S| against the measured controlled/uncontrolled spectrum ratio (dB)."""
+    """Predicted |S| against the measured controlled/uncontrolled spectrum ratio (dB).
+
+    With a twin comparison, also the H1 estimate from the twin's z to the controlled z.
+    """
     curves = result.sensitivity_curves
     view = result.report.get("sensitivity", {}).get("view", "")
     notch = [r["frequency_hz"] for r in result.report["tones"] if r["controlled"]]
@@ -424,13 +428,18 @@ def sensitivity_figure(path: Path, result: Analysis) -> Path:
     spans = [(0.0, FS / 2.0)]
     if notch:
         spans.append((max(min(notch) - 8.0, 0.0), max(notch) + 8.0))
+    drawn = [("measured_frequency_hz", "measured_db", dict(
+                  color="tab:red", lw=0.8, label="measured: controlled / uncontrolled spectrum")),
+             ("twin_frequency_hz", "twin_db", dict(
+                  color="tab:green", lw=0.9, label="measured: H1 from the twin (no control)")),
+             ("frequency_hz", "predicted_db", dict(
+                  color="k", lw=1.2, label=f"predicted |S| ({view}) before control"))]
     for ax, (lo, hi) in zip(axes, spans, strict=False):
-        sel = (curves["measured_frequency_hz"] >= lo) & (curves["measured_frequency_hz"] <= hi)
-        ax.plot(curves["measured_frequency_hz"][sel], curves["measured_db"][sel],
-                color="tab:red", lw=0.8, label="measured: controlled / uncontrolled spectrum")
-        sel = (curves["frequency_hz"] >= lo) & (curves["frequency_hz"] <= hi)
-        ax.plot(curves["frequency_hz"][sel], curves["predicted_db"][sel], color="k", lw=1.2,
-                label=f"predicted |S| ({view}) before control")
+        for f_key, db_key, style in drawn:
+            if f_key not in curves:
+                continue
+            sel = (curves[f_key] >= lo) & (curves[f_key] <= hi)
+            ax.plot(curves[f_key][sel], curves[db_key][sel], **style)
         for f in notch:
             if lo <= f <= hi:
                 ax.axvline(f, color="0.5", lw=0.6, ls=":")

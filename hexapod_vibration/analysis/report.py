@@ -353,7 +353,12 @@ class Analysis:
     harmonics: dict[str, Any] | None = None
     sensitivity_curves: dict[str, np.ndarray] = field(default_factory=dict)
     """Predicted (``frequency_hz``, ``predicted_db``) and measured (``measured_frequency_hz``,
-    ``measured_db``) |S| for ``sensitivity.png``; empty without a recorded prediction."""
+    ``measured_db``) |S| for ``sensitivity.png``; empty without a recorded prediction.
+    A twin comparison adds the H1 estimate (``twin_frequency_hz``, ``twin_db``)."""
+    controlled_hz: list[float] = field(default_factory=list)
+    """The notch's tones (Hz) as the report uses them (snapped to the report tones)."""
+    tracked_hz: list[float] = field(default_factory=list)
+    """The notch's configured tones (Hz) whose tracks give ``following_tones``."""
 
 
 @dataclass(frozen=True)
@@ -426,7 +431,7 @@ def analyze_signals(signals: BagSignals, request: Request = Request()) -> Analys
     details = _details(signals, levels, tones, notes, windows, index, over_time,
                        (ident, ident_source), harmonics)
     return Analysis(report, details, z, windows, index, over_time, ident,
-                    rec.paper() if rec else {}, harmonics, curves)
+                    rec.paper() if rec else {}, harmonics, curves, controlled, configured)
 
 
 def _windows(signals: BagSignals, index: np.ndarray, window_s: float | None,
@@ -480,7 +485,7 @@ def configured_tones(signals: BagSignals, controlled: list[float]) -> list[float
     return [round(float(np.nanmedian(estimate[1][:, k])), 6) for k in range(columns)]
 
 
-def _tone_tracks(signals: BagSignals, controlled: list[float]
+def tone_tracks(signals: BagSignals, controlled: list[float]
                  ) -> list[tuple[str, np.ndarray, np.ndarray] | None]:
     """Per controlled tone: (source topic, message samples, Hz) of the track that follows it.
 
@@ -518,7 +523,7 @@ def following_tones(signals: BagSignals, windows: dict[str, slice],
     """
     z, index = signals.z, signals.accel.sample_index
     rows = []
-    for nominal, track in zip(controlled, _tone_tracks(signals, controlled), strict=True):
+    for nominal, track in zip(controlled, tone_tracks(signals, controlled), strict=True):
         if track is None:
             continue
         topic, at, hz = track
@@ -538,45 +543,73 @@ def following_tones(signals: BagSignals, windows: dict[str, slice],
     return rows
 
 
+def recorded_prediction(signals: BagSignals
+                        ) -> tuple[int, str, np.ndarray, np.ndarray] | None:
+    """(sample, view, frequency grid Hz, predicted |S| dB) of the last ``/pph/notch_sensitivity``.
+
+    The view is its ``output_db`` row (the z axis) when given, else ``sigma_max_db``; None
+    without a usable recorded prediction.
+    """
+    if not signals.sensitivity:
+        return None
+    sample, rows = signals.sensitivity[-1]
+    view = "output_db" if "output_db" in rows else "sigma_max_db"
+    if "frequency_hz" not in rows or view not in rows:
+        return None
+    return int(sample), view, rows["frequency_hz"], rows[view]
+
+
+def prediction_difference(f: np.ndarray, measured_db: np.ndarray, grid_hz: np.ndarray,
+                          predicted_db: np.ndarray, controlled: list[float],
+                          lines: list[float], segment_s: float) -> dict[str, Any]:
+    """Measured minus predicted |S| (dB) within 5 Hz of the controlled tones, lines left out.
+
+    Args:
+        f: the measured curve's frequencies (Hz).
+        measured_db: the measured |S| on ``f`` (dB).
+        grid_hz: the prediction's frequencies (Hz).
+        predicted_db: the predicted |S| on ``grid_hz`` (dB), interpolated onto ``f``.
+        controlled: the notch's tones (Hz).
+        lines: every other line left out (Hz).
+        segment_s: the measured curve's Welch segment (s), for the lines' exclusion.
+    """
+    exclusion_hz = moving_tones.line_exclusion_hz(segment_s)
+    near = moving_tones.near_tones_mask(f, controlled, lines, exclusion_hz)
+    difference = measured_db[near] - np.interp(f, grid_hz, predicted_db)[near]
+    return {"segment_s": _json_float(segment_s),
+            "line_exclusion_hz": _json_float(exclusion_hz),
+            "near_tones_points": int(np.count_nonzero(near)),
+            "near_tones_max_difference_db": _json_float(
+                float(np.max(np.abs(difference))) if near.any() else math.nan),
+            "near_tones_rms_difference_db": _json_float(
+                float(np.sqrt(np.mean(difference ** 2))) if near.any() else math.nan)}
+
+
 def sensitivity_comparison(signals: BagSignals, windows: dict[str, slice],
                            controlled: list[float], lines: list[float]
                            ) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
     """report.json's ``sensitivity`` and the curves of ``sensitivity.png``.
 
-    Predicted: the last ``/pph/notch_sensitivity`` (its ``output_db`` row, the z axis, when
-    given, else ``sigma_max_db``). Measured: the ratio of the controlled to the uncontrolled
-    z spectrum (:func:`~hexapod_vibration.analysis.moving_tones.spectrum_ratio_db`). Their
-    difference is summarised within 5 Hz of the controlled tones, outside every line's main
-    lobe (``line_exclusion_hz``).
+    Predicted: :func:`recorded_prediction`. Measured: the ratio of the controlled to the
+    uncontrolled z spectrum (:func:`~hexapod_vibration.analysis.moving_tones.spectrum_ratio_db`).
+    Their difference is summarised within 5 Hz of the controlled tones, outside every line's
+    main lobe (:func:`prediction_difference`).
     Both empty without a recorded prediction or without a controlled window.
     """
-    if not signals.sensitivity or "controlled" not in windows:
+    prediction = recorded_prediction(signals)
+    if prediction is None or "controlled" not in windows:
         return {}, {}
-    sample, rows = signals.sensitivity[-1]
-    view = "output_db" if "output_db" in rows else "sigma_max_db"
-    if "frequency_hz" not in rows or view not in rows:
-        return {}, {}
-    grid, predicted = rows["frequency_hz"], rows[view]
+    sample, view, grid, predicted = prediction
     z = signals.z
     on, off = z[windows["controlled"]], z[windows["uncontrolled"]]
     f, measured = moving_tones.spectrum_ratio_db(on, off, FS)
     segment_s = moving_tones.ratio_segment_s(on, off, FS)
-    exclusion_hz = moving_tones.line_exclusion_hz(segment_s)
-    near = moving_tones.near_tones_mask(f, controlled, lines, exclusion_hz)
-    on_grid = np.interp(f, grid, predicted)
     k = int(np.argmax(predicted))
     report = {"view": view.removesuffix("_db"), "prediction_sample": int(sample),
               "predicted_rise_db": _json_float(float(predicted[k])),
               "predicted_rise_at_hz": _json_float(float(grid[k])),
-              "segment_s": _json_float(segment_s),
-              "line_exclusion_hz": _json_float(exclusion_hz),
-              "near_tones_points": int(np.count_nonzero(near)),
-              "near_tones_max_difference_db": _json_float(
-                  float(np.max(np.abs(measured[near] - on_grid[near]))) if near.any()
-                  else math.nan),
-              "near_tones_rms_difference_db": _json_float(
-                  float(np.sqrt(np.mean((measured[near] - on_grid[near]) ** 2))) if near.any()
-                  else math.nan)}
+              **prediction_difference(f, measured, grid, predicted, controlled, lines,
+                                      segment_s)}
     curves = {"frequency_hz": grid, "predicted_db": predicted, "measured_frequency_hz": f,
               "measured_db": measured}
     return report, curves
@@ -830,14 +863,23 @@ def format_harmonics(harmonics: dict[str, Any], scenario: str) -> str:
 # ---------------------------------------------------------------------------- entry point
 def analyze_bag(bag_path: str | Path, out_dir: str | Path, model: ModelConfig,
                 request: Request = Request(), control_on_s: float | None = None,
-                plots: bool = True) -> Analysis:
+                plots: bool = True, twin_bag: str | Path | None = None,
+                twin_segment_s: float | None = None) -> Analysis:
     """Analyse a bag and write ``report.json``, ``details.json``, the PNG and CSV figures.
 
-    The bag is read and analysed completely before anything is written, so a bad bag
-    leaves ``out_dir`` untouched.
+    ``twin_bag``: the same run with control never on; the report gets a ``twin`` section
+    (:mod:`hexapod_vibration.analysis.twin`, ``twin_segment_s`` its over-time window).
+    The bags are read and analysed completely before anything is written, so a bad bag
+    (or a twin that is not this run's) leaves ``out_dir`` untouched.
     """
     signals = load_signals(bag_path, model, control_on_s)
+    twin_signals = None if twin_bag is None else load_signals(twin_bag, model)
     result = analyze_signals(signals, request)
+    if twin_signals is not None:
+        from hexapod_vibration.analysis import twin
+
+        result.report["twin"] = twin.compare(signals, twin_signals, result,
+                                             twin_segment_s or twin.DEFAULT_SEGMENT_S)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     write_json(out / "report.json", result.report)

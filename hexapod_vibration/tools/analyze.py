@@ -1,9 +1,11 @@
-"""``analyze BAG [--tones F ...] --out DIR``: the paper's table and figures from any bag.
+"""``analyze BAG [--tones F ...] [--twin TWIN_BAG] --out DIR``: the paper's table and figures.
 
 Works on bags of this package's experiment runner and on bags recorded with
 ``ros2 bag record`` (MCAP or sqlite3) that hold ``/pph/accel`` (and optionally the other
 contract topics, ``/diagnostics`` and ``/parameter_events``). Writes ``DIR/report.json``,
-``DIR/details.json`` and PNG plots, and prints the table.
+``DIR/details.json`` and PNG plots, and prints the table. ``--twin TWIN_BAG``: the same
+run with control never on (``experiment --twin``); the controlled window is compared with
+the same samples of the twin (report.json's ``twin`` section, see ``analysis.twin``).
 """
 
 from __future__ import annotations
@@ -17,6 +19,8 @@ from hexapod_vibration.tools import outputs
 
 DEFAULT_WINDOW_S = 10.0
 """Same as ``analysis.report.DEFAULT_WINDOW_S`` (tested); here so ``--help`` stays cheap."""
+DEFAULT_TWIN_SEGMENT_S = 1.0
+"""Same as ``analysis.twin.DEFAULT_SEGMENT_S`` (tested)."""
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -43,6 +47,14 @@ def build_parser() -> argparse.ArgumentParser:
                              "bag directory's name)")
     parser.add_argument("--model", type=cli.existing_file, default=None,
                         help="physical model YAML for the Jacobian (default: packaged)")
+    parser.add_argument("--twin", type=cli.existing_dir, default=None, metavar="TWIN_BAG",
+                        help="the same run with control never on (experiment --twin's "
+                             "DIR/twin/bag): report.json gets a 'twin' section comparing the "
+                             "controlled window with the same samples of the twin")
+    parser.add_argument("--twin-segment", type=cli.number(0.0, 60.0, "s", low_open=True),
+                        default=DEFAULT_TWIN_SEGMENT_S, metavar="S",
+                        help="window (s) of the following tones' reduction over time "
+                             f"(default {DEFAULT_TWIN_SEGMENT_S:g})")
     parser.add_argument("--no-plots", action="store_true", help="skip the PNG figures")
     return parser
 
@@ -66,7 +78,8 @@ def main(argv: list[str] | None = None) -> int:
         request = Request(args.tones, args.scenario, args.window, args.harmonics_of)
         with outputs.staged(args.out) as staging:     # every file complete, or none
             result = analyze_bag(args.bag, staging, model, request, args.control_on,
-                                 plots=not args.no_plots)
+                                 plots=not args.no_plots, twin_bag=args.twin,
+                                 twin_segment_s=args.twin_segment)
     except (BagError, WindowTooShort, ValueError, FileNotFoundError) as exc:
         return cli.fail("analyze", exc)
     except KeyboardInterrupt as exc:
@@ -76,6 +89,10 @@ def main(argv: list[str] | None = None) -> int:
     following = format_following(result.report)
     if following:
         print(following)
+    if args.twin is not None:
+        from hexapod_vibration.analysis.twin import format_twin
+
+        print(format_twin(result.report))
     if result.harmonics is not None:
         print(format_harmonics(result.harmonics, result.report["scenario"]))
     for note in result.details["notes"]:

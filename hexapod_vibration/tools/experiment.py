@@ -1,7 +1,7 @@
 """``experiment``: run one of the paper's experiments through the ROS graph and analyse it.
 
 ``experiment --scenario NAME --out DIR [--duration S] [--control-on S] [--lockstep|--realtime]
-[--composed] [--storage mcap|sqlite3]``
+[--composed] [--storage mcap|sqlite3] [--twin]``
 
 1. Writes ``DIR/params.yaml`` (a ROS 2 params file for the three nodes, from the scenario).
 2. Starts the recorder (bag into ``DIR/bag``), the controllers and the driver as separate
@@ -20,6 +20,11 @@ paper's Tables 1 and 2 and Fig. 4 (``single_tone_harmonic``, ``close_tones``,
 ``plant_response``) into ``DIR/<scenario>``, prints the three tables with the paper's
 reductions and writes ``DIR/summary.md``.
 
+``--twin`` (lockstep, one scenario): after the run, the same scenario again with control
+never on (same seeds, same identification) into ``DIR/twin`` (its bag, report.json and
+details.json), then ``DIR/bag`` analysed against it (``analyze DIR/bag --twin
+DIR/twin/bag``: report.json's ``twin`` section, and the figures).
+
 The run record (scenario, tones, windows, planned identification, the paper's column) goes
 into the bag's ``metadata.yaml`` ``custom_data``, so ``analyze DIR/bag`` gives exactly this
 report. The runner releases the driver only when the recorder itself reports every loop
@@ -29,6 +34,7 @@ publisher matched (its ``/diagnostics``), so the bag has every sample from 0.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import math
 import sys
 import time
@@ -551,22 +557,34 @@ class ExperimentRun:
             self.sup = None
 
 
-def run_scenario(options: RunOptions) -> Any:
+def run_scenario(options: RunOptions, plots: bool = True) -> Any:
     """Run, stop, analyse; return the Analysis. Ctrl-C stops cleanly and re-raises.
 
-    The analysis is ``analyze DIR/bag``'s: everything comes from the run record in the bag.
+    The analysis is ``analyze DIR/bag``'s: everything comes from the run record in the bag
+    (``plots=False``: report.json and details.json only).
     """
     run = ExperimentRun(options)
     try:
         run.run()
     finally:
         run.stop()
+    return analyze_run(options.out, run.model_file, plots=plots)
+
+
+def analyze_run(out: Path, model_file: Path | None, twin_bag: Path | None = None,
+                plots: bool = True) -> Any:
+    """``analyze OUT/bag [--twin TWIN_BAG] --out OUT`` with the run's model (None: packaged)."""
     from hexapod_vibration.analysis.report import analyze_bag
     from hexapod_vibration.core.model.config import load_model_config
 
-    model = load_model_config(run.model_file or config_path("pph_model.yaml"))
-    with outputs.staged(options.out) as staging:     # every file complete, or none
-        return analyze_bag(run.bag, staging, model)
+    model = load_model_config(model_file or config_path("pph_model.yaml"))
+    with outputs.staged(out) as staging:     # every file complete, or none
+        return analyze_bag(out / "bag", staging, model, twin_bag=twin_bag, plots=plots)
+
+
+def twin_scenario(scenario: Scenario) -> Scenario:
+    """The same scenario with control never on (the runner then never sets ``enabled``)."""
+    return dataclasses.replace(scenario, control_on_s=scenario.duration_s)
 
 
 # ---------------------------------------------------------------------------- CLI
@@ -594,6 +612,10 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--demo", action="store_true",
                         help="run the paper's Tables 1 and 2 and Fig. 4 into DIR/<scenario> "
                              "and write DIR/summary.md")
+    parser.add_argument("--twin", action="store_true",
+                        help="then run it again with control never on into DIR/twin and "
+                             "compare the controlled window with the same samples of this "
+                             "twin (report.json's 'twin' section; lockstep, one scenario)")
     parser.set_defaults(mode="lockstep")
     return parser
 
@@ -627,11 +649,22 @@ def check_arguments(args: argparse.Namespace) -> list[Scenario]:
     names = DEMO_SCENARIOS if args.demo else ([args.scenario] if args.scenario else [])
     if not names:
         raise ValueError("give --scenario NAME or --demo")
+    if args.twin and args.demo:
+        raise ValueError("argument --twin: not with --demo (give one --scenario)")
+    if args.twin and args.mode != "lockstep":
+        raise ValueError("argument --twin: needs --lockstep (a realtime run has no "
+                         "sample-for-sample twin)")
     scenarios = [_scenario(n, args.duration, args.control_on) for n in names]
     for sc in scenarios:
-        bag = (args.out / sc.name if args.demo else args.out) / "bag"
-        if bag.exists():
-            raise ValueError(f"argument --out: {bag} exists: choose another --out or remove it")
+        out = args.out / sc.name if args.demo else args.out
+        for bag in [out / "bag", *([out / "twin" / "bag"] if args.twin else [])]:
+            if bag.exists():
+                raise ValueError(f"argument --out: {bag} exists: choose another --out or "
+                                 "remove it")
+        if args.twin and not 0.0 < sc.control_on_s < sc.duration_s:
+            raise ValueError(f"argument --twin: control never goes on in {sc.name} "
+                             f"(control_on_s {sc.control_on_s:g} s, duration "
+                             f"{sc.duration_s:g} s): nothing to compare")
     return scenarios
 
 
@@ -659,16 +692,35 @@ def _run_all(args: argparse.Namespace, scenarios: list[Scenario]) -> int:
         out = args.out / sc.name if args.demo else args.out
         print(f"experiment {sc.name}: {sc.description} ({args.mode}, {sc.duration_s:g} s, "
               f"control on at {sc.control_on_s:g} s) -> {out}", flush=True)
-        try:
-            result = run_scenario(RunOptions(sc, out, args.mode, args.storage,
-                                             composed=args.composed))
-        except KeyboardInterrupt as exc:
-            print(f"\nexperiment: interrupted; processes stopped, bag in {out / 'bag'}",
-                  file=sys.stderr, flush=True)
-            return cli.interrupted_exit_code(exc)
-        except (ExperimentError, BagError, WindowTooShort) as exc:
-            print(f"experiment: {exc}", file=sys.stderr)
-            return 2 if isinstance(exc, ExperimentError) and "exists" in str(exc) else 1
+        runs = [(sc, out)]
+        if args.twin:
+            runs.append((twin_scenario(sc), out / "twin"))
+        for k, (run_sc, run_out) in enumerate(runs):
+            if k:
+                print(f"experiment {sc.name}: its twin, control never on -> {run_out}",
+                      flush=True)
+            try:
+                # With --twin the figures come with the comparison (below).
+                result = run_scenario(RunOptions(run_sc, run_out, args.mode, args.storage,
+                                                 composed=args.composed), plots=not args.twin)
+            except KeyboardInterrupt as exc:
+                print(f"\nexperiment: interrupted; processes stopped, bag in "
+                      f"{run_out / 'bag'}", file=sys.stderr, flush=True)
+                return cli.interrupted_exit_code(exc)
+            except (ExperimentError, BagError, WindowTooShort) as exc:
+                print(f"experiment: {exc}", file=sys.stderr)
+                return 2 if isinstance(exc, ExperimentError) and "exists" in str(exc) else 1
+        if args.twin:
+            try:
+                model_file = out / "model.yaml" if model_file_text(sc) else None
+                result = analyze_run(out, model_file, out / "twin" / "bag")
+            except KeyboardInterrupt as exc:
+                print(f"\nexperiment: interrupted; bags in {out / 'bag'} and "
+                      f"{out / 'twin' / 'bag'}", file=sys.stderr, flush=True)
+                return cli.interrupted_exit_code(exc)
+            except (BagError, ValueError) as exc:
+                print(f"experiment: {' '.join(str(exc).split())}", file=sys.stderr)
+                return 1
         results.append(result)
         tables.append(scenario_table(result))
         print(tables[-1], flush=True)
@@ -691,9 +743,11 @@ def scenario_table(result: Any) -> str:
     if result.harmonics is not None and not any(
             r["controlled"] for r in result.report["tones"]):
         return format_harmonics(result.harmonics, result.report["scenario"])
-    following = format_following(result.report)
-    table = format_table(result.report, result.paper_reduction_db)
-    return f"{table}\n{following}" if following else table
+    from hexapod_vibration.analysis.twin import format_twin
+
+    parts = [format_table(result.report, result.paper_reduction_db),
+             format_following(result.report), format_twin(result.report)]
+    return "\n".join(p for p in parts if p)
 
 
 if __name__ == "__main__":

@@ -51,3 +51,31 @@ def test_model_overrides_reach_the_nodes_as_a_model_file(tmp_path):
     with pytest.raises(ValueError, match="mass_kg"):
         model_file_text(bad)
     assert "model_file" not in yaml.safe_dump(node_parameters(bad, "lockstep"))
+
+
+def test_twin_is_refused_with_demo_realtime_or_an_existing_twin_bag(tmp_path):
+    import pytest
+
+    from hexapod_vibration.tools.experiment import build_parser, check_arguments
+
+    def check(*argv):
+        return check_arguments(build_parser().parse_args(["--out", str(tmp_path), *argv]))
+
+    with pytest.raises(ValueError, match="--twin: not with --demo"):
+        check("--demo", "--twin")
+    with pytest.raises(ValueError, match="--twin: needs --lockstep"):
+        check("--scenario", "mismatch", "--twin", "--realtime")
+    (tmp_path / "twin" / "bag").mkdir(parents=True)
+    with pytest.raises(ValueError, match="twin/bag exists"):
+        check("--scenario", "mismatch", "--twin")
+    assert check("--scenario", "mismatch")         # no --twin: the twin's folder is not ours
+
+
+def test_the_twin_scenario_never_switches_control_on():
+    from hexapod_vibration.tools.experiment import run_record, twin_scenario
+
+    scenario = scenario_from_dict({**BASE, "notch": {"tone_frequencies_hz": [40.0]}})
+    twin = twin_scenario(scenario)
+    assert twin.control_on_s == twin.duration_s == scenario.duration_s
+    assert twin.seed == scenario.seed and twin.identify_at_s == scenario.identify_at_s
+    assert run_record(twin, "lockstep").control_on_sample == -1

@@ -1,0 +1,291 @@
+"""A run measured against its uncontrolled twin: the same scenario with control never on.
+
+A lockstep run is deterministic: run again with the same seeds and identification but with
+control never switched on, it is sample-for-sample the same until control-on, and after it
+exactly "no control" at the same times. So the controlled window of the run (``BAG``) is
+compared with the same samples of the twin (``TWIN``) instead of with a window before
+control: a moving tone, a drift or the noise floor is compared at the same time.
+
+- The check (:func:`check_twin`): the same run length, no control-on in the twin, and the
+  top plate's z acceleration identical (to ``IDENTICAL_M_S2``) on every sample before
+  control-on; otherwise :class:`NotATwin`.
+- ``tones``: each report tone's level (:func:`~hexapod_vibration.analysis.report.tone_levels`)
+  in the controlled window and in the twin's same samples; a tone whose recorded track
+  moved over the window is measured in a band following it (both signals dechirped along
+  the same track of the run, :func:`~hexapod_vibration.analysis.moving_tones.dechirp`).
+- ``following_over_time``: each tracked tone's reduction in consecutive windows of
+  ``segment_s`` from control-on to the end of the run.
+- ``bands``: third-octave band levels (lines included: a band's whole level) over the
+  controlled window, controlled minus twin, and the contract's ``never_worse``.
+- ``sensitivity``: the measured |S(f)|, H1 from twin z to controlled z
+  (:func:`~hexapod_vibration.analysis.moving_tones.transfer_function_db`), against the
+  recorded prediction near the tones
+  (:func:`~hexapod_vibration.analysis.report.prediction_difference`).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from hexapod_vibration.analysis import moving_tones
+from hexapod_vibration.analysis.report import (
+    FS,
+    SNAP_HZ,
+    Analysis,
+    BagSignals,
+    level_text,
+    prediction_difference,
+    recorded_prediction,
+    reduction_text,
+    tone_levels,
+    tone_tracks,
+)
+from hexapod_vibration.core import spectrum
+from hexapod_vibration.json_values import json_float
+
+IDENTICAL_M_S2 = 1e-9
+"""Before control-on the twin's z acceleration equals the run's to this (m/s^2)."""
+DEFAULT_SEGMENT_S = 1.0
+"""``following_over_time`` window (s)."""
+BAND_LOW_HZ, BAND_HIGH_HZ = 5.0, 450.0
+"""Third-octave band centres compared (Hz)."""
+NEVER_WORSE_DB = 1.0
+"""The contract: no band more than 1 dB above its level without control."""
+DIGITS = 2
+
+
+class NotATwin(ValueError):
+    """The twin bag is not the same run with control never on."""
+
+
+def _round(value: float) -> float | None:
+    return json_float(value, DIGITS)
+
+
+def check_twin(signals: BagSignals, twin: BagSignals) -> int:
+    """The run's control-on sample, once ``twin`` is shown to be its twin; else NotATwin."""
+    def refuse(why: str) -> NotATwin:
+        return NotATwin(f"{twin.path} is not this run's twin: {why}")
+
+    on = signals.control_on_sample
+    if on is None:
+        raise ValueError(f"{signals.path}: control never went on: nothing to compare with a "
+                         "twin")
+    samples, twin_samples = signals.run_samples(), twin.run_samples()
+    if samples != twin_samples:
+        raise refuse(f"{twin_samples} samples, the run has {samples}")
+    if twin.control_on_sample is not None and twin.control_on_sample < samples:
+        raise refuse(f"its control went on at sample {twin.control_on_sample}")
+    index, twin_index = signals.accel.sample_index, twin.accel.sample_index
+    common, rows, twin_rows = np.intersect1d(index[index < on], twin_index,
+                                             return_indices=True)
+    if common.size == 0:
+        raise refuse(f"no sample before control-on (sample {on}) in both bags")
+    difference = np.abs(signals.z[rows] - twin.z[twin_rows])
+    worst = int(np.argmax(difference))
+    if difference[worst] > IDENTICAL_M_S2:
+        raise refuse(f"z acceleration differs by {difference[worst]:.3g} m/s^2 at sample "
+                     f"{int(common[worst])}, before control-on (sample {on})")
+    return on
+
+
+def _twin_rows(twin: BagSignals, samples: np.ndarray, what: str) -> np.ndarray:
+    """The twin's rows holding ``samples``; ValueError if the twin misses any of them."""
+    index = twin.accel.sample_index
+    rows = np.clip(np.searchsorted(index, samples), 0, max(index.size - 1, 0))
+    missing = int(np.count_nonzero(index[rows] != samples)) if index.size else samples.size
+    if missing:
+        raise ValueError(f"{twin.path}: misses {missing} samples of {what}")
+    return rows
+
+
+def _row(frequency_hz: float, controlled: bool, band: str, ctl: tuple, twin: tuple
+         ) -> dict[str, Any]:
+    """A ``tones`` row from (level, floor flag) of the run and of the twin (dB re 1 g)."""
+    return {"frequency_hz": float(frequency_hz), "controlled": controlled, "band": band,
+            "controlled_db": _round(ctl[0]), "twin_db": _round(twin[0]),
+            "reduction_db": _round(round(twin[0], DIGITS) - round(ctl[0], DIGITS)),
+            "at_noise_floor": {"controlled": ctl[1], "twin": twin[1]}}
+
+
+def _following_level(x: np.ndarray, track_hz: np.ndarray) -> tuple[float, bool]:
+    """(level dB re 1 g, at floor) in a band following ``track_hz`` (Hz per sample)."""
+    y, f_ref = moving_tones.dechirp(x, track_hz, FS)
+    level, _, at_floor = tone_levels(y, [f_ref])
+    return level[0], at_floor[0]
+
+
+def compare(signals: BagSignals, twin: BagSignals, result: Analysis,
+            segment_s: float = DEFAULT_SEGMENT_S) -> dict[str, Any]:
+    """report.json's ``twin`` section (see the module docstring); adds the H1 curve.
+
+    Raises:
+        NotATwin: ``twin`` is not this run's twin.
+        ValueError: no controlled window, or the twin misses samples of it.
+    """
+    on = check_twin(signals, twin)
+    if "controlled" not in result.windows:
+        raise ValueError(f"{signals.path}: no controlled window to compare with the twin")
+    window = result.windows["controlled"]
+    index = signals.accel.sample_index
+    samples = index[window]
+    first, stop = int(samples[0]), int(samples[-1]) + 1
+    z_ctl = signals.z[window]
+    z_twin = twin.z[_twin_rows(twin, samples, f"the controlled window [{first}, {stop})")]
+    tracks = [(f, t) for f, t in zip(result.tracked_hz, tone_tracks(signals, result.tracked_hz),
+                                     strict=True) if t is not None]
+    section: dict[str, Any] = {
+        "bag": str(twin.path), "control_on_sample": on,
+        "window": {"first_sample": first, "samples": stop - first},
+        "tones": _tones(result, z_ctl, z_twin, samples, tracks),
+        "following_over_time": _over_time(signals, twin, on, tracks, segment_s),
+        "bands": _bands(z_ctl, z_twin),
+    }
+    sensitivity = _sensitivity(signals, result, z_ctl, z_twin)
+    if sensitivity:
+        section["sensitivity"] = sensitivity
+    return section
+
+
+def _tones(result: Analysis, z_ctl: np.ndarray, z_twin: np.ndarray, samples: np.ndarray,
+           tracks: list[tuple[float, tuple[str, np.ndarray, np.ndarray]]]
+           ) -> list[dict[str, Any]]:
+    """Fixed-band rows per report tone; a tone whose track moved gets a following band."""
+    report_rows = result.report["tones"]
+    tones = [r["frequency_hz"] for r in report_rows]
+    segment = min(spectrum.DEFAULT_SEGMENT_S, z_ctl.size / FS)
+    ctl, twin = tone_levels(z_ctl, tones, segment), tone_levels(z_twin, tones, segment)
+    rows = [_row(f, r["controlled"], "fixed", (ctl[0][k], ctl[2][k]),
+                 (twin[0][k], twin[2][k])) for k, (f, r) in enumerate(zip(tones, report_rows,
+                                                                           strict=True))]
+    for nominal, (topic, at, hz) in tracks:
+        track_hz = moving_tones.track_on_samples(at, hz, samples)
+        if track_hz.max() - track_hz.min() <= 1e-6:
+            continue                            # a steady tone: its fixed band is right
+        row = _row(nominal, True, "following", _following_level(z_ctl, track_hz),
+                   _following_level(z_twin, track_hz))
+        row.update(source=topic, frequency_span_hz=[round(float(track_hz.min()), 4),
+                                                    round(float(track_hz.max()), 4)])
+        same = [k for k, f in enumerate(tones) if abs(f - nominal) <= SNAP_HZ]
+        if same:
+            rows[same[0]] = row
+        else:
+            rows.append(row)
+    return rows
+
+
+def _over_time(signals: BagSignals, twin: BagSignals, on: int,
+               tracks: list[tuple[float, tuple[str, np.ndarray, np.ndarray]]],
+               segment_s: float) -> list[dict[str, Any]]:
+    """Per tracked tone: its reduction (dB) in consecutive ``segment_s`` windows from ``on``.
+
+    A window with a sample missing from either bag is left out (counted).
+    """
+    width = int(round(segment_s * FS))
+    end = signals.run_samples()
+    index, twin_index = signals.accel.sample_index, twin.accel.sample_index
+    starts = list(range(on, end - width + 1, width))
+    out = []
+    for nominal, (topic, at, hz) in tracks:
+        points, skipped = [], 0
+        for a in starts:
+            samples = np.arange(a, a + width)
+            rows = np.searchsorted(index, samples).clip(0, index.size - 1)
+            twin_rows = np.searchsorted(twin_index, samples).clip(0, twin_index.size - 1)
+            if np.any(index[rows] != samples) or np.any(twin_index[twin_rows] != samples):
+                skipped += 1
+                continue
+            track_hz = moving_tones.track_on_samples(at, hz, samples)
+            level_ctl, _ = _following_level(signals.z[rows], track_hz)
+            level_twin, _ = _following_level(twin.z[twin_rows], track_hz)
+            points.append([round(a / FS, 3), _round(level_twin - level_ctl)])
+        values = [p[1] for p in points]
+        out.append({"frequency_hz": float(nominal), "source": topic,
+                    "segment_s": float(segment_s), "reduction_db": points,
+                    "min_reduction_db": _round(min(values)) if values else None,
+                    "median_reduction_db": _round(float(np.median(values))) if values
+                    else None,
+                    "windows_skipped": skipped})
+    return out
+
+
+def _bands(z_ctl: np.ndarray, z_twin: np.ndarray) -> dict[str, Any]:
+    """Third-octave levels (lines included) over the controlled window, run and twin."""
+    bands = spectrum.third_octave_bands_hz(BAND_LOW_HZ, BAND_HIGH_HZ)
+    segment = min(spectrum.DEFAULT_SEGMENT_S, z_ctl.size / FS)
+    ctl = spectrum.band_levels_db(z_ctl - z_ctl.mean(), FS, bands, segment_s=segment)
+    off = spectrum.band_levels_db(z_twin - z_twin.mean(), FS, bands, segment_s=segment)
+    rise = ctl - off
+    ok = np.isfinite(rise)
+    k = int(np.flatnonzero(ok)[np.argmax(rise[ok])]) if ok.any() else -1
+    largest = float(rise[k]) if k >= 0 else math.nan
+    return {"centre_hz": [round(float(f), 2) for f in bands[:, 0]],
+            "controlled_db": [_round(v) for v in ctl], "twin_db": [_round(v) for v in off],
+            "rise_db": [_round(v) for v in rise],
+            "largest_rise_db": _round(largest),
+            "largest_rise_at_hz": round(float(bands[k, 0]), 2) if k >= 0 else None,
+            "never_worse": bool(largest <= NEVER_WORSE_DB) if k >= 0 else None}
+
+
+def _sensitivity(signals: BagSignals, result: Analysis, z_ctl: np.ndarray,
+                 z_twin: np.ndarray) -> dict[str, Any]:
+    """H1 (twin z -> controlled z) against the recorded prediction; adds the curve."""
+    f, measured, coherence = moving_tones.transfer_function_db(z_twin, z_ctl, FS)
+    result.sensitivity_curves["twin_frequency_hz"] = f
+    result.sensitivity_curves["twin_db"] = measured
+    prediction = recorded_prediction(signals)
+    if prediction is None:
+        return {}
+    sample, view, grid, predicted = prediction
+    tones = [r["frequency_hz"] for r in result.report["tones"]]
+    segment_s = moving_tones.ratio_segment_s(z_ctl, z_twin, FS)
+    out = {"estimate": "H1 = Pxy / Pxx, twin z -> controlled z",
+           "view": view.removesuffix("_db"), "prediction_sample": sample,
+           **prediction_difference(f, measured, grid, predicted, result.controlled_hz, tones,
+                                   segment_s)}
+    exclusion = moving_tones.line_exclusion_hz(segment_s)
+    near = moving_tones.near_tones_mask(f, result.controlled_hz, tones, exclusion)
+    out["near_tones_min_coherence"] = json_float(float(np.min(coherence[near])), 6) \
+        if near.any() else None
+    return out
+
+
+def format_twin(report: dict[str, Any]) -> str:
+    """The twin comparison as a table (``format_table``'s layout) and three summary lines."""
+    section = report.get("twin")
+    if not section:
+        return ""
+    lines = [f"{report['scenario']}  (against its twin without control, same samples; "
+             "20 log10(a_rms / 1 g), z-axis; * = notch tone)",
+             f"{'Frequency':>10} {'band':>9} {'twin':>17} {'controlled':>17} {'reduction':>10}"]
+    for row in section["tones"]:
+        floor = row["at_noise_floor"]
+        mark = "*" if row["controlled"] else " "
+        reduction = reduction_text({"reduction_db": row["reduction_db"], "at_noise_floor": {
+            "controlled": floor["controlled"], "uncontrolled": floor["twin"]}})
+        lines.append(f"{row['frequency_hz']:>8.1f}Hz{mark}{row['band']:>9}"
+                     f"{level_text(row['twin_db'], floor['twin']):>18} "
+                     f"{level_text(row['controlled_db'], floor['controlled']):>17} "
+                     f"{reduction:>10}")
+    for tone in section["following_over_time"]:
+        if tone["min_reduction_db"] is not None:
+            lines.append(f"following {tone['frequency_hz']:g} Hz over {tone['segment_s']:g} s "
+                         f"windows from control-on: min {tone['min_reduction_db']:.1f} dB, "
+                         f"median {tone['median_reduction_db']:.1f} dB "
+                         f"({len(tone['reduction_db'])} windows)")
+    bands = section["bands"]
+    if bands["largest_rise_db"] is not None:
+        lines.append(f"third-octave bands {BAND_LOW_HZ:g}-{BAND_HIGH_HZ:g} Hz: largest rise "
+                     f"{bands['largest_rise_db']:+.2f} dB at {bands['largest_rise_at_hz']:g} Hz"
+                     f" (never worse than off: {'yes' if bands['never_worse'] else 'NO'})")
+    sens = section.get("sensitivity")
+    if sens and sens["near_tones_points"]:
+        lines.append(f"sensitivity H1 vs predicted within {moving_tones.NEAR_TONE_HZ:g} Hz of the"
+                     f" tones: rms {sens['near_tones_rms_difference_db']:.2f} dB, max "
+                     f"{sens['near_tones_max_difference_db']:.2f} dB "
+                     f"({sens['near_tones_points']} points)")
+    return "\n".join(lines)
+

@@ -1,0 +1,181 @@
+"""A run against its uncontrolled twin: H1 sensitivity, the twin check, ``analyze --twin``.
+
+Synthetic signals (no ROS): the twin is a tone plus broadband noise; the run is the same
+signal, and from control-on the same signal through a known LTI filter (a notch: the
+sensitivity of a canceller at the tone), or a drifting tone removed by a decaying gain.
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from bag_factory import (
+    FS,
+    array_cdr,
+    frequencies_cdr,
+    notch_status,
+    struts_from_z,
+    tone,
+    write_bag,
+)
+from scipy import signal
+
+from hexapod_vibration.analysis import moving_tones, twin
+from hexapod_vibration.analysis.report import RunRecord
+from hexapod_vibration.core.spectrum import G0
+from hexapod_vibration.tools import analyze
+
+ON, END = 12_000, 24_000
+NOISE_M_S2 = 3e-3
+NOTCH_HZ, POLE_RADIUS = 40.0, 0.99
+
+
+def notch_filter() -> tuple[np.ndarray, np.ndarray]:
+    """(b, a): a notch at 40 Hz, |H| from 0 dB far from it to a zero at it."""
+    w0 = 2 * np.pi * NOTCH_HZ / FS
+    b = np.array([1.0, -2.0 * np.cos(w0), 1.0])
+    a = np.array([1.0, -2.0 * POLE_RADIUS * np.cos(w0), POLE_RADIUS**2])
+    return b, a
+
+
+def response_db(b, a, f_hz: np.ndarray) -> np.ndarray:
+    _, h = signal.freqz(b, a, worN=f_hz, fs=FS)
+    return 20 * np.log10(np.abs(h))
+
+
+def test_the_h1_estimate_is_the_filters_response():
+    rng = np.random.default_rng(1)
+    x = rng.standard_normal(20_000) + 0.3 * np.sin(2 * np.pi * 100.0 * np.arange(20_000) / FS)
+    b, a = signal.butter(2, 60.0, fs=FS)
+    y = signal.lfilter(b, a, x)
+    f, h1_db, coherence = moving_tones.transfer_function_db(x, y, FS)
+    band = (f >= 5.0) & (f <= 150.0)
+    assert np.max(np.abs(h1_db[band] - response_db(b, a, f[band]))) < 0.5
+    assert np.min(coherence[band]) > 0.99
+
+
+def test_bands_rise_with_a_gain_and_never_worse_fails_above_1db():
+    x = np.random.default_rng(2).standard_normal(10_000)
+    same = twin._bands(x, x)
+    assert same["largest_rise_db"] == 0.0 and same["never_worse"] is True
+    louder = twin._bands(1.5 * x, x)
+    assert louder["largest_rise_db"] == pytest.approx(20 * np.log10(1.5), abs=0.01)
+    assert louder["never_worse"] is False
+
+
+# ---------------------------------------------------------------- through analyze
+def _record(name: str, on: int, tones: tuple[float, ...] = (40.0, 80.0)) -> str:
+    return RunRecord(scenario=name, report_tones_hz=list(tones), notch_tones_hz=[40.0],
+                     window_s=10.0, samples=END, control_on_sample=on,
+                     identify_at_sample=500, identification_samples=1000).to_json()
+
+
+def _statuses(on: int) -> list[tuple[int, dict[str, str]]]:
+    return [(s, notch_status(s, 'adapting' if 0 <= on <= s else 'disabled', [40.0],
+                             on if 0 <= on <= s else -1, (500, 1500)))
+            for s in range(0, END, 1000)]
+
+
+def _prediction(b, a) -> dict[str, list[tuple[int, bytes]]]:
+    grid = np.linspace(0.0, 500.0, 5001)
+    predicted = response_db(b, a, grid[1:])
+    predicted = np.concatenate([[predicted[0]], predicted])
+    return {'/pph/notch_sensitivity': [(1600, array_cdr(
+        np.vstack([grid, predicted, predicted]),
+        [('rows:frequency_hz,sigma_max_db,output_db', 3, 3 * grid.size),
+         ('frequency', grid.size, 1), ('sample:1600', 1, 1)]))]}
+
+
+def _lti_pair(tmp_path, twin_seed: int = 3, twin_end: int = END):
+    """(run bag, twin bag): 40 and 80 Hz tones in noise; the run filtered from ON.
+
+    ``twin_seed`` other than 3 or ``twin_end`` short of END: a bag that is not the twin.
+    """
+    def uncontrolled(seed: int) -> np.ndarray:
+        noise = NOISE_M_S2 * np.random.default_rng(seed).standard_normal(END)
+        return tone(-40.0, 40.0, END) + tone(-50.0, 80.0, END) + noise
+
+    b, a = notch_filter()
+    x_run, x = uncontrolled(3), uncontrolled(twin_seed)
+    y = np.where(np.arange(END) < ON, x_run, signal.lfilter(b, a, x_run))
+    run = write_bag(tmp_path / 'bag', struts_from_z(G0 + y), statuses=_statuses(ON),
+                    run_record=_record('lti', ON), topics=_prediction(b, a))
+    twin_bag = write_bag(tmp_path / 'twin', struts_from_z(G0 + x[:twin_end]),
+                         statuses=_statuses(-1)[:twin_end // 1000],
+                         run_record=_record('lti', -1), topics=_prediction(b, a))
+    return run, twin_bag
+
+
+def test_analyze_against_the_twin_measures_the_filter(tmp_path, capsys):
+    run, twin_bag = _lti_pair(tmp_path)
+    out = tmp_path / 'out'
+    assert analyze.main([str(run), '--twin', str(twin_bag), '--out', str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert 'against its twin' in printed and 'never worse than off: yes' in printed
+    report = json.loads((out / 'report.json').read_text())
+    assert {'scenario', 'tones', 'convergence_s', 'loop', 'sensitivity'} <= set(report)
+    section = report['twin']
+    assert section['window'] == {'first_sample': END - 10_000, 'samples': 10_000}
+    rows = {r['frequency_hz']: r for r in section['tones']}
+    assert rows[40.0]['band'] == 'fixed' and rows[40.0]['twin_db'] == pytest.approx(-40, abs=.3)
+    assert rows[40.0]['reduction_db'] > 40.0               # the notch's zero is at 40 Hz
+    expected_80 = -response_db(*notch_filter(), np.array([80.0]))[0]
+    assert rows[80.0]['reduction_db'] == pytest.approx(expected_80, abs=0.2)
+    assert section['bands']['never_worse'] is True
+    assert section['bands']['largest_rise_db'] < 0.2
+    sens = section['sensitivity']
+    assert sens['near_tones_points'] > 20
+    assert sens['near_tones_rms_difference_db'] < 0.5       # the twin removes the scatter
+    assert sens['near_tones_max_difference_db'] < 1.0
+    assert section['following_over_time'] == []            # no frequency track recorded
+    assert (out / 'sensitivity.png').stat().st_size > 10_000
+
+
+@pytest.mark.parametrize('what', ['other_noise', 'shorter'])
+def test_a_bag_that_is_not_the_twin_is_refused_in_one_line(tmp_path, capsys, what):
+    run, other = _lti_pair(tmp_path, **({'twin_seed': 4} if what == 'other_noise'
+                                         else {'twin_end': END - 1000}))
+    out = tmp_path / 'out'
+    assert analyze.main([str(run), '--twin', str(other), '--out', str(out),
+                         '--no-plots']) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count('\n') == 0 and "is not this run's twin" in err, err
+    assert ('differs' if what == 'other_noise' else 'samples') in err
+    assert not out.exists()
+
+
+def test_a_drifting_tone_is_followed_over_time_against_the_twin(tmp_path, capsys):
+    """40 Hz drifting +-1 Hz (20 s period); the run's tone decays 60 dB from control-on."""
+    t = np.arange(END) / FS
+    phase = 2 * np.pi * 40.0 * t - 1.0 * 20.0 * np.cos(2 * np.pi * t / 20.0)
+    track = 40.0 + np.sin(2 * np.pi * t / 20.0)
+    x = np.sqrt(2) * G0 * 10 ** (-37 / 20) * np.sin(phase)
+    noise = 1e-6 * np.random.default_rng(5).standard_normal(END)
+    n = np.arange(END)
+    gain = np.where(n < ON, 1.0, np.maximum(np.exp(-(n - ON) / 500.0), 1e-3))
+    topics = {'/pph/disturbance_frequencies': [(s, frequencies_cdr([track[s]], s))
+                                               for s in range(0, END, 10)]}
+    run = write_bag(tmp_path / 'bag', struts_from_z(G0 + gain * x + noise),
+                    statuses=_statuses(ON), run_record=_record('drift', ON, [40.0]),
+                    topics=topics)
+    other = write_bag(tmp_path / 'twin', struts_from_z(G0 + x + noise),
+                      statuses=_statuses(-1), run_record=_record('drift', -1, [40.0]),
+                      topics=topics)
+    out = tmp_path / 'out'
+    assert analyze.main([str(run), '--twin', str(other), '--out', str(out), '--no-plots',
+                         '--twin-segment', '2']) == 0
+    assert 'following 40 Hz over 2 s windows' in capsys.readouterr().out
+    section = json.loads((out / 'report.json').read_text())['twin']
+    row, = section['tones']
+    assert row['band'] == 'following' and row['source'] == '/pph/disturbance_frequencies'
+    assert row['twin_db'] == pytest.approx(-37.0, abs=0.3)
+    assert row['reduction_db'] == pytest.approx(60.0, abs=0.5)
+    over, = section['following_over_time']
+    starts = [p[0] for p in over['reduction_db']]
+    assert starts == [12.0, 14.0, 16.0, 18.0, 20.0, 22.0]
+    assert over['reduction_db'][0][1] < 40.0                 # the decay at control-on
+    assert over['reduction_db'][-1][1] == pytest.approx(60.0, abs=0.5)
+    assert over['median_reduction_db'] == pytest.approx(60.0, abs=0.5)
+    assert over['min_reduction_db'] == over['reduction_db'][0][1]
