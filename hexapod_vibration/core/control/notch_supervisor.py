@@ -105,6 +105,9 @@ MAX_TONES = 16
 """Largest number of tones the controller accepts (oscillators, harmonics included)."""
 MAX_HARMONICS = MAX_TONES - 1
 """Largest ``harmonics`` setting (orders 2..16 of one tone; tones x orders <= MAX_TONES)."""
+ACQUISITION_SLOPE_WINDOW_HZ = 1.0
+"""The halves of the acquisition record look for the line within this of where the whole
+record found it (Hz): its rate of change is their difference."""
 P_RETUNE_HZ = 0.05
 """A moved oscillator gets new coefficients from the broadband G(f) after this shift (Hz)."""
 REFERENCE_STATES = ("unused", "waiting", "following", "stale")
@@ -1153,7 +1156,10 @@ class _ToneFollowing:
         effective = rate * self._rate_scale               # a mu policy's per-tone rates
         if (previous is None or plant is None or rate <= 0.0
                 or index - self._adapting_since < SETTLE_TIME_CONSTANTS / effective):
-            return self.tracker.update(np.zeros(t), np.zeros(t, bool), effective)
+            # still settling after adaptation started: the tones coast on the acquired
+            # rate (frozen or not adapting: they hold)
+            return self.tracker.update(np.zeros(t), np.zeros(t, bool), effective,
+                                       coast=rate > 0.0 and plant is not None)
         error, strength = weight_phase_error(previous, weights, rate, self.block, plant,
                                              inverse)
         strength = np.where(canceller.adapting, strength, 0.0)
@@ -1203,6 +1209,7 @@ class _ToneFollowing:
         record = np.concatenate([self._record[start:], self._record[:start]])
         found = strongest_lines_hz(record, self.sup.fs, self.tracker.lower_hz,
                                    self.tracker.upper_hz)
+        slope = self._record_slopes_hz_per_s(record, found)
         # the record's window does not resolve lines closer than its main lobe's half
         # width (2 / record length): a tone with a neighbour that close keeps its place
         # (close_tones, 39 and 40 Hz: the 1 s record put them at 38.70 and 40.33 Hz)
@@ -1212,14 +1219,33 @@ class _ToneFollowing:
         if not np.any(np.isfinite(found)):
             return
         self.acquired_hz = found
-        target = np.where(np.isfinite(found), found, self.fundamentals_hz)
-        self.tracker.reset(target)
+        # the line measured over the record is where it was at the record's middle: a
+        # drifting line has moved on by half a record since
+        now = found + 0.5 * ACQUISITION_RECORD_S * slope
+        target = np.where(np.isfinite(found), now, self.fundamentals_hz)
+        self.tracker.reset(target, np.where(np.isfinite(found), slope, 0.0))
         self._retune(self.tracker.frequencies_hz)
         self._previous_w = None
         self.sup._event("info", "acquisition at control on: tones " + ", ".join(
-            f"{n:g} -> {f:.3f} Hz" if np.isfinite(a) else f"{n:g} Hz (no line)"
-            for n, f, a in zip(self.nominal_hz, self.fundamentals_hz, found, strict=True))
+            f"{n:g} -> {f:.3f} Hz ({r:+.3f} Hz/s)" if np.isfinite(a) else f"{n:g} Hz (no line)"
+            for n, f, a, r in zip(self.nominal_hz, self.fundamentals_hz, found, slope,
+                                  strict=True))
             + f" (strongest line of the last {ACQUISITION_RECORD_S:g} s)")
+
+    def _record_slopes_hz_per_s(self, record: np.ndarray, found: np.ndarray) -> np.ndarray:
+        """Each found line's rate of change (Hz/s) from the record's two halves (0: none).
+
+        The strongest line of each half within +-:data:`ACQUISITION_SLOPE_WINDOW_HZ` of
+        the whole record's; a half without it, or a tone without a line, gives 0.
+        """
+        half = record.shape[0] // 2
+        window = ACQUISITION_SLOPE_WINDOW_HZ
+        lower = np.where(np.isfinite(found), found - window, self.tracker.lower_hz)
+        upper = np.where(np.isfinite(found), found + window, self.tracker.upper_hz)
+        first = strongest_lines_hz(record[:half], self.sup.fs, lower, upper)
+        second = strongest_lines_hz(record[half:], self.sup.fs, lower, upper)
+        slope = (second - first) / (half / self.sup.fs)
+        return np.where(np.isfinite(slope) & np.isfinite(found), slope, 0.0)
 
     def acquire(self, lines: list[RemovedLine]) -> None:
         """Start each tone at the strongest disturbance line within its tracking bounds.
