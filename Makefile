@@ -27,7 +27,7 @@ $(STAMP): requirements.txt setup.py setup.cfg package.xml | $(PY)
 # workers (-n 2, one per core) take disjoint domains.
 test: venv
 	HEXAPOD_TEST_DOMAIN_BASE=$${HEXAPOD_TEST_DOMAIN_BASE:-$$((20 + RANDOM % 181))} \
-	  $(PY) -m pytest -q -n 2 test
+	  $(PY) -m pytest -q -n 2 --dist worksteal test
 
 lint: venv
 	$(VENV)/bin/ruff check .

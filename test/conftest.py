@@ -36,11 +36,21 @@ BIN_DIR = Path(sys.executable).parent
 """Folder of the virtualenv's console scripts (pph_recorder, ...)."""
 
 
+LONG_FIRST = ('test_moving_tones_graph.py', 'test_experiment.py', 'test_twin_graph.py',
+              'test_sensitivity_core_loop.py', 'test_params_file.py', 'test_fxlms.py',
+              'test_colcon_layout.py', 'test_never_worse_core_loop.py',
+              'test_harmonic_rise.py')
+"""Files of the longest tests (30-240 s each), collected first so that pytest-xdist's
+workers do not end on them one after the other (order only: none depends on another)."""
+
+
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
-    """Mark every test that uses a ROS fixture ``ros`` (process or rclpy tests)."""
+    """Mark every test that uses a ROS fixture ``ros``; the longest files first."""
     for item in items:
         if ROS_FIXTURES.intersection(getattr(item, 'fixturenames', ())):
             item.add_marker(pytest.mark.ros)
+    rank = {name: k for k, name in enumerate(LONG_FIRST)}
+    items.sort(key=lambda item: rank.get(item.path.name, len(LONG_FIRST)))    # stable
 
 
 def _worker() -> tuple[int, int]:

@@ -14,7 +14,8 @@ control: a moving tone, a drift or the noise floor is compared at the same time.
   moved over the window is measured in a band following it (both signals dechirped along
   the same track of the run, :func:`~hexapod_vibration.analysis.moving_tones.dechirp`).
 - ``following_over_time``: each tracked tone's reduction in consecutive windows of
-  ``segment_s`` from control-on to the end of the run.
+  ``segment_s`` from control-on to the end of the run, and likewise every other recorded
+  true disturbance line (a rotor's orders: the bank's harmonics follow them).
 - ``bands``: third-octave band levels (lines included: a band's whole level) over the
   controlled window, controlled minus twin, and the contract's ``never_worse``.
 - ``sensitivity``: the measured |S(f)|, H1 from twin z to controlled z
@@ -43,6 +44,7 @@ from hexapod_vibration.analysis.report import (
     tone_levels,
     tone_tracks,
 )
+from hexapod_vibration.contract import DISTURBANCE_FREQUENCIES_TOPIC
 from hexapod_vibration.core import spectrum
 from hexapod_vibration.json_values import json_float
 
@@ -141,7 +143,8 @@ def compare(signals: BagSignals, twin: BagSignals, result: Analysis,
         "bag": str(twin.path), "control_on_sample": on,
         "window": {"first_sample": first, "samples": stop - first},
         "tones": _tones(result, z_ctl, z_twin, samples, tracks),
-        "following_over_time": _over_time(signals, twin, on, tracks, segment_s),
+        "following_over_time": _over_time(signals, twin, on,
+                                          tracks + _other_lines(signals, tracks), segment_s),
         "bands": _bands(z_ctl, z_twin),
     }
     sensitivity = _sensitivity(signals, result, z_ctl, z_twin)
@@ -175,6 +178,29 @@ def _tones(result: Analysis, z_ctl: np.ndarray, z_twin: np.ndarray, samples: np.
         else:
             rows.append(row)
     return rows
+
+
+def _other_lines(signals: BagSignals,
+                 tracks: list[tuple[float, tuple[str, np.ndarray, np.ndarray]]]
+                 ) -> list[tuple[float, tuple[str, np.ndarray, np.ndarray]]]:
+    """Every other recorded true disturbance line (a rotor's orders, the shaker's tones).
+
+    The columns of ``/pph/disturbance_frequencies`` no controlled tone follows, each named
+    by its median frequency (Hz): a harmonic in the notch's bank (``harmonics``) or a line
+    nobody cancels is measured the same way, in a band following it.
+    """
+    truth = signals.frequencies.get(DISTURBANCE_FREQUENCIES_TOPIC)
+    if truth is None:
+        return []
+    at, table = truth
+    used = [hz for _, (topic, _, hz) in tracks if topic == DISTURBANCE_FREQUENCIES_TOPIC]
+    out = []
+    for column in table.T:
+        if np.any(np.isfinite(column)) and not any(
+                np.array_equal(column, hz, equal_nan=True) for hz in used):
+            out.append((float(np.nanmedian(column)),
+                        (DISTURBANCE_FREQUENCIES_TOPIC, at, column)))
+    return out
 
 
 def _over_time(signals: BagSignals, twin: BagSignals, on: int,
