@@ -65,15 +65,18 @@ MAX_SLEW_HZ_PER_S = 4.0
 fundamental at 1 Hz/s; a loop pulling in from a large initial error (its phase detector
 saturated) would otherwise jump by Hz in a few blocks and splatter images of the tone at
 the block rate's multiples."""
-PROPORTIONAL_CORNER_HZ = 8.0
-"""Corner (Hz) of the first-order low-pass on the phase error of the proportional path.
+PROPORTIONAL_CORNER_HZ = DEFAULT_BANDWIDTH_HZ
+"""Corner (Hz) of the first-order low-pass on the phase error of the proportional path:
+the loop's own bandwidth.
 
 The proportional correction ``K1 e`` shifts the phase of the canceller's output, which is
 as large as the cancelled tone: broadband error in the block's phase detector (up to half
 the block rate, 31 Hz, from the tone) is re-emitted beside the tone. Measured on the core
-loop (drift + tracking, guard off, last 10 s against the uncontrolled twin): the 63 Hz
-third octave +5.9 dB unfiltered, +3.7 dB at 8 Hz. A lower corner costs the loop its phase
-margin: at 3 Hz and 1.5 Hz the drifting tone is lost (8.8 / 7.0 dB left of 42 dB)."""
+loop against the uncontrolled twin (last 10 s, z axis, largest third-octave rise):
+``mismatch_tracking`` +3.6 dB unfiltered, +0.7 dB at 1.5 Hz (a fixed notch on the true
+40.4 Hz: +0.66 dB); ``drift`` + tracking +6.1 dB at 8 Hz, +4.0 dB at 3 Hz, +3.1 dB at
+1.5 Hz, the tone's band 42.3 dB down in each; ``spin_up`` unchanged. (Before the tones
+coasted on the acquired rate, a 3 Hz corner lost the drifting tone.)"""
 MAX_PHASE_ERROR_RAD = 0.5
 """A measured phase error above this (rad) is clipped: the linear loop holds to there."""
 

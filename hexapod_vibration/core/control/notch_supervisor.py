@@ -105,6 +105,9 @@ MAX_TONES = 16
 """Largest number of tones the controller accepts (oscillators, harmonics included)."""
 MAX_HARMONICS = MAX_TONES - 1
 """Largest ``harmonics`` setting (orders 2..16 of one tone; tones x orders <= MAX_TONES)."""
+DETECTOR_RAMP_TIME_CONSTANTS = 1.0
+"""After the settling, the phase detector's gain rises linearly to 1 over this many
+adaptation time constants (1/mu samples)."""
 ACQUISITION_SLOPE_WINDOW_HZ = 1.0
 """The halves of the acquisition record look for the line within this of where the whole
 record found it (Hz): its rate of change is their difference."""
@@ -1165,6 +1168,10 @@ class _ToneFollowing:
         strength = np.where(canceller.adapting, strength, 0.0)
         fundamental_error, valid = combine_orders(error.reshape(-1, t),
                                                   strength.reshape(-1, t), self.orders)
+        # the detector's gain rises from 0 to 1 over the next time constant: the weights
+        # are not converged yet and their first measurements kick the loop
+        elapsed = (index - self._adapting_since) * effective - SETTLE_TIME_CONSTANTS
+        fundamental_error = fundamental_error * min(1.0, elapsed / DETECTOR_RAMP_TIME_CONSTANTS)
         return self.tracker.update(fundamental_error, valid, effective)
 
     def _detector_matrices(self) -> tuple[np.ndarray | None, np.ndarray | None]:
