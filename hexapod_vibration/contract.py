@@ -27,6 +27,10 @@ SAMPLE_RATE_HZ = 1000.0
 STRUT_COUNT = 6
 """Number of struts, hence of values in every ``/pph/*`` message."""
 
+NEVER_WORSE_DB = 1.0
+"""Never worse than off: a band more than this above its level without control is worse
+(dB; the twin comparison's ``never_worse`` and the sweep maps' rise scale)."""
+
 SAMPLE_RATE_HZ = 1000.0
 """Loop rate (Hz): sample n is at n / SAMPLE_RATE_HZ s of sim time."""
 

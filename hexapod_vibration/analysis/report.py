@@ -486,7 +486,7 @@ def configured_tones(signals: BagSignals, controlled: list[float]) -> list[float
 
 
 def tone_tracks(signals: BagSignals, controlled: list[float]
-                 ) -> list[tuple[str, np.ndarray, np.ndarray] | None]:
+                ) -> list[tuple[str, np.ndarray, np.ndarray] | None]:
     """Per controlled tone: (source topic, message samples, Hz) of the track that follows it.
 
     The driver's true frequency (the column nearest the controller's estimate, or the
@@ -561,7 +561,8 @@ def recorded_prediction(signals: BagSignals
 
 def prediction_difference(f: np.ndarray, measured_db: np.ndarray, grid_hz: np.ndarray,
                           predicted_db: np.ndarray, controlled: list[float],
-                          lines: list[float], segment_s: float) -> dict[str, Any]:
+                          lines: list[float], segment_s: float,
+                          coherence: np.ndarray | None = None) -> dict[str, Any]:
     """Measured minus predicted |S| (dB) within 5 Hz of the controlled tones, lines left out.
 
     Args:
@@ -572,17 +573,23 @@ def prediction_difference(f: np.ndarray, measured_db: np.ndarray, grid_hz: np.nd
         controlled: the notch's tones (Hz).
         lines: every other line left out (Hz).
         segment_s: the measured curve's Welch segment (s), for the lines' exclusion.
+        coherence: the measurement's coherence on ``f``; when given, its least value over
+            the compared bins is reported too (``near_tones_min_coherence``).
     """
     exclusion_hz = moving_tones.line_exclusion_hz(segment_s)
     near = moving_tones.near_tones_mask(f, controlled, lines, exclusion_hz)
     difference = measured_db[near] - np.interp(f, grid_hz, predicted_db)[near]
-    return {"segment_s": _json_float(segment_s),
-            "line_exclusion_hz": _json_float(exclusion_hz),
-            "near_tones_points": int(np.count_nonzero(near)),
-            "near_tones_max_difference_db": _json_float(
-                float(np.max(np.abs(difference))) if near.any() else math.nan),
-            "near_tones_rms_difference_db": _json_float(
-                float(np.sqrt(np.mean(difference ** 2))) if near.any() else math.nan)}
+    out = {"segment_s": _json_float(segment_s),
+           "line_exclusion_hz": _json_float(exclusion_hz),
+           "near_tones_points": int(np.count_nonzero(near)),
+           "near_tones_max_difference_db": _json_float(
+               float(np.max(np.abs(difference))) if near.any() else math.nan),
+           "near_tones_rms_difference_db": _json_float(
+               float(np.sqrt(np.mean(difference ** 2))) if near.any() else math.nan)}
+    if coherence is not None:
+        out["near_tones_min_coherence"] = (json_float(float(np.min(coherence[near])), 6)
+                                           if near.any() else None)
+    return out
 
 
 def sensitivity_comparison(signals: BagSignals, windows: dict[str, slice],

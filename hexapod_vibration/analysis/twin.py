@@ -44,7 +44,7 @@ from hexapod_vibration.analysis.report import (
     tone_levels,
     tone_tracks,
 )
-from hexapod_vibration.contract import DISTURBANCE_FREQUENCIES_TOPIC
+from hexapod_vibration.contract import DISTURBANCE_FREQUENCIES_TOPIC, NEVER_WORSE_DB
 from hexapod_vibration.core import spectrum
 from hexapod_vibration.json_values import json_float
 
@@ -54,8 +54,6 @@ DEFAULT_SEGMENT_S = 1.0
 """``following_over_time`` window (s)."""
 BAND_LOW_HZ, BAND_HIGH_HZ = 5.0, 450.0
 """Third-octave band centres compared (Hz)."""
-NEVER_WORSE_DB = 1.0
-"""The contract: no band more than 1 dB above its level without control."""
 DIGITS = 2
 
 
@@ -94,11 +92,18 @@ def check_twin(signals: BagSignals, twin: BagSignals) -> int:
     return on
 
 
+def _rows_of(signals: BagSignals, samples: np.ndarray) -> tuple[np.ndarray, int]:
+    """(rows of ``signals`` holding ``samples``, how many of the samples it misses)."""
+    index = signals.accel.sample_index
+    if not index.size:
+        return np.zeros(samples.size, dtype=np.int64), samples.size
+    rows = np.clip(np.searchsorted(index, samples), 0, index.size - 1)
+    return rows, int(np.count_nonzero(index[rows] != samples))
+
+
 def _twin_rows(twin: BagSignals, samples: np.ndarray, what: str) -> np.ndarray:
     """The twin's rows holding ``samples``; ValueError if the twin misses any of them."""
-    index = twin.accel.sample_index
-    rows = np.clip(np.searchsorted(index, samples), 0, max(index.size - 1, 0))
-    missing = int(np.count_nonzero(index[rows] != samples)) if index.size else samples.size
+    rows, missing = _rows_of(twin, samples)
     if missing:
         raise ValueError(f"{twin.path}: misses {missing} samples of {what}")
     return rows
@@ -212,16 +217,15 @@ def _over_time(signals: BagSignals, twin: BagSignals, on: int,
     """
     width = int(round(segment_s * FS))
     end = signals.run_samples()
-    index, twin_index = signals.accel.sample_index, twin.accel.sample_index
     starts = list(range(on, end - width + 1, width))
     out = []
     for nominal, (topic, at, hz) in tracks:
         points, skipped = [], 0
         for a in starts:
             samples = np.arange(a, a + width)
-            rows = np.searchsorted(index, samples).clip(0, index.size - 1)
-            twin_rows = np.searchsorted(twin_index, samples).clip(0, twin_index.size - 1)
-            if np.any(index[rows] != samples) or np.any(twin_index[twin_rows] != samples):
+            (rows, missing), (twin_rows, twin_missing) = (_rows_of(signals, samples),
+                                                          _rows_of(twin, samples))
+            if missing or twin_missing:
                 skipped += 1
                 continue
             track_hz = moving_tones.track_on_samples(at, hz, samples)
@@ -268,15 +272,10 @@ def _sensitivity(signals: BagSignals, result: Analysis, z_ctl: np.ndarray,
     sample, view, grid, predicted = prediction
     tones = [r["frequency_hz"] for r in result.report["tones"]]
     segment_s = moving_tones.ratio_segment_s(z_ctl, z_twin, FS)
-    out = {"estimate": "H1 = Pxy / Pxx, twin z -> controlled z",
-           "view": view.removesuffix("_db"), "prediction_sample": sample,
-           **prediction_difference(f, measured, grid, predicted, result.controlled_hz, tones,
-                                   segment_s)}
-    exclusion = moving_tones.line_exclusion_hz(segment_s)
-    near = moving_tones.near_tones_mask(f, result.controlled_hz, tones, exclusion)
-    out["near_tones_min_coherence"] = json_float(float(np.min(coherence[near])), 6) \
-        if near.any() else None
-    return out
+    return {"estimate": "H1 = Pxy / Pxx, twin z -> controlled z",
+            "view": view.removesuffix("_db"), "prediction_sample": sample,
+            **prediction_difference(f, measured, grid, predicted, result.controlled_hz, tones,
+                                    segment_s, coherence)}
 
 
 def format_twin(report: dict[str, Any]) -> str:

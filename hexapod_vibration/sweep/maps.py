@@ -34,6 +34,7 @@ from matplotlib import colors, patches  # noqa: E402
 from matplotlib import patheffects as effects  # noqa: E402
 from matplotlib.lines import Line2D  # noqa: E402
 
+from hexapod_vibration.contract import NEVER_WORSE_DB
 from hexapod_vibration.sweep.grid import Axis, Grid  # noqa: E402
 
 DPI = 150
@@ -41,7 +42,6 @@ MU_PATH = "notch.mu"
 RISE_SCALE_MAX_DB = 20.0        # colour scale of the rise; larger values keep their number
 FACETS_PER_FIGURE = 4
 ANNOTATE_MAX_CELLS = 15          # per axis: more cells than this are left unlabelled
-NEVER_WORSE_DB = 1.0
 BOUND_STYLES = {                 # column -> (legend, line style, colour)
     "mu_bound_eq18": ("eq. 18 averaged bound (identified G)", "--", "darkorange"),
     "mu_bound_exact_lti": ("exact LTI bound (linear plant model)", "-", "black"),

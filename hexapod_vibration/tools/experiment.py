@@ -169,12 +169,17 @@ def model_file_text(scenario: Scenario) -> str:
     source = config_path("pph_model.yaml")
     with open(source, encoding="utf-8") as stream:
         packaged = yaml.safe_load(stream)
-    merged = merged_model_mapping(packaged, scenario.model_overrides, f"{scenario.name}")
+    merged = merged_model_mapping(packaged, scenario.model_overrides, scenario.name)
     model_config_from_dict(merged, source=scenario.name)        # every value checked
     header = (f"# The physical model of scenario {scenario.name}, written by `experiment`:\n"
               f"# the packaged pph_model.yaml with the scenario's model_overrides\n"
               f"# {scenario.model_overrides}\n")
     return header + yaml.safe_dump(merged, sort_keys=False)
+
+
+def run_model_file(out: Path, scenario: Scenario) -> Path | None:
+    """Where a run in ``out`` keeps its model YAML (:func:`model_file_text`); None: packaged."""
+    return (out / "model.yaml").resolve() if scenario.model_overrides else None
 
 
 def params_file_text(scenario: Scenario, mode: str, model_file: str = "") -> str:
@@ -418,10 +423,9 @@ class ExperimentRun:
         if self.bag.exists():
             raise ExperimentError(f"{self.bag} exists: choose another --out or remove it")
         options.out.mkdir(parents=True, exist_ok=True)
-        model_text = model_file_text(options.scenario)
-        self.model_file = (options.out / "model.yaml").resolve() if model_text else None
+        self.model_file = run_model_file(options.out, options.scenario)
         if self.model_file is not None:
-            outputs.write_text(self.model_file, model_text)
+            outputs.write_text(self.model_file, model_file_text(options.scenario))
         self.params_file = options.out / "params.yaml"
         outputs.write_text(self.params_file, params_file_text(
             options.scenario, options.mode, str(self.model_file or "")))
@@ -712,8 +716,7 @@ def _run_all(args: argparse.Namespace, scenarios: list[Scenario]) -> int:
                 return 2 if isinstance(exc, ExperimentError) and "exists" in str(exc) else 1
         if args.twin:
             try:
-                model_file = out / "model.yaml" if model_file_text(sc) else None
-                result = analyze_run(out, model_file, out / "twin" / "bag")
+                result = analyze_run(out, run_model_file(out, sc), out / "twin" / "bag")
             except KeyboardInterrupt as exc:
                 print(f"\nexperiment: interrupted; bags in {out / 'bag'} and "
                       f"{out / 'twin' / 'bag'}", file=sys.stderr, flush=True)
