@@ -417,7 +417,9 @@ def analyze_signals(signals: BagSignals, request: Request = Request()) -> Analys
     following = following_tones(signals, windows, configured)
     if following:
         report["following_tones"] = following
-    sensitivity, curves = sensitivity_comparison(signals, windows, controlled, tones)
+    sensitivity, curves = sensitivity_comparison(
+        signals, windows, controlled, tones,
+        tones_moved_hz(following, ("uncontrolled", "controlled")))
     if sensitivity:
         report["sensitivity"] = sensitivity
     harmonics_of = (request.harmonics_of_hz if request.harmonics_of_hz is not None
@@ -562,8 +564,14 @@ def recorded_prediction(signals: BagSignals
 def prediction_difference(f: np.ndarray, measured_db: np.ndarray, grid_hz: np.ndarray,
                           predicted_db: np.ndarray, controlled: list[float],
                           lines: list[float], segment_s: float,
-                          coherence: np.ndarray | None = None) -> dict[str, Any]:
+                          coherence: np.ndarray | None = None,
+                          moved_hz: float = 0.0) -> dict[str, Any]:
     """Measured minus predicted |S| (dB) within 5 Hz of the controlled tones, lines left out.
+
+    The prediction is the sensitivity of tones at fixed frequencies: when a tone moved by
+    more than one bin of the measured curve (``1 / segment_s``) over the compared windows
+    (``moved_hz``, :func:`tones_moved_hz`), nothing is compared (``near_tones_points`` 0,
+    the differences None) and ``not_compared`` says why.
 
     Args:
         f: the measured curve's frequencies (Hz).
@@ -575,9 +583,13 @@ def prediction_difference(f: np.ndarray, measured_db: np.ndarray, grid_hz: np.nd
         segment_s: the measured curve's Welch segment (s), for the lines' exclusion.
         coherence: the measurement's coherence on ``f``; when given, its least value over
             the compared bins is reported too (``near_tones_min_coherence``).
+        moved_hz: the largest frequency span (Hz) of a tone over the compared windows.
     """
     exclusion_hz = moving_tones.line_exclusion_hz(segment_s)
     near = moving_tones.near_tones_mask(f, controlled, lines, exclusion_hz)
+    moved = moved_hz > 1.0 / segment_s
+    if moved:
+        near = np.zeros_like(near)
     difference = measured_db[near] - np.interp(f, grid_hz, predicted_db)[near]
     out = {"segment_s": _json_float(segment_s),
            "line_exclusion_hz": _json_float(exclusion_hz),
@@ -589,18 +601,28 @@ def prediction_difference(f: np.ndarray, measured_db: np.ndarray, grid_hz: np.nd
     if coherence is not None:
         out["near_tones_min_coherence"] = (json_float(float(np.min(coherence[near])), 6)
                                            if near.any() else None)
+    if moved:
+        out["not_compared"] = (f"the tones moved {moved_hz:.2f} Hz over the window: the "
+                               "prediction is for tones at fixed frequencies")
     return out
 
 
+def tones_moved_hz(following: list[dict[str, Any]], windows: tuple[str, ...]) -> float:
+    """The largest frequency span (Hz) of a ``following_tones`` row over ``windows``."""
+    spans = [row["frequency_span_hz"][name] for row in following for name in windows
+             if name in row["frequency_span_hz"]]
+    return max((hi - lo for lo, hi in spans), default=0.0)
+
+
 def sensitivity_comparison(signals: BagSignals, windows: dict[str, slice],
-                           controlled: list[float], lines: list[float]
+                           controlled: list[float], lines: list[float], moved_hz: float = 0.0
                            ) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
     """report.json's ``sensitivity`` and the curves of ``sensitivity.png``.
 
     Predicted: :func:`recorded_prediction`. Measured: the ratio of the controlled to the
     uncontrolled z spectrum (:func:`~hexapod_vibration.analysis.moving_tones.spectrum_ratio_db`).
     Their difference is summarised within 5 Hz of the controlled tones, outside every line's
-    main lobe (:func:`prediction_difference`).
+    main lobe (:func:`prediction_difference`; not where a tone moved ``moved_hz``).
     Both empty without a recorded prediction or without a controlled window.
     """
     prediction = recorded_prediction(signals)
@@ -616,7 +638,7 @@ def sensitivity_comparison(signals: BagSignals, windows: dict[str, slice],
               "predicted_rise_db": _json_float(float(predicted[k])),
               "predicted_rise_at_hz": _json_float(float(grid[k])),
               **prediction_difference(f, measured, grid, predicted, controlled, lines,
-                                      segment_s)}
+                                      segment_s, moved_hz=moved_hz)}
     curves = {"frequency_hz": grid, "predicted_db": predicted, "measured_frequency_hz": f,
               "measured_db": measured}
     return report, curves

@@ -152,7 +152,9 @@ def compare(signals: BagSignals, twin: BagSignals, result: Analysis,
                                           tracks + _other_lines(signals, tracks), segment_s),
         "bands": _bands(z_ctl, z_twin),
     }
-    sensitivity = _sensitivity(signals, result, z_ctl, z_twin)
+    moved = max((float(np.ptp(moving_tones.track_on_samples(at, hz, samples)))
+                 for _, (_, at, hz) in tracks), default=0.0)
+    sensitivity = _sensitivity(signals, result, z_ctl, z_twin, moved)
     if sensitivity:
         section["sensitivity"] = sensitivity
     return section
@@ -261,8 +263,12 @@ def _bands(z_ctl: np.ndarray, z_twin: np.ndarray) -> dict[str, Any]:
 
 
 def _sensitivity(signals: BagSignals, result: Analysis, z_ctl: np.ndarray,
-                 z_twin: np.ndarray) -> dict[str, Any]:
-    """H1 (twin z -> controlled z) against the recorded prediction; adds the curve."""
+                 z_twin: np.ndarray, moved_hz: float) -> dict[str, Any]:
+    """H1 (twin z -> controlled z) against the recorded prediction; adds the curve.
+
+    ``moved_hz``: how far the tones moved over the window (Hz); see
+    :func:`~hexapod_vibration.analysis.report.prediction_difference`.
+    """
     f, measured, coherence = moving_tones.transfer_function_db(z_twin, z_ctl, FS)
     result.sensitivity_curves["twin_frequency_hz"] = f
     result.sensitivity_curves["twin_db"] = measured
@@ -275,7 +281,7 @@ def _sensitivity(signals: BagSignals, result: Analysis, z_ctl: np.ndarray,
     return {"estimate": "H1 = Pxy / Pxx, twin z -> controlled z",
             "view": view.removesuffix("_db"), "prediction_sample": sample,
             **prediction_difference(f, measured, grid, predicted, result.controlled_hz, tones,
-                                    segment_s, coherence)}
+                                    segment_s, coherence, moved_hz)}
 
 
 def format_twin(report: dict[str, Any]) -> str:
@@ -307,7 +313,9 @@ def format_twin(report: dict[str, Any]) -> str:
                      f"{bands['largest_rise_db']:+.2f} dB at {bands['largest_rise_at_hz']:g} Hz"
                      f" (never worse than off: {'yes' if bands['never_worse'] else 'NO'})")
     sens = section.get("sensitivity")
-    if sens and sens["near_tones_points"]:
+    if sens and sens.get("not_compared"):
+        lines.append(f"sensitivity H1 not compared with the prediction: {sens['not_compared']}")
+    elif sens and sens["near_tones_points"]:
         lines.append(f"sensitivity H1 vs predicted within {moving_tones.NEAR_TONE_HZ:g} Hz of the"
                      f" tones: rms {sens['near_tones_rms_difference_db']:.2f} dB, max "
                      f"{sens['near_tones_max_difference_db']:.2f} dB "

@@ -88,10 +88,13 @@ def _prediction(b, a) -> dict[str, list[tuple[int, bytes]]]:
          ('frequency', grid.size, 1), ('sample:1600', 1, 1)]))]}
 
 
-def _lti_pair(tmp_path, twin_seed: int = 3, twin_end: int = END):
+def _lti_pair(tmp_path, twin_seed: int = 3, twin_end: int = END,
+              track_span_hz: float | None = None):
     """(run bag, twin bag): 40 and 80 Hz tones in noise; the run filtered from ON.
 
     ``twin_seed`` other than 3 or ``twin_end`` short of END: a bag that is not the twin.
+    ``track_span_hz``: a recorded true frequency of the 40 Hz tone, ramping over this span
+    (Hz) across the controlled window (the signal's tone itself stays at 40 Hz).
     """
     def uncontrolled(seed: int) -> np.ndarray:
         noise = NOISE_M_S2 * np.random.default_rng(seed).standard_normal(END)
@@ -100,11 +103,17 @@ def _lti_pair(tmp_path, twin_seed: int = 3, twin_end: int = END):
     b, a = notch_filter()
     x_run, x = uncontrolled(3), uncontrolled(twin_seed)
     y = np.where(np.arange(END) < ON, x_run, signal.lfilter(b, a, x_run))
+    topics = _prediction(b, a)
+    if track_span_hz is not None:
+        track = 40.0 + track_span_hz * np.clip((np.arange(END) - (END - 10_000)) / 10_000,
+                                               0.0, 1.0)
+        topics['/pph/disturbance_frequencies'] = [(s, frequencies_cdr([track[s]], s))
+                                                  for s in range(0, END, 10)]
     run = write_bag(tmp_path / 'bag', struts_from_z(G0 + y), statuses=_statuses(ON),
-                    run_record=_record('lti', ON), topics=_prediction(b, a))
+                    run_record=_record('lti', ON), topics=topics)
     twin_bag = write_bag(tmp_path / 'twin', struts_from_z(G0 + x[:twin_end]),
                          statuses=_statuses(-1)[:twin_end // 1000],
-                         run_record=_record('lti', -1), topics=_prediction(b, a))
+                         run_record=_record('lti', -1), topics=topics)
     return run, twin_bag
 
 
@@ -166,7 +175,8 @@ def test_a_drifting_tone_is_followed_over_time_against_the_twin(tmp_path, capsys
     out = tmp_path / 'out'
     assert analyze.main([str(run), '--twin', str(other), '--out', str(out), '--no-plots',
                          '--twin-segment', '2']) == 0
-    assert 'following 40 Hz over 2 s windows' in capsys.readouterr().out
+    printed = capsys.readouterr().out
+    assert 'following 40 Hz over 2 s windows' in printed
     section = json.loads((out / 'report.json').read_text())['twin']
     row, = section['tones']
     assert row['band'] == 'following' and row['source'] == '/pph/disturbance_frequencies'
@@ -179,3 +189,19 @@ def test_a_drifting_tone_is_followed_over_time_against_the_twin(tmp_path, capsys
     assert over['reduction_db'][-1][1] == pytest.approx(60.0, abs=0.5)
     assert over['median_reduction_db'] == pytest.approx(60.0, abs=0.5)
     assert over['min_reduction_db'] == over['reduction_db'][0][1]
+
+
+def test_a_moving_tone_is_not_compared_with_a_fixed_tone_prediction(tmp_path, capsys):
+    """The LTI pair with a recorded frequency track: fixed, compared; drifting, not."""
+    for span_hz, compared in ((0.0, True), (1.5, False)):
+        run, twin_bag = _lti_pair(tmp_path / f'span{span_hz}', track_span_hz=span_hz)
+        out = tmp_path / f'out{span_hz}'
+        assert analyze.main([str(run), '--twin', str(twin_bag), '--out', str(out),
+                             '--no-plots']) == 0
+        printed = capsys.readouterr().out
+        sens = json.loads((out / 'report.json').read_text())['twin']['sensitivity']
+        assert (sens['near_tones_points'] > 20) is compared
+        assert ('not_compared' in sens) is not compared
+        assert ('H1 not compared' in printed) is not compared
+        if not compared:
+            assert sens['not_compared'].startswith('the tones moved 1.50 Hz over the window')
