@@ -419,7 +419,7 @@ def analyze_signals(signals: BagSignals, request: Request = Request()) -> Analys
         report["following_tones"] = following
     sensitivity, curves = sensitivity_comparison(
         signals, windows, controlled, tones,
-        tones_moved_hz(following, ("uncontrolled", "controlled")))
+        oscillators_moved_hz(signals, configured, [index[w] for w in windows.values()]))
     if sensitivity:
         report["sensitivity"] = sensitivity
     harmonics_of = (request.harmonics_of_hz if request.harmonics_of_hz is not None
@@ -568,10 +568,11 @@ def prediction_difference(f: np.ndarray, measured_db: np.ndarray, grid_hz: np.nd
                           moved_hz: float = 0.0) -> dict[str, Any]:
     """Measured minus predicted |S| (dB) within 5 Hz of the controlled tones, lines left out.
 
-    The prediction is the sensitivity of tones at fixed frequencies: when a tone moved by
-    more than one bin of the measured curve (``1 / segment_s``) over the compared windows
-    (``moved_hz``, :func:`tones_moved_hz`), nothing is compared (``near_tones_points`` 0,
-    the differences None) and ``not_compared`` says why.
+    The prediction is the sensitivity of the tones at the fixed frequencies it was made
+    for: when a notch oscillator ran more than one bin of the measured curve
+    (``1 / segment_s``) from there over the compared windows (``moved_hz``,
+    :func:`oscillators_moved_hz`: tracking a drift, a spin-up, a mismatch), nothing is
+    compared (``near_tones_points`` 0, the differences None) and ``not_compared`` says why.
 
     Args:
         f: the measured curve's frequencies (Hz).
@@ -583,7 +584,7 @@ def prediction_difference(f: np.ndarray, measured_db: np.ndarray, grid_hz: np.nd
         segment_s: the measured curve's Welch segment (s), for the lines' exclusion.
         coherence: the measurement's coherence on ``f``; when given, its least value over
             the compared bins is reported too (``near_tones_min_coherence``).
-        moved_hz: the largest frequency span (Hz) of a tone over the compared windows.
+        moved_hz: the farthest (Hz) an oscillator ran from its tone in the prediction.
     """
     exclusion_hz = moving_tones.line_exclusion_hz(segment_s)
     near = moving_tones.near_tones_mask(f, controlled, lines, exclusion_hz)
@@ -602,16 +603,25 @@ def prediction_difference(f: np.ndarray, measured_db: np.ndarray, grid_hz: np.nd
         out["near_tones_min_coherence"] = (json_float(float(np.min(coherence[near])), 6)
                                            if near.any() else None)
     if moved:
-        out["not_compared"] = (f"the tones moved {moved_hz:.2f} Hz over the window: the "
-                               "prediction is for tones at fixed frequencies")
+        out["not_compared"] = (f"the notch ran up to {moved_hz:.2f} Hz from the tones the "
+                               "prediction is for")
     return out
 
 
-def tones_moved_hz(following: list[dict[str, Any]], windows: tuple[str, ...]) -> float:
-    """The largest frequency span (Hz) of a ``following_tones`` row over ``windows``."""
-    spans = [row["frequency_span_hz"][name] for row in following for name in windows
-             if name in row["frequency_span_hz"]]
-    return max((hi - lo for lo, hi in spans), default=0.0)
+def oscillators_moved_hz(signals: BagSignals, configured: list[float],
+                         samples: list[np.ndarray]) -> float:
+    """The farthest (Hz) a notch oscillator ran from its configured tone on ``samples``.
+
+    From the recorded ``/pph/notch_frequencies`` (one column per configured tone, where
+    the prediction has the tones); 0 without it (the tones stayed where they were told).
+    """
+    estimate = signals.frequencies.get(NOTCH_FREQUENCIES_TOPIC)
+    if estimate is None or estimate[1].shape[1] != len(configured):
+        return 0.0
+    at, table = estimate
+    return max((float(np.max(np.abs(moving_tones.track_on_samples(at, table[:, k], rows) - f)))
+                for rows in samples if rows.size for k, f in enumerate(configured)
+                if np.any(np.isfinite(table[:, k]))), default=0.0)
 
 
 def sensitivity_comparison(signals: BagSignals, windows: dict[str, slice],

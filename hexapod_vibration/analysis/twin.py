@@ -38,6 +38,7 @@ from hexapod_vibration.analysis.report import (
     Analysis,
     BagSignals,
     level_text,
+    oscillators_moved_hz,
     prediction_difference,
     recorded_prediction,
     reduction_text,
@@ -152,9 +153,8 @@ def compare(signals: BagSignals, twin: BagSignals, result: Analysis,
                                           tracks + _other_lines(signals, tracks), segment_s),
         "bands": _bands(z_ctl, z_twin),
     }
-    moved = max((float(np.ptp(moving_tones.track_on_samples(at, hz, samples)))
-                 for _, (_, at, hz) in tracks), default=0.0)
-    sensitivity = _sensitivity(signals, result, z_ctl, z_twin, moved)
+    sensitivity = _sensitivity(signals, result, z_ctl, z_twin,
+                               oscillators_moved_hz(signals, result.tracked_hz, [samples]))
     if sensitivity:
         section["sensitivity"] = sensitivity
     return section
@@ -266,7 +266,7 @@ def _sensitivity(signals: BagSignals, result: Analysis, z_ctl: np.ndarray,
                  z_twin: np.ndarray, moved_hz: float) -> dict[str, Any]:
     """H1 (twin z -> controlled z) against the recorded prediction; adds the curve.
 
-    ``moved_hz``: how far the tones moved over the window (Hz); see
+    ``moved_hz``: how far an oscillator ran from its configured tone over the window (Hz); see
     :func:`~hexapod_vibration.analysis.report.prediction_difference`.
     """
     f, measured, coherence = moving_tones.transfer_function_db(z_twin, z_ctl, FS)

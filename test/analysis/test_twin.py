@@ -93,8 +93,9 @@ def _lti_pair(tmp_path, twin_seed: int = 3, twin_end: int = END,
     """(run bag, twin bag): 40 and 80 Hz tones in noise; the run filtered from ON.
 
     ``twin_seed`` other than 3 or ``twin_end`` short of END: a bag that is not the twin.
-    ``track_span_hz``: a recorded true frequency of the 40 Hz tone, ramping over this span
-    (Hz) across the controlled window (the signal's tone itself stays at 40 Hz).
+    ``track_span_hz``: the notch's recorded oscillator frequency (``/pph/notch_frequencies``),
+    ramping from 40 Hz over this span (Hz) across the controlled window (the signal itself
+    stays as it is).
     """
     def uncontrolled(seed: int) -> np.ndarray:
         noise = NOISE_M_S2 * np.random.default_rng(seed).standard_normal(END)
@@ -107,8 +108,8 @@ def _lti_pair(tmp_path, twin_seed: int = 3, twin_end: int = END,
     if track_span_hz is not None:
         track = 40.0 + track_span_hz * np.clip((np.arange(END) - (END - 10_000)) / 10_000,
                                                0.0, 1.0)
-        topics['/pph/disturbance_frequencies'] = [(s, frequencies_cdr([track[s]], s))
-                                                  for s in range(0, END, 10)]
+        topics['/pph/notch_frequencies'] = [(s, frequencies_cdr([track[s]], s))
+                                            for s in range(0, END, 10)]
     run = write_bag(tmp_path / 'bag', struts_from_z(G0 + y), statuses=_statuses(ON),
                     run_record=_record('lti', ON), topics=topics)
     twin_bag = write_bag(tmp_path / 'twin', struts_from_z(G0 + x[:twin_end]),
@@ -204,4 +205,4 @@ def test_a_moving_tone_is_not_compared_with_a_fixed_tone_prediction(tmp_path, ca
         assert ('not_compared' in sens) is not compared
         assert ('H1 not compared' in printed) is not compared
         if not compared:
-            assert sens['not_compared'].startswith('the tones moved 1.50 Hz over the window')
+            assert sens['not_compared'].startswith('the notch ran up to 1.50 Hz from the tones')
