@@ -324,3 +324,61 @@ def test_a_tone_0_4_hz_off_is_acquired_from_the_broadband_identification():
     assert est[-1] == pytest.approx([40.4], abs=0.01)
     assert sup.status()["guard_bands"] == "following" and sup.state == NotchState.ADAPTING
     assert 20 * np.log10(0.05 / demodulated_rms(residual, 40.4, 16000)) > 40.0
+
+
+def _sweep_run(sup, samples=12000):
+    """A tachometer rotor: 30 Hz, 2 Hz/s from 5 s to 9 s, then 38 Hz.
+
+    The disturbance path has a 5 ms delay and the amplitude grows with speed^2 (its phasor
+    moves as it sweeps). Returns the residual (samples, 6), the speed per sample and the
+    canceller's integral ratios and weight rates at 4.9, 8, 9.05 and 11.9 s (before,
+    during, just after the sweep and once its hold is over).
+    """
+    response = static_plant_response()
+    speed = np.clip(30.0 + 2e-3 * (np.arange(samples) - 5000), 30.0, 38.0)
+    phase, u = 0.4, np.zeros(6)
+    residual = np.zeros((samples, 6))
+    ratios = {}
+    rng = np.random.default_rng(2)
+    for n in range(samples):
+        phase += 2 * np.pi * speed[n] / FS
+        path = phase - 2 * np.pi * speed[n] * 0.005
+        d = MIX * 0.05 * (speed[n] / 30.0) ** 2 * np.cos(path) * (n >= 3300)
+        residual[n] = d + K @ u
+        if sup.plant_response is not None:
+            sup.plant_frequency_response = response
+        sup.set_reference_frequency(speed[n], n)
+        u = sup.step(n, GRAVITY + residual[n] + 1e-5 * rng.standard_normal(6)).copy()
+        if n in (4900, 8000, 9050, 11900):
+            ratios[n] = (sup.canceller.integral_ratio.copy(), sup.canceller.weight_rates)
+    return residual, speed, ratios
+
+
+def test_a_sweeping_tone_adapts_with_the_rate_integrator_only_while_it_sweeps(monkeypatch):
+    """The type-2 update follows a sweeping disturbance the first-order one lags.
+
+    On while the reference sweeps (the paper's update lags by its time constant); steady
+    tones have none.
+    """
+    from hexapod_vibration.core.control import notch_supervisor
+
+    def reduction(residual, speed):
+        return 20 * np.log10(0.05 * (34.0 / 30.0) ** 2
+                             / demodulated_rms(residual[:8900], speed[:8900], 6500))
+
+    settings = dict(reference_harmonics=[1.0], frequency_tracking=False, mu=0.005)
+    residual, speed, ratios = _sweep_run(supervisor([30.0], **settings))
+    with_integral = reduction(residual, speed)
+    assert not np.any(ratios[4900][0])                      # steady: the paper's update
+    ratio = notch_supervisor.MOVING_TONE_INTEGRAL_RATIO
+    assert ratios[8000][0] == pytest.approx([ratio]) and np.any(ratios[8000][1])
+    # the sweep stops at 9 s: the learnt rate goes with the reference's slope at once, the
+    # update stays type 2 for 10 time constants (2 s), then it is the paper's again
+    assert ratios[9050][0] == pytest.approx([ratio])
+    assert np.abs(ratios[9050][1]).max() < 0.05 * np.abs(ratios[8000][1]).max()
+    assert not np.any(ratios[11900][0]) and not np.any(ratios[11900][1])
+    monkeypatch.setattr(notch_supervisor, "MOVING_TONE_INTEGRAL_RATIO", 0.0)
+    residual, speed, ratios = _sweep_run(supervisor([30.0], **settings))
+    without = reduction(residual, speed)
+    assert not np.any(ratios[8000][0])
+    assert without < 40.0 and with_integral > without + 20.0, (without, with_integral)

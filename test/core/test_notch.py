@@ -260,11 +260,14 @@ def test_advance_equals_steps_with_zero_error():
     np.testing.assert_allclose(skipped.step(np.zeros(6)), stepped.step(np.zeros(6)), atol=1e-9)
 
 
-@pytest.mark.parametrize('centralized', [False, True])
-def test_step_does_not_allocate_arrays_across_phasor_resyncs(centralized):
+@pytest.mark.parametrize('centralized,integral', [(False, False), (True, False),
+                                                  (False, True), (True, True)])
+def test_step_does_not_allocate_arrays_across_phasor_resyncs(centralized, integral):
     shape = (400, 6, 6) if centralized else (400, 6)
     anc = AdaptiveNotchCanceller(6, np.linspace(1.0, 499.0, 400), FS, 0.01,
                                  np.ones(shape, dtype=complex))
+    if integral:
+        anc.set_integral_ratio(0.5)
     e, out = np.full(6, 0.1), np.zeros(6)
     for _ in range(10):
         anc.step(e, out=out)
@@ -317,3 +320,62 @@ def test_advance_across_phasor_resyncs_equals_steps_with_zero_error():
     for _ in range(300):
         np.testing.assert_allclose(skipped.step(np.zeros(3)), stepped.step(np.zeros(3)),
                                    rtol=0, atol=1e-11)
+
+
+# ----------------------------------------------------------------------------- type-2 update
+def _ramp_run(ratio, mu=0.01, seconds=6.0):
+    """SISO plant, a 40 Hz disturbance whose amplitude grows steadily (0.1 + 0.05 t)."""
+    plant = resonant_plant([60.0])
+    g = frequency_response(plant, 40.0)[0]
+    anc = AdaptiveNotchCanceller(1, [40.0], FS, mu, -2.0 / g[None])
+    anc.set_integral_ratio(ratio)
+    n = np.arange(int(seconds * FS))
+    amplitude = 0.1 + 0.05 * n / FS
+    dist = (amplitude * np.cos(2 * np.pi * 40.0 * n / FS + 0.3))[:, None]
+    err = simulate(plant, anc, dist)[:, 0]
+    return abs(tone_phasor(err[4000:], 40.0, 4000)), anc
+
+
+def test_first_order_update_lags_a_steady_change_by_its_time_constant_type_2_does_not():
+    """The paper's update leaves the disturbance's change over 1/mu samples; type 2 none.
+
+    0.05 per s x 0.1 s = 5e-3; the rate integrator (damping 0.7) removes it.
+    """
+    first, _ = _ramp_run(0.0)
+    assert first == pytest.approx(0.05 / (0.01 * FS), rel=0.15)
+    second, anc = _ramp_run(1.0 / (4 * 0.7 ** 2))
+    assert second < 0.01 * first
+    # the learnt rate is the converged weight's change per sample: -G^-1 D' (0.05 N/s / fs)
+    g = frequency_response(resonant_plant([60.0]), 40.0)[0, 0, 0]
+    assert abs(anc.weight_rates[0, 0]) == pytest.approx(0.05 / FS / abs(g), rel=0.05)
+
+
+def test_type_2_state_is_kept_cleared_and_validated():
+    anc = AdaptiveNotchCanceller(2, [40.0, 80.0], FS, 0.05, -2.0 * np.ones((2, 2)))
+    plain = AdaptiveNotchCanceller(2, [40.0, 80.0], FS, 0.05, -2.0 * np.ones((2, 2)))
+    anc.set_integral_ratio(0.0)
+    rng = np.random.default_rng(1)
+    errors = rng.standard_normal((50, 2))
+    for e in errors:                                   # ratio 0: the paper's update exactly
+        np.testing.assert_array_equal(anc.step(e), plain.step(e))
+    assert not np.any(anc.weight_rates)
+    anc.set_integral_ratio([0.5, 0.0])
+    for e in errors:
+        anc.step(e)
+    rates = anc.weight_rates
+    assert np.all(rates[0] != 0) and not np.any(rates[1])
+    anc.set_tone_frequencies([40.0, 60.0], coefficients=-2.0 * np.ones((2, 2)))
+    np.testing.assert_array_equal(anc.weight_rates[0], rates[0])        # kept tone keeps it
+    assert not np.any(anc.weight_rates[1])
+    assert anc.integral_ratio.tolist() == [0.5, 0.5]     # a new tone takes the last setting
+    anc.set_frozen(True)
+    assert not np.any(anc.weight_rates)                   # frozen weights hold
+    anc.set_frozen(False)
+    for e in errors:
+        anc.step(e)
+    anc.set_weights(np.full((2, 2), 100.0))
+    assert anc.limit_weights(1.0) and not np.any(anc.weight_rates)      # anti-windup
+    for bad in (-0.1, [0.5], np.nan):
+        with pytest.raises(ValueError, match='integral ratio'):
+            anc.set_integral_ratio(bad)
+    assert anc.integral_ratio.tolist() == [0.5, 0.5]

@@ -39,6 +39,25 @@ def test_closed_form_equals_the_state_space_of_the_canceller():
     assert np.max(np.abs(k - k_ss)) < 1e-12 * np.max(np.abs(k_ss))
 
 
+def test_closed_form_with_the_rate_integrator_is_the_cancellers_impulse_response():
+    """Type-2 update: h_n = Re{mu P p^n (1 + kappa (n + 1))}, and K is its z-transform."""
+    p, mu, ratio, tone = np.array([[[-1.5 + 0.7j]]]), 0.01, 0.5, 40.0
+    anc = AdaptiveNotchCanceller(1, [tone], FS, mu, p)
+    anc.set_integral_ratio(ratio)
+    n = np.arange(4000)
+    h = np.array([anc.step(np.array([1.0 if k == 0 else 0.0]))[0] for k in n])
+    pole = np.exp(2j * np.pi * tone / FS)
+    expected = (mu * p[0, 0, 0] * pole ** n * (1.0 + ratio * mu * (n + 1))).real
+    assert np.max(np.abs(h - expected)) < 1e-12
+    radius, f = 1.01, np.array([3.0, 39.5, 40.2, 120.0])
+    z = radius * np.exp(2j * np.pi * f / FS)
+    k_sum = np.array([np.sum(h * zz ** -n) for zz in z])
+    k = sen.canceller_frequency_response([tone], FS, p, mu, f, radius, integral_ratio=ratio)
+    assert np.max(np.abs(k[:, 0, 0] - k_sum)) < 1e-9 * np.max(np.abs(k_sum))
+    first = sen.canceller_frequency_response([tone], FS, p, mu, f, radius)
+    assert np.max(np.abs(k - first)) > 0.1 * np.max(np.abs(first))
+
+
 def test_per_tone_rates_fold_into_the_coefficients():
     rng = np.random.default_rng(1)
     p = rng.normal(size=(2, 2, 2)) + 1j * rng.normal(size=(2, 2, 2))

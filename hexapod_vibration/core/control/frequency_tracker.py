@@ -331,6 +331,11 @@ class FrequencyTracker:
         return self._effective * (self.fs / TWO_PI)
 
     @property
+    def rates_hz_per_s(self) -> np.ndarray:
+        """The loops' learnt rates of change of the frequencies (Hz/s), a new array."""
+        return self._rate * (self.fs ** 2 / TWO_PI)
+
+    @property
     def estimates_hz(self) -> np.ndarray:
         """The loops' frequency estimates (Hz, the integrators), a new array."""
         return self._omega * (self.fs / TWO_PI)

@@ -13,6 +13,18 @@ the generalised paper update (eqs. 8-9, ``P = I`` is the paper as printed)
 
 with ``e_n`` the (DC-blocked) accelerations (m/s^2) of sample ``n``. A diagonal ``P`` takes an
 O(T*C) path (the paper's decentralised SISO loops); a full ``P`` costs O(T*C*C).
+
+Optionally (:meth:`AdaptiveNotchCanceller.set_integral_ratio`, moving tones) the update is of
+type 2: a second state ``Z_t``, the weights' rate of change (N per sample), integrates the
+same correction and the weights move on by it every sample,
+
+    Z_t += kappa_t * mu P_t (e_n e^{-j phi_t,n}),   W_t += mu P_t (e_n e^{-j phi_t,n}) + Z_t,
+
+``kappa_t = ratio_t * mu``. A disturbance whose phasor changes at a steady rate (a tone
+sweeping through the plant's and the disturbance path's response, its amplitude growing
+with speed^2) then leaves no residual; the first-order update leaves ``1/mu`` samples of
+that change. With the normalised P (M = I) the averaged loop of the residual is
+``s^2 + mu s + kappa mu`` (per sample): damping ``zeta = 1 / (2 sqrt(ratio))``.
 Timing (docs/architecture.md): the command returned for sample ``n`` is held over
 ``[n/fs, (n+1)/fs)`` and first seen in the error of sample ``n+1``.
 
@@ -224,14 +236,17 @@ class AdaptiveNotchCanceller:
         self._fading = _FadingTones(self._c)
         self._u = np.zeros(self._c)
         self._weight_limit: float | None = None
+        self._integral_base = 0.0
         self._limit_scratch: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
         self.clamped_samples = 0
         self._install(freqs, np.zeros((freqs.size, self._c), dtype=complex),
-                      np.zeros(freqs.size), p_full, np.ones(freqs.size, dtype=bool))
+                      np.zeros(freqs.size), p_full, np.ones(freqs.size, dtype=bool),
+                      np.zeros((freqs.size, self._c), dtype=complex), np.zeros(freqs.size))
 
     # ------------------------------------------------------------------ state management
     def _install(self, freqs: np.ndarray, w: np.ndarray, phi: np.ndarray,
-                 p_full: np.ndarray, adapting: np.ndarray) -> None:
+                 p_full: np.ndarray, adapting: np.ndarray, z: np.ndarray,
+                 ratio: np.ndarray) -> None:
         """Replace the tone set and (re)allocate every per-sample buffer."""
         t = freqs.size
         self._freqs = freqs.copy()
@@ -249,6 +264,9 @@ class AdaptiveNotchCanceller:
         self._m = np.zeros((self._c, t), dtype=complex)     # conj(mu P) e (full P)
         self._m_flat = self._m.view(float).reshape(-1)
         self._m_stack = self._m.T[:, None, :]
+        self._zv = np.ascontiguousarray(np.conj(z).T, dtype=complex)  # conj(Z)^T, (C, T)
+        self._zy = np.zeros((self._c, t), dtype=complex)    # kappa * update of V
+        self._ratio = np.asarray(ratio, dtype=float).copy()
         self._adapting = adapting.astype(bool).copy()
         self._set_p(p_full)
 
@@ -266,6 +284,10 @@ class AdaptiveNotchCanceller:
         ``sum_j mu_t conj(P_t[i, j]) e_j`` in memory. ``mu_t = mu`` for adapting tones, else 0.
         """
         rate = self._mu * self._adapting
+        # kappa_t for every channel, complex (C, T): same shape and dtype as the update
+        self._kappa = np.ascontiguousarray(np.broadcast_to(
+            (self._ratio * self._mu).astype(complex), self._y.shape))
+        self._integral = bool(np.any(self._ratio > 0.0))
         q = np.conj(rate[:, None, None] * self._p_full).transpose(1, 0, 2)    # (C, T, C)
         if self._p_diag is not None:
             self._q = np.ascontiguousarray(np.diagonal(q, axis1=0, axis2=2).T)
@@ -340,6 +362,10 @@ class AdaptiveNotchCanceller:
         else:
             np.dot(self._q_stack, e, out=self._m_flat)
             np.matmul(self._z_stack, self._m_stack, out=self._y_stack)
+        if self._integral:
+            np.multiply(self._y, self._kappa, out=self._zy)
+            np.add(self._zv, self._zy, out=self._zv)
+            np.add(self._y, self._zv, out=self._y)
         np.add(self._v, self._y, out=self._v)
 
     def _advance_gain(self) -> None:
@@ -394,20 +420,23 @@ class AdaptiveNotchCanceller:
         phi = np.zeros(t_new)
         p_full = np.zeros((t_new, self._c, self._c), dtype=complex)
         adapting = np.zeros(t_new, dtype=bool)
+        z = np.zeros((t_new, self._c), dtype=complex)
+        ratio = np.full(t_new, self._integral_base)
         kept_old = np.zeros(self._freqs.size, dtype=bool)
-        w_old, phi_old = self.weights, self.phases_rad
+        w_old, phi_old, z_old = self.weights, self.phases_rad, self.weight_rates
         for k, f in enumerate(freqs):
             match = np.flatnonzero(np.abs(self._freqs - f) <= SAME_FREQUENCY_TOL_HZ)
             if match.size:
                 old = match[0]
                 kept_old[old] = True
-                w[k], phi[k] = w_old[old], phi_old[old]
+                w[k], phi[k], z[k] = w_old[old], phi_old[old], z_old[old]
                 p_full[k], adapting[k] = self._p_full[old], self._adapting[old]
+                ratio[k] = self._ratio[old]
         if given is not None:
             p_full, adapting[:] = given, True
         gone = ~kept_old
         self._fading.add(w_old[gone], phi_old[gone], self._dphi[gone], ramp)
-        self._install(freqs, w, phi, p_full, adapting)
+        self._install(freqs, w, phi, p_full, adapting, z, ratio)
 
     def retune(self, freqs_hz: np.ndarray) -> None:
         """Move every tone to ``freqs_hz`` (Hz, (T,)) from the next sample on.
@@ -434,6 +463,7 @@ class AdaptiveNotchCanceller:
         ramp = _validate_ramp(ramp_samples)
         self._fading.add(self.weights, self.phases_rad, self._dphi.copy(), ramp)
         self._v[:] = 0.0
+        self._zv[:] = 0.0
 
     def set_weights(self, weights: np.ndarray) -> None:
         """Overwrite the complex (T, C) weights (N); the output follows immediately."""
@@ -450,12 +480,19 @@ class AdaptiveNotchCanceller:
         resumes from the last weights.
         """
         ramp = _validate_ramp(ramp_samples)
+        if not flag:
+            self._zv[:] = 0.0            # the weights hold: no rate left to resume with
         self._enabled = bool(flag)
         self._target = 1.0 if self._enabled else 0.0
         self._gain_step = 1.0 / ramp if ramp > 0 else 0.0
 
     def set_frozen(self, flag: bool) -> None:
-        """Freeze (True) or resume (False) adaptation; the output keeps running."""
+        """Freeze (True) or resume (False) adaptation; the output keeps running.
+
+        Freezing clears the weights' rate of change (type-2 update): frozen weights hold.
+        """
+        if flag:
+            self._zv[:] = 0.0
         self._frozen = bool(flag)
 
     def limit_weights(self, limit_n: float) -> bool:
@@ -476,8 +513,42 @@ class AdaptiveNotchCanceller:
         if not over.any():
             return False
         self._v[over] *= (limit_n / peak[over])[:, None]
+        if self._integral:
+            self._zv[over] = 0.0         # anti-windup of the rate too
         self.clamped_samples += 1
         return True
+
+    def set_integral_ratio(self, ratio: float | Sequence[float] | np.ndarray) -> None:
+        """Type-2 update (see the module): ``kappa_t = ratio_t * mu`` (0: first order).
+
+        ``ratio`` is one value (every tone, and tones added later) or one per tone (T,),
+        finite and >= 0; ``1 / (4 zeta^2)`` gives damping ``zeta`` with the normalised P.
+        Setting it keeps the weights' present rates of change (0 where the ratio is 0).
+
+        Raises:
+            ValueError: a bad shape or value; the object is unchanged.
+        """
+        r = np.asarray(ratio, dtype=float)
+        t = self._freqs.size
+        if r.ndim == 0:
+            values, base = np.full(t, float(r)), float(r)
+        elif r.shape == (t,):
+            values, base = r.copy(), float(r.max(initial=0.0))
+        else:
+            raise ValueError(f'integral ratio must be one value or {t}, got shape {r.shape}')
+        if not np.all(np.isfinite(values)) or np.any(values < 0.0):
+            raise ValueError(f'integral ratio must be finite and >= 0, got {values.tolist()}')
+        self._ratio, self._integral_base = values, base
+        self._zv[:, values == 0.0] = 0.0
+        self._update_rate()
+
+    def set_weight_rates(self, rates: np.ndarray) -> None:
+        """Overwrite the weights' rates of change Z (T, C) (N per sample, type-2 update)."""
+        z = np.array(rates, dtype=complex)
+        shape = (self._freqs.size, self._c)
+        if z.shape != shape or not np.all(np.isfinite(z)):
+            raise ValueError(f'rates must be finite with shape {shape}, got {z.shape}')
+        self._zv[...] = np.conj(z).T
 
     def set_weight_limit(self, limit_n: float | None) -> None:
         """Apply :meth:`limit_weights` after every adaptation step (None: no limit)."""
@@ -490,6 +561,19 @@ class AdaptiveNotchCanceller:
     def weights(self) -> np.ndarray:
         """Complex (T, C) weights W = a - j b (N), a copy."""
         return np.conj(self._v).T.copy()
+
+    @property
+    def weight_rates(self) -> np.ndarray:
+        """Complex (T, C) rates of change Z of the weights (N per sample), a copy.
+
+        Zero unless the type-2 update (:meth:`set_integral_ratio`) is on.
+        """
+        return np.conj(self._zv).T.copy()
+
+    @property
+    def integral_ratio(self) -> np.ndarray:
+        """Per-tone ratios ``kappa_t / mu`` of the type-2 update (T,), a copy."""
+        return self._ratio.copy()
 
     @property
     def tone_frequencies_hz(self) -> np.ndarray:

@@ -44,7 +44,10 @@ the strongest line of the last second of error without output (a drifting line h
 since); the tracker then fine-tracks. The guard's tone bands follow the oscillators (its
 reference is kept). A stale tachometer leaves the tones where it had them (tracking goes
 on from there); reported in the events and ``status()`` (``acquired_hz``, ``guard_bands``,
-``reference``).
+``reference``). A sweeping tone (the reference's slope or the tracker's learnt rate above
+:data:`SWEEP_RATE_FLOOR_HZ_PER_S`) adapts with a type-2 update (the weights' rate of change
+integrated too, :data:`MOVING_TONE_DAMPING`) that follows the disturbance's change as the
+tone moves through the plant's response; steady tones keep the paper's update.
 
 Missing samples (a gap in the indices) move the phases on as if the samples had been
 there (:meth:`AdaptiveNotchCanceller.advance`); a gap during an identification restarts it.
@@ -120,6 +123,37 @@ P_RETUNE_CHANGE = 0.1
 kicks the phase detector: third octave 56-71 Hz +1.15 dB over the uncontrolled twin at a
 P every 0.05 Hz, +0.59 dB with this), one sweeping 30 -> 150 Hz gets a new P every few
 tenths of a hertz (``spin_up`` unchanged, within 0.3 dB per order)."""
+MOVING_TONE_DAMPING = 0.7
+"""Damping ratio of the type-2 weight update that moving tones (tracking or a reference)
+adapt with (:meth:`AdaptiveNotchCanceller.set_integral_ratio`, ratio ``1 / (4 zeta^2)``).
+
+A tone sweeping at a steady rate changes the disturbance it cancels (its path's response at
+the tone's frequency, an amplitude growing with speed^2): the first-order update lags that
+by its time constant, ``1/mu`` samples, and leaves the change over one time constant as the
+residual. ``spin_up`` (core loop, tachometer, mu 0.006): the residual equals
+``tau dD/dt`` (correlation 0.98-1.00); order 2 through the disturbance path's zero near 90
+Hz changes by 24 %/s (z axis: a deeper minimum) and kept only 21 dB, order 3 at 93 Hz
+18 dB (the identified G(f) is within 0.1 % of the model's there and -P G / 2 = I: neither
+P nor the rate is the cause). The rate integrator removes the steady part of the change:
+ramp (17-36 s) minimum 21 -> 41 dB on order 2 and 20 -> 33 dB on order 3 with the
+tachometer, 21 -> 36 and 19 -> 30 dB tracked; 0.7 beat 1.0 and 1.5 on the averaged loop
+driven by the recorded disturbance (order 3: 44, 35, 26 dB)."""
+MOVING_TONE_INTEGRAL_RATIO = 1.0 / (4.0 * MOVING_TONE_DAMPING ** 2)
+INTEGRAL_DELAY_TIME_CONSTANTS = 5.0
+"""The type-2 update starts this many adaptation time constants (1/mu samples) after the
+tones start adapting with output on: integrating the initial convergence's large residual
+would overshoot (spin_up_tachometer, integrating from control on: 14 and 42 dB on order 1
+in the first two seconds, 24 and 62 dB first order)."""
+SWEEP_HOLD_TIME_CONSTANTS = 10.0
+"""A tone that stopped sweeping keeps its type-2 update this many time constants (1/mu_t
+samples) before it is cleared: without the tachometer the tracker's rate falls ahead of the
+weights, whose rate is still unlearning the tracker's lag at the sweep's end (spin_up,
+cleared at once: 46/39/36 dB on orders 1-3 in the second after; held: 55/49/44 dB, the
+first-order update 50/42/40 dB)."""
+SWEEP_RATE_FLOOR_HZ_PER_S = 0.05
+"""A tone whose fundamental moves faster than this (Hz/s) sweeps: it adapts with the type-2
+update, and its weights' rates of change are scaled with its sweep rate when that falls
+(:meth:`_ToneFollowing._follow_sweep_rate`)."""
 REFERENCE_STATES = ("unused", "waiting", "following", "stale")
 IDENTIFICATION_METHODS = ("tones", "broadband")
 MAX_IDENTIFICATION_UNCERTAINTY = 0.1
@@ -704,11 +738,13 @@ class NotchSupervisor:
         """The Nyquist limit on G(f), one stability test per ``yield`` (a generator).
 
         As :func:`~hexapod_vibration.core.control.sensitivity.stable_mu_limit` (the
-        largest stable common rate), found by doubling from 1e-5 and bisecting to 2 %.
+        largest stable common rate), found by doubling from 1e-5 and bisecting to 2 %;
+        moving tones with the type-2 update they sweep with (:attr:`integral_ratio_setting`).
         """
         def stable(mu: float) -> bool:
             return sensitivity.closed_loop_is_stable(self.plant_frequency_response.at,
-                                                     tones, self.fs, coefficients, mu)
+                                                     tones, self.fs, coefficients, mu,
+                                                     integral_ratio=self.integral_ratio_setting)
 
         lo = 1e-5
         if not stable(lo):
@@ -940,6 +976,17 @@ class NotchSupervisor:
 
     # ------------------------------------------------------------------ moving tones
     @property
+    def integral_ratio_setting(self) -> float:
+        """The type-2 ratio for sweeping tones (:data:`MOVING_TONE_INTEGRAL_RATIO`), or 0.
+
+        Non-zero when the tones may move (tracking or a reference); 0: the paper's update.
+        """
+        cfg = self._config
+        moving = bool(cfg.tone_frequencies_hz) and (cfg.frequency_tracking
+                                                    or bool(cfg.reference_harmonics))
+        return MOVING_TONE_INTEGRAL_RATIO if moving else 0.0
+
+    @property
     def tone_estimates_hz(self) -> np.ndarray:
         """(T,) the frequency (Hz) each configured tone's oscillator runs at now."""
         return self._follow.fundamentals_hz.copy()
@@ -1017,6 +1064,9 @@ class _ToneFollowing:
         self._rate_scale = 1.0
         self._adapting_since = -1
         self._detector: tuple[np.ndarray | None, np.ndarray | None] = (None, None)
+        self._sweep_hz_per_s: np.ndarray | None = None
+        self._integrating_from = -1
+        self._swept_at: np.ndarray | None = None
 
     def rebuild(self) -> None:
         """Re-read the settings; the tracker restarts from where the tones are.
@@ -1043,6 +1093,8 @@ class _ToneFollowing:
         self._record_n = 0
         self.active = bool(nominal.size) and (self.tracker is not None
                                                or self.reference_orders.size > 0)
+        self._integrating_from = -1
+        self.sup.canceller.set_integral_ratio(0.0)
         self.reference_state = "waiting" if self.reference_orders.size else "unused"
         self.count = 0
         self._previous_w = None
@@ -1102,13 +1154,99 @@ class _ToneFollowing:
                                               sup.canceller.weights))
         if sup.identifier is not None or not sup.canceller.tone_frequencies_hz.size:
             self._previous_w, self._adapting_since = None, -1
+            self._sweep_hz_per_s = None
+            self._gate_integral(index)         # off: it restarts after its delay
             return
         fundamentals = self._from_reference(index)
-        if fundamentals is None:
+        if fundamentals is not None:
+            sweep = self.reference_slope * self.sup.fs * self.reference_orders
+        else:
             fundamentals = self._from_tracking(index)
+            sweep = None if self.tracker is None else self.tracker.rates_hz_per_s
         if fundamentals is None:
             return
         self._retune(fundamentals)
+        self._follow_sweep_rate(sweep)
+        self._gate_integral(index)
+
+    def _gate_integral(self, index: int) -> None:
+        """Type-2 update for the tones that sweep, once they adapted with output a while.
+
+        A tone sweeps when its fundamental moves faster than
+        :data:`SWEEP_RATE_FLOOR_HZ_PER_S` (the reference's slope, or the tracker's learnt
+        rate), and for :data:`SWEEP_HOLD_TIME_CONSTANTS` after. Off (the weights' rates
+        cleared) for steady tones, and while the canceller is frozen, off or ramping; on
+        :data:`INTEGRAL_DELAY_TIME_CONSTANTS` time constants after that ended. (A steady
+        tone keeps the paper's update: with the tracker closing its loop on the weights'
+        rotation, a type-2 update on a steady 1 % mismatch left 40-48 dB where the
+        first-order update has 56-66 dB.)
+        """
+        canceller = self.sup.canceller
+        running = (canceller.enabled and not canceller.frozen and canceller.mu > 0.0
+                   and canceller.output_gain == 1.0 and bool(np.all(canceller.adapting)))
+        ratio = self.sup.integral_ratio_setting
+        sweep = self._sweep_hz_per_s
+        size = canceller.tone_frequencies_hz.size
+        if not running or ratio <= 0.0 or sweep is None or size % max(sweep.size, 1):
+            self._integrating_from, self._swept_at = -1, None
+            if np.any(canceller.integral_ratio > 0.0):
+                canceller.set_integral_ratio(0.0)
+            return
+        if self._integrating_from < 0:
+            self._integrating_from = index + int(np.ceil(INTEGRAL_DELAY_TIME_CONSTANTS
+                                                         / canceller.mu))
+        if index < self._integrating_from:
+            return
+        if self._swept_at is None or self._swept_at.shape != sweep.shape:
+            self._swept_at = np.full(sweep.shape, -np.inf)
+        self._swept_at[np.abs(sweep) > SWEEP_RATE_FLOOR_HZ_PER_S] = index
+        scale = np.broadcast_to(self._tone_rate_scale(), (size,))
+        hold = SWEEP_HOLD_TIME_CONSTANTS / (canceller.mu * np.maximum(scale, 1e-6))
+        sweeping = index - np.tile(self._swept_at, size // sweep.size) <= hold
+        wanted = ratio * scale * sweeping
+        if not np.array_equal(wanted, canceller.integral_ratio):
+            canceller.set_integral_ratio(wanted)
+
+    def _tone_rate_scale(self) -> np.ndarray | float:
+        """Each oscillator's rate relative to mu (a mu policy's per-tone rates in P).
+
+        So that every tone's type-2 loop has the same damping: ``kappa_t = R mu_t``.
+        """
+        choice = self.sup.mu_choice
+        size = self.sup.canceller.tone_frequencies_hz.size
+        if choice is None or choice.tone_mu.shape != (size,) or not choice.mu > 0.0:
+            return 1.0
+        return choice.tone_mu / choice.mu
+
+    def _follow_sweep_rate(self, sweep_hz_per_s: np.ndarray | None) -> None:
+        """Scale the weights' rates of change (type-2 update) down with a falling sweep rate.
+
+        While a tone sweeps, its weights' rate of change is the converged weight's slope
+        over frequency times the sweep rate (Hz/s: the reference's slope, or the tracker's
+        learnt rate): when the sweep slows or stops (a spin-up reaching its speed), the
+        rate the integrator learnt is scaled by the ratio of the new to the old sweep rate
+        (within 0..1) instead of running on until the residual unlearns it. Only for
+        tones that were sweeping faster than :data:`SWEEP_RATE_FLOOR_HZ_PER_S`.
+        """
+        canceller = self.sup.canceller
+        previous = self._sweep_hz_per_s
+        self._sweep_hz_per_s = None if sweep_hz_per_s is None else np.asarray(
+            sweep_hz_per_s, dtype=float).copy()
+        if (previous is None or sweep_hz_per_s is None
+                or previous.shape != self._sweep_hz_per_s.shape
+                or not np.any(canceller.integral_ratio > 0.0)):
+            return
+        sweeping = np.abs(previous) > SWEEP_RATE_FLOOR_HZ_PER_S
+        if not np.any(sweeping):
+            return
+        factor = np.ones(previous.size)
+        factor[sweeping] = np.clip(self._sweep_hz_per_s[sweeping] / previous[sweeping],
+                                   0.0, 1.0)
+        if np.all(factor == 1.0):
+            return
+        orders = canceller.tone_frequencies_hz.size // previous.size
+        rates = canceller.weight_rates * np.tile(factor, orders)[:, None]
+        canceller.set_weight_rates(rates)
 
     def _from_reference(self, index: int) -> np.ndarray | None:
         """Order x reference (extrapolated to the block's middle) while fresh, else None."""

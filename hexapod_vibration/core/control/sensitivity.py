@@ -85,8 +85,13 @@ def canceller_frequency_response(
     tone_frequencies_hz: Sequence[float] | np.ndarray, sample_rate_hz: float,
     coefficients: np.ndarray, mu: float | Sequence[float] | np.ndarray,
     frequencies_hz: Sequence[float] | np.ndarray, radius: float = 1.0,
+    integral_ratio: float | Sequence[float] | np.ndarray = 0.0,
 ) -> np.ndarray:
     """K (F, C, C) of the adapting canceller from error to command (closed form).
+
+    With the type-2 update (:meth:`AdaptiveNotchCanceller.set_integral_ratio`,
+    ``kappa_t = ratio_t mu_t``) each tone's ``z / (z - p)`` becomes
+    ``g + kappa_t g^2`` with ``g = z / (z - p)`` (the rate integrates the same correction).
 
     Args:
         tone_frequencies_hz: tones f_t (Hz).
@@ -96,6 +101,7 @@ def canceller_frequency_response(
         frequencies_hz: where to evaluate (Hz); ``z = radius e^{j 2 pi f / fs}``.
         radius: |z| (1: the frequency response; slightly > 1 for a Nyquist contour that
             passes outside the canceller's poles).
+        integral_ratio: the type-2 ratio, one or per tone (0: the first-order update).
     """
     tones = validate_frequencies(tone_frequencies_hz, sample_rate_hz)
     p = np.asarray(coefficients, dtype=complex)
@@ -107,6 +113,10 @@ def canceller_frequency_response(
     pole = np.exp(2j * np.pi * tones / sample_rate_hz)                    # (T,)
     g_pos = z[:, None] / _off_pole(z[:, None] - pole[None, :])            # (F, T)
     g_neg = z[:, None] / _off_pole(z[:, None] - np.conj(pole)[None, :])
+    kappa = tone_rates(integral_ratio, tones.size) * rates                # (T,)
+    if np.any(kappa > 0.0):
+        g_pos = g_pos * (1.0 + kappa[None, :] * g_pos)
+        g_neg = g_neg * (1.0 + kappa[None, :] * g_neg)
     half = 0.5 * rates[:, None, None] * p                                 # (T, C, C)
     return (np.einsum('ft,tij->fij', g_pos, half)
             + np.einsum('ft,tij->fij', g_neg, np.conj(half)))
@@ -254,7 +264,8 @@ def closed_loop_is_stable(plant: PlantResponse, tone_frequencies_hz: Sequence[fl
                           sample_rate_hz: float, coefficients: np.ndarray,
                           mu: float | Sequence[float] | np.ndarray,
                           frequencies_hz: np.ndarray | None = None,
-                          max_refinements: int = 60) -> bool:
+                          max_refinements: int = 60,
+                          integral_ratio: float | Sequence[float] | np.ndarray = 0.0) -> bool:
     """Nyquist test of the loop G + canceller from G's frequency response (G stable).
 
     The closed-loop poles are the zeros of ``det(I - G(z) K(z))``. With G stable and
@@ -277,6 +288,8 @@ def closed_loop_is_stable(plant: PlantResponse, tone_frequencies_hz: Sequence[fl
         mu: one rate or one per tone (T,).
         frequencies_hz: starting grid (default :func:`prediction_grid`).
         max_refinements: bisection rounds of the grid.
+        integral_ratio: the canceller's type-2 ratio (see :func:`canceller_frequency_response`;
+            its double poles sit on the same circle, inside the contour).
     """
     fs = float(sample_rate_hz)
     tones = validate_frequencies(tone_frequencies_hz, fs)
@@ -299,7 +312,8 @@ def closed_loop_is_stable(plant: PlantResponse, tone_frequencies_hz: Sequence[fl
 
     def det_on_contour(freqs: np.ndarray) -> np.ndarray:
         g = _plant_at(plant, freqs)
-        k = canceller_frequency_response(tones, fs, coefficients, rates, freqs, radius)
+        k = canceller_frequency_response(tones, fs, coefficients, rates, freqs, radius,
+                                         integral_ratio)
         return np.linalg.det(np.eye(g.shape[1]) - g @ k)
 
     d = det_on_contour(f)
