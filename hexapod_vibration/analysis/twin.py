@@ -56,6 +56,8 @@ DEFAULT_SEGMENT_S = 1.0
 BAND_LOW_HZ, BAND_HIGH_HZ = 5.0, 450.0
 """Third-octave band centres compared (Hz)."""
 DIGITS = 2
+STEADY_TRACK_HZ = 1e-6
+"""A track within this of its report tone over the whole window is held there (Hz)."""
 
 
 class NotATwin(ValueError):
@@ -163,7 +165,11 @@ def compare(signals: BagSignals, twin: BagSignals, result: Analysis,
 def _tones(result: Analysis, z_ctl: np.ndarray, z_twin: np.ndarray, samples: np.ndarray,
            tracks: list[tuple[float, tuple[str, np.ndarray, np.ndarray]]]
            ) -> list[dict[str, Any]]:
-    """Fixed-band rows per report tone; a tone whose track moved gets a following band."""
+    """Fixed-band rows per report tone; a tone whose track left it gets a following band.
+
+    A track that moved over the window, or held still away from its report tone (a
+    spin-up at its final speed: the tone at 50 Hz, its report tone 30 Hz).
+    """
     report_rows = result.report["tones"]
     tones = [r["frequency_hz"] for r in report_rows]
     segment = min(spectrum.DEFAULT_SEGMENT_S, z_ctl.size / FS)
@@ -173,13 +179,13 @@ def _tones(result: Analysis, z_ctl: np.ndarray, z_twin: np.ndarray, samples: np.
                                                                            strict=True))]
     for nominal, (topic, at, hz) in tracks:
         track_hz = moving_tones.track_on_samples(at, hz, samples)
-        if track_hz.max() - track_hz.min() <= 1e-6:
-            continue                            # a steady tone: its fixed band is right
+        same = [k for k, f in enumerate(tones) if abs(f - nominal) <= SNAP_HZ]
+        if same and np.max(np.abs(track_hz - tones[same[0]])) <= STEADY_TRACK_HZ:
+            continue                            # held on its report tone: the fixed band
         row = _row(nominal, True, "following", _following_level(z_ctl, track_hz),
                    _following_level(z_twin, track_hz))
         row.update(source=topic, frequency_span_hz=[round(float(track_hz.min()), 4),
                                                     round(float(track_hz.max()), 4)])
-        same = [k for k, f in enumerate(tones) if abs(f - nominal) <= SNAP_HZ]
         if same:
             rows[same[0]] = row
         else:

@@ -1199,13 +1199,20 @@ class _ToneFollowing:
             return
         if self._swept_at is None or self._swept_at.shape != sweep.shape:
             self._swept_at = np.full(sweep.shape, -np.inf)
-        self._swept_at[np.abs(sweep) > SWEEP_RATE_FLOOR_HZ_PER_S] = index
+        fast = np.abs(sweep) > SWEEP_RATE_FLOOR_HZ_PER_S
+        if not fast.any() and self._never_swept():
+            return                             # steady tones: the paper's update
+        self._swept_at[fast] = index
         scale = np.broadcast_to(self._tone_rate_scale(), (size,))
         hold = SWEEP_HOLD_TIME_CONSTANTS / (canceller.mu * np.maximum(scale, 1e-6))
         sweeping = index - np.tile(self._swept_at, size // sweep.size) <= hold
         wanted = ratio * scale * sweeping
         if not np.array_equal(wanted, canceller.integral_ratio):
             canceller.set_integral_ratio(wanted)
+
+    def _never_swept(self) -> bool:
+        """True while no tone has swept since the type-2 update was last cleared."""
+        return bool(np.all(np.isneginf(self._swept_at)))
 
     def _tone_rate_scale(self) -> np.ndarray | float:
         """Each oscillator's rate relative to mu (a mu policy's per-tone rates in P).
