@@ -206,3 +206,31 @@ def test_a_moving_tone_is_not_compared_with_a_fixed_tone_prediction(tmp_path, ca
         assert ('H1 not compared' in printed) is not compared
         if not compared:
             assert sens['not_compared'].startswith('the notch ran up to 1.50 Hz from the tones')
+
+
+def test_a_tone_held_away_from_its_report_tone_is_measured_where_it_is(tmp_path):
+    """A spin-up's end: the line ramps 40 -> 43 Hz after control-on and holds at 43 Hz.
+
+    Over the controlled window the track does not move, but it is not at the report tone
+    (40 Hz): the twin row follows it (a fixed band at 40 Hz would read the noise floor).
+    """
+    n = np.arange(END)
+    track = 40.0 + 3.0 * np.clip((n - ON) / 1000.0, 0.0, 1.0)
+    phase = 2 * np.pi * np.cumsum(track) / FS
+    x = np.sqrt(2) * G0 * 10 ** (-37 / 20) * np.sin(phase)
+    noise = 1e-6 * np.random.default_rng(6).standard_normal(END)
+    gain = np.where(n < ON, 1.0, np.maximum(np.exp(-(n - ON) / 500.0), 1e-3))
+    topics = {'/pph/disturbance_frequencies': [(s, frequencies_cdr([track[s]], s))
+                                               for s in range(0, END, 10)]}
+    run = write_bag(tmp_path / 'bag', struts_from_z(G0 + gain * x + noise),
+                    statuses=_statuses(ON), run_record=_record('held', ON, [40.0]),
+                    topics=topics)
+    other = write_bag(tmp_path / 'twin', struts_from_z(G0 + x + noise),
+                      statuses=_statuses(-1), run_record=_record('held', -1, [40.0]),
+                      topics=topics)
+    out = tmp_path / 'out'
+    assert analyze.main([str(run), '--twin', str(other), '--out', str(out), '--no-plots']) == 0
+    row, = json.loads((out / 'report.json').read_text())['twin']['tones']
+    assert row['band'] == 'following' and row['frequency_span_hz'] == [43.0, 43.0]
+    assert row['twin_db'] == pytest.approx(-37.0, abs=0.3)
+    assert row['reduction_db'] == pytest.approx(60.0, abs=0.5)
