@@ -67,7 +67,9 @@ PAPER_REDUCTION_DB = {
 DEMO_SCENARIOS = ("single_tone_harmonic", "close_tones", "plant_response")
 STOP_TIMEOUT_S = 15.0
 STALL_TIMEOUT_S = 120.0
-"""The run fails when neither sim time nor the recorder moves for this long (s, wall)."""
+"""The run fails when neither sim time nor the recorder's loop topics move for this long
+(s, wall)."""
+RECORDER_DRAIN = "recorder writing the last samples"
 EXPERIMENT_LOCKSTEP_TIMEOUT_S = 10.0
 """The driver's ``lockstep_timeout_s`` in an experiment (s, wall): the parameter's maximum."""
 DRIVER_TOPICS = ("/pph/accel", "/pph/eddy", "/pph/actuator_force", "/clock",
@@ -486,14 +488,24 @@ class ExperimentRun:
                                   f"{what}")
         # Progress: sim time, what is awaited, or the recorder's counts changed. A loaded
         # machine only slows them down; nothing changing for STALL_TIMEOUT_S is a hang.
+        # (Only the loop topics' counts: /diagnostics and /parameter_events are recorded
+        # too and grow every second whatever the loop does.)
         sup = self.sup
-        key = (sup.sim_time_s, what, tuple(sorted(sup.recorder.items())),
+        topics = self.recorded_topics()
+        key = (sup.sim_time_s, what, tuple(sup.recorder.get(f"{t} messages") for t in topics),
                sup.driver.get("sample"))
         if key != self._progress_key:
             self._progress_key, self._progress_at = key, now
         elif now - self._progress_at > STALL_TIMEOUT_S:
+            from hexapod_vibration.analysis.bag_io import STRUT_TOPICS
+
+            loop = [t for t in topics if t in STRUT_TOPICS]
+            behind = ", ".join(f"{t} {sup.recorder.get(f'{t} messages', '0')}"
+                               for t in sup.recorder_behind(loop, self.n_end))
+            detail = (f" (recorded of {self.n_end} samples: {behind}; the rest never "
+                      "reached the recorder)" if what == RECORDER_DRAIN and behind else "")
             raise ExperimentError(f"the loop is not advancing: nothing changed for "
-                                  f"{STALL_TIMEOUT_S:g} s while {what}")
+                                  f"{STALL_TIMEOUT_S:g} s while {what}{detail}")
 
     def _wait(self, predicate, what: str) -> None:
         while not predicate():
@@ -540,8 +552,7 @@ class ExperimentRun:
         from hexapod_vibration.analysis.bag_io import STRUT_TOPICS
 
         loop = [t for t in STRUT_TOPICS if t != "/pph/notch_command" or self.has_notch]
-        self._wait(lambda: not self.sup.recorder_behind(loop, self.n_end),
-                   "recorder writing the last samples")
+        self._wait(lambda: not self.sup.recorder_behind(loop, self.n_end), RECORDER_DRAIN)
 
     def _run_realtime(self) -> None:
         sc = self.o.scenario

@@ -571,6 +571,11 @@ class AdaptiveNotchCanceller:
         return np.conj(self._zv).T.copy()
 
     @property
+    def integrating(self) -> bool:
+        """True while some tone adapts with the type-2 update (a ratio > 0)."""
+        return self._integral
+
+    @property
     def integral_ratio(self) -> np.ndarray:
         """Per-tone ratios ``kappa_t / mu`` of the type-2 update (T,), a copy."""
         return self._ratio.copy()

@@ -150,6 +150,10 @@ samples) before it is cleared: without the tachometer the tracker's rate falls a
 weights, whose rate is still unlearning the tracker's lag at the sweep's end (spin_up,
 cleared at once: 46/39/36 dB on orders 1-3 in the second after; held: 55/49/44 dB, the
 first-order update 50/42/40 dB)."""
+SWEEP_CHECK_BLOCKS = 4
+"""The type-2 update's gating and its rates' scaling with the sweep run every this many
+blocks (64 ms): the sweep rate and the holds (time constants, >= 0.17 s) change slowly,
+and each check costs some 20 small array operations."""
 SWEEP_RATE_FLOOR_HZ_PER_S = 0.05
 """A tone whose fundamental moves faster than this (Hz/s) sweeps: it adapts with the type-2
 update, and its weights' rates of change are scaled with its sweep rate when that falls
@@ -1066,6 +1070,7 @@ class _ToneFollowing:
         self._detector: tuple[np.ndarray | None, np.ndarray | None] = (None, None)
         self._sweep_hz_per_s: np.ndarray | None = None
         self._integrating_from = -1
+        self._blocks = 0                       # blocks retuned (SWEEP_CHECK_BLOCKS)
         self._swept_at: np.ndarray | None = None
 
     def rebuild(self) -> None:
@@ -1166,8 +1171,10 @@ class _ToneFollowing:
         if fundamentals is None:
             return
         self._retune(fundamentals)
-        self._follow_sweep_rate(sweep)
-        self._gate_integral(index)
+        self._blocks += 1
+        if self._blocks % SWEEP_CHECK_BLOCKS == 0:
+            self._follow_sweep_rate(sweep)
+            self._gate_integral(index)
 
     def _gate_integral(self, index: int) -> None:
         """Type-2 update for the tones that sweep, once they adapted with output a while.
@@ -1189,7 +1196,7 @@ class _ToneFollowing:
         size = canceller.tone_frequencies_hz.size
         if not running or ratio <= 0.0 or sweep is None or size % max(sweep.size, 1):
             self._integrating_from, self._swept_at = -1, None
-            if np.any(canceller.integral_ratio > 0.0):
+            if canceller.integrating:
                 canceller.set_integral_ratio(0.0)
             return
         if self._integrating_from < 0:
@@ -1241,7 +1248,7 @@ class _ToneFollowing:
             sweep_hz_per_s, dtype=float).copy()
         if (previous is None or sweep_hz_per_s is None
                 or previous.shape != self._sweep_hz_per_s.shape
-                or not np.any(canceller.integral_ratio > 0.0)):
+                or not canceller.integrating):
             return
         sweeping = np.abs(previous) > SWEEP_RATE_FLOOR_HZ_PER_S
         if not np.any(sweeping):
