@@ -387,7 +387,8 @@ def frequencies_figure(path: Path, signals: BagSignals, result: Analysis) -> Pat
         ax.grid(alpha=0.3)
     top.set(ylabel="frequency (Hz)", title="tone frequencies: the controller's estimates "
             "and the true ones (dashed: control on)")
-    top.legend(loc="best")
+    if top.get_legend_handles_labels()[0]:     # a run without tracks (plant_response)
+        top.legend(loc="best")
     return _save(fig, path)
 
 
