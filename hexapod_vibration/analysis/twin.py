@@ -147,12 +147,13 @@ def compare(signals: BagSignals, twin: BagSignals, result: Analysis,
     z_twin = twin.z[_twin_rows(twin, samples, f"the controlled window [{first}, {stop})")]
     tracks = [(f, t) for f, t in zip(result.tracked_hz, tone_tracks(signals, result.tracked_hz),
                                      strict=True) if t is not None]
+    others = _other_lines(signals, tracks)
     section: dict[str, Any] = {
         "bag": str(twin.path), "control_on_sample": on,
         "window": {"first_sample": first, "samples": stop - first},
-        "tones": _tones(result, z_ctl, z_twin, samples, tracks),
-        "following_over_time": _over_time(signals, twin, on,
-                                          tracks + _other_lines(signals, tracks), segment_s),
+        "tones": _tones(result, z_ctl, z_twin, samples, tracks,
+                        _report_lines(result, others, on)),
+        "following_over_time": _over_time(signals, twin, on, tracks + others, segment_s),
         "bands": _bands(z_ctl, z_twin),
     }
     sensitivity = _sensitivity(signals, result, z_ctl, z_twin,
@@ -163,12 +164,15 @@ def compare(signals: BagSignals, twin: BagSignals, result: Analysis,
 
 
 def _tones(result: Analysis, z_ctl: np.ndarray, z_twin: np.ndarray, samples: np.ndarray,
-           tracks: list[tuple[float, tuple[str, np.ndarray, np.ndarray]]]
+           tracks: list[tuple[float, tuple[str, np.ndarray, np.ndarray]]],
+           lines: list[tuple[float, tuple[str, np.ndarray, np.ndarray]]] = ()
            ) -> list[dict[str, Any]]:
     """Fixed-band rows per report tone; a tone whose track left it gets a following band.
 
     A track that moved over the window, or held still away from its report tone (a
-    spin-up at its final speed: the tone at 50 Hz, its report tone 30 Hz).
+    spin-up at its final speed: the tone at 50 Hz, its report tone 30 Hz). ``tracks``: the
+    notch's tones (controlled); ``lines``: other disturbance lines named by the report
+    tone they started on (:func:`_report_lines`), controlled as that tone's row says.
     """
     report_rows = result.report["tones"]
     tones = [r["frequency_hz"] for r in report_rows]
@@ -177,12 +181,15 @@ def _tones(result: Analysis, z_ctl: np.ndarray, z_twin: np.ndarray, samples: np.
     rows = [_row(f, r["controlled"], "fixed", (ctl[0][k], ctl[2][k]),
                  (twin[0][k], twin[2][k])) for k, (f, r) in enumerate(zip(tones, report_rows,
                                                                            strict=True))]
-    for nominal, (topic, at, hz) in tracks:
+    entries = [(f, track, True) for f, track in tracks] + [(f, track, None) for f, track in lines]
+    for nominal, (topic, at, hz), controlled in entries:
         track_hz = moving_tones.track_on_samples(at, hz, samples)
         same = [k for k, f in enumerate(tones) if abs(f - nominal) <= SNAP_HZ]
-        if same and np.max(np.abs(track_hz - tones[same[0]])) <= STEADY_TRACK_HZ:
-            continue                            # held on its report tone: the fixed band
-        row = _row(nominal, True, "following", _following_level(z_ctl, track_hz),
+        if any(np.max(np.abs(track_hz - f)) <= STEADY_TRACK_HZ for f in tones):
+            continue                            # held on a report tone: its fixed band
+        if controlled is None:
+            controlled = bool(report_rows[same[0]]["controlled"])
+        row = _row(nominal, controlled, "following", _following_level(z_ctl, track_hz),
                    _following_level(z_twin, track_hz))
         row.update(source=topic, frequency_span_hz=[round(float(track_hz.min()), 4),
                                                     round(float(track_hz.max()), 4)])
@@ -191,6 +198,24 @@ def _tones(result: Analysis, z_ctl: np.ndarray, z_twin: np.ndarray, samples: np.
         else:
             rows.append(row)
     return rows
+
+
+def _report_lines(result: Analysis,
+                  others: list[tuple[float, tuple[str, np.ndarray, np.ndarray]]], on: int
+                  ) -> list[tuple[float, tuple[str, np.ndarray, np.ndarray]]]:
+    """The other lines that sat on a report tone at control-on, named by that tone (Hz).
+
+    A rotor's orders 2 and 3 in the notch's bank (``harmonics``) start on the report tones
+    60 and 90 Hz and end at 100 and 150 Hz: their rows follow them as the fundamental's does.
+    """
+    tones = [r["frequency_hz"] for r in result.report["tones"]]
+    out = []
+    for _, (topic, at, hz) in others:
+        at_on = float(moving_tones.track_on_samples(at, hz, np.array([on]))[0])
+        near = [f for f in tones if abs(f - at_on) <= SNAP_HZ]
+        if near:
+            out.append((near[0], (topic, at, hz)))
+    return out
 
 
 def _other_lines(signals: BagSignals,

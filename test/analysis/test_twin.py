@@ -234,3 +234,31 @@ def test_a_tone_held_away_from_its_report_tone_is_measured_where_it_is(tmp_path)
     assert row['band'] == 'following' and row['frequency_span_hz'] == [43.0, 43.0]
     assert row['twin_db'] == pytest.approx(-37.0, abs=0.3)
     assert row['reduction_db'] == pytest.approx(60.0, abs=0.5)
+
+
+def test_a_second_line_that_started_on_a_report_tone_is_followed_there(tmp_path):
+    """A rotor's order 2 (in the bank, not a notch tone): 80 -> 86 Hz, reported at 80 Hz."""
+    n = np.arange(END)
+    track = 40.0 + 3.0 * np.clip((n - ON) / 1000.0, 0.0, 1.0)
+    phase = 2 * np.pi * np.cumsum(track) / FS
+    level = np.sqrt(2) * G0 * 10 ** (-37 / 20)
+    x = level * (np.sin(phase) + 0.5 * np.sin(2 * phase))
+    noise = 1e-6 * np.random.default_rng(7).standard_normal(END)
+    gain = np.where(n < ON, 1.0, np.maximum(np.exp(-(n - ON) / 500.0), 1e-3))
+    topics = {'/pph/disturbance_frequencies': [
+        (s, frequencies_cdr([track[s], 2 * track[s]], s)) for s in range(0, END, 10)]}
+    run = write_bag(tmp_path / 'bag', struts_from_z(G0 + gain * x + noise),
+                    statuses=_statuses(ON), run_record=_record('orders', ON, [40.0, 80.0]),
+                    topics=topics)
+    other = write_bag(tmp_path / 'twin', struts_from_z(G0 + x + noise),
+                      statuses=_statuses(-1), run_record=_record('orders', -1, [40.0, 80.0]),
+                      topics=topics)
+    out = tmp_path / 'out'
+    assert analyze.main([str(run), '--twin', str(other), '--out', str(out), '--no-plots']) == 0
+    rows = {r['frequency_hz']: r for r in json.loads((out / 'report.json').read_text())[
+        'twin']['tones']}
+    assert set(rows) == {40.0, 80.0}
+    assert rows[80.0]['band'] == 'following' and rows[80.0]['frequency_span_hz'] == [86.0, 86.0]
+    assert rows[80.0]['controlled'] is False                 # not a notch tone
+    assert rows[80.0]['twin_db'] == pytest.approx(-37.0 - 6.02, abs=0.3)
+    assert rows[80.0]['reduction_db'] == pytest.approx(60.0, abs=0.5)
