@@ -867,11 +867,12 @@ def format_following(report: dict[str, Any]) -> str:
     """The following bands (``following_tones``) as a table; "" when no controlled tone moved.
 
     A tone whose track stayed at one frequency in both windows has its fixed-band row in
-    the main table already.
+    the main table already; one that moved within a window or between them (a spin-up:
+    30 Hz before control, 50 Hz at the end) is listed.
     """
     rows = report.get("following_tones") or []
-    moved = [r for r in rows if any(hi - lo > 1e-6 for lo, hi in
-                                    r["frequency_span_hz"].values())]
+    moved = [r for r in rows if np.ptp([edge for span in r["frequency_span_hz"].values()
+                                        for edge in span]) > 1e-6]
     if not moved:
         return ""
     lines = [f"{report['scenario']}  (bands following the tones; tracks from the bag)",

@@ -235,3 +235,19 @@ def test_memory_does_not_grow_with_the_messages_of_a_long_bag(tmp_path):
     assert result.report['tones'][0]['uncontrolled_db'] == pytest.approx(-31.0, abs=0.2)
     assert all(len(s) == n for s in signals.series.values())
     assert peak < 10e6, f'{peak / 1e6:.1f} MB'
+
+
+def test_the_following_table_lists_a_tone_that_moved_between_the_windows():
+    """A spin-up: 30 Hz before control, held at 50 Hz at the end; a mismatch held at 40.4."""
+    from hexapod_vibration.analysis.report import format_following
+
+    def row(f, before, after):
+        return {"frequency_hz": f, "uncontrolled_db": -30.0, "controlled_db": -90.0,
+                "reduction_db": 60.0, "frequency_span_hz": {"uncontrolled": before,
+                                                            "controlled": after}}
+
+    moved = format_following({"scenario": "s", "following_tones": [row(30.0, [30, 30],
+                                                                       [50, 50])]})
+    assert "30.00-30.00 -> 50.00-50.00" in moved
+    assert format_following({"scenario": "s", "following_tones": [
+        row(40.0, [40.4, 40.4], [40.4, 40.4])]}) == ""
