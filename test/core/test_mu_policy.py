@@ -67,6 +67,23 @@ def test_auto_says_so_when_no_rate_helps():
     assert 'remain at any rate' in choice.warning
 
 
+def test_auto_still_bounds_the_far_rise_when_the_notch_floor_breaks_the_limit():
+    """P 30 deg off: 1.25 dB beside the notches at any rate, 8.7 dB at 20 Hz at full mu.
+
+    The limit (0.5 dB) is out of reach; the rates are lowered until the far rise is
+    within the floor plus FLOOR_MARGIN_DB instead of staying at mu.
+    """
+    _, g = _far_field_plant()
+    tones = [39.0, 40.0]
+    p = ad.normalized_coefficients(g(tones), 'centralized') * np.exp(1j * np.pi / 6)
+    assert _rise(g, tones, p, np.full(2, 0.0008)) > 8.0
+    floor = _rise(g, tones, p, np.full(2, 0.0008 * mu_policy.SMALLEST_SCALE))
+    choice = mu_policy.choose_tone_rates(g, tones, FS, p, 0.0008, 'auto', 0.5)
+    assert np.all(choice.tone_mu < 0.0008)
+    assert floor < choice.predicted_rise_db <= floor + mu_policy.FLOOR_MARGIN_DB + 1e-9
+    assert 'remain at any rate' in choice.warning and 'rates bounded' in choice.warning
+
+
 def test_unstable_loop_is_reported():
     plant = resonance_bank(60.0, 0.02, 1.0)
     g = lambda f: frequency_response(plant, f)  # noqa: E731
