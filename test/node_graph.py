@@ -158,16 +158,34 @@ def drain(ros_context, budget_s: float = 0.05) -> None:
         ros_context.executor.spin_once(timeout_sec=0.0)
 
 
-def wait_until(ros_context, predicate, timeout_s: float = HANG_GUARD_S, step=None) -> bool:
+PROGRESS_CHUNK_S = 60.0
+"""With a ``progress`` reading, :func:`wait_until` fails only after this long without it
+changing (s)."""
+
+
+def wait_until(ros_context, predicate, timeout_s: float = HANG_GUARD_S, step=None,
+               progress=None) -> bool:
     """Spin (draining the queues) until ``predicate()``; False after the hang guard.
 
-    ``step`` (e.g. publishing something) runs before each drain.
+    ``step`` (e.g. publishing something) runs before each drain. ``progress`` (e.g. the
+    driver's sample count): the guard is a stall, not a total time, so a loop slowed by a
+    loaded machine keeps the wait alive while it moves (``PROGRESS_CHUNK_S`` without change
+    is a hang).
     """
     def spin() -> None:
         if step is not None:
             step()
         drain(ros_context)
-    return ros_context.wait_for(predicate, timeout_s, step=spin)
+    if progress is None:
+        return ros_context.wait_for(predicate, timeout_s, step=spin)
+    last = object()
+    while True:
+        if ros_context.wait_for(predicate, PROGRESS_CHUNK_S, step=spin):
+            return True
+        now = progress()
+        if now == last:
+            return False
+        last = now
 
 
 class ParameterClient:
