@@ -123,8 +123,12 @@ class Diagnostics:
     def __init__(self, node: Node):
         self.latest: dict[str, Any] = {}
         self.history: list[Any] = []
+        # a deep queue: a listener starved by a loaded machine must not lose one node's
+        # status under another's (the composed graph's notch status never arrived on CI)
         node.create_subscription(DiagnosticArray, '/diagnostics', self._on_diag,
-                                 DIAGNOSTICS_QOS)
+                                 QoSProfile(reliability=DIAGNOSTICS_QOS.reliability,
+                                            history=DIAGNOSTICS_QOS.history, depth=1000,
+                                            durability=DIAGNOSTICS_QOS.durability))
 
     def _on_diag(self, msg: DiagnosticArray) -> None:
         for status in msg.status:
