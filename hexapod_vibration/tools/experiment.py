@@ -473,6 +473,12 @@ class ExperimentRun:
         return [*DRIVER_TOPICS, *tachometer, *POINTING_TOPICS,
                 *(NOTCH_TOPICS if self.has_notch else ())]
 
+    def loop_topics(self) -> list[str]:
+        """The per-sample topics the bag must hold every sample of."""
+        from hexapod_vibration.analysis.bag_io import STRUT_TOPICS
+
+        return [t for t in STRUT_TOPICS if t != "/pph/notch_command" or self.has_notch]
+
     def _breakpoint(self, prefix: str = "") -> list[str]:
         """Lockstep: the driver starts held before sample 0 (after the params file: wins)."""
         return ["-p", f"{prefix}hold_at_time_s:=0.0"] if self.o.mode == "lockstep" else []
@@ -497,11 +503,8 @@ class ExperimentRun:
         if key != self._progress_key:
             self._progress_key, self._progress_at = key, now
         elif now - self._progress_at > STALL_TIMEOUT_S:
-            from hexapod_vibration.analysis.bag_io import STRUT_TOPICS
-
-            loop = [t for t in topics if t in STRUT_TOPICS]
             behind = ", ".join(f"{t} {sup.recorder.get(f'{t} messages', '0')}"
-                               for t in sup.recorder_behind(loop, self.n_end))
+                               for t in sup.recorder_behind(self.loop_topics(), self.n_end))
             detail = (f" (recorded of {self.n_end} samples: {behind}; the rest never "
                       "reached the recorder)" if what == RECORDER_DRAIN and behind else "")
             raise ExperimentError(f"the loop is not advancing: nothing changed for "
@@ -549,9 +552,7 @@ class ExperimentRun:
         self._wait(lambda: self.sup.held_at(self.n_end), "running")
         # The loop is held at its last sample: wait until the recorder wrote every sample
         # (it may lag a fast lockstep loop by seconds; stopping it then would lose them).
-        from hexapod_vibration.analysis.bag_io import STRUT_TOPICS
-
-        loop = [t for t in STRUT_TOPICS if t != "/pph/notch_command" or self.has_notch]
+        loop = self.loop_topics()
         self._wait(lambda: not self.sup.recorder_behind(loop, self.n_end), RECORDER_DRAIN)
 
     def _run_realtime(self) -> None:

@@ -118,6 +118,26 @@ def _lti_pair(tmp_path, twin_seed: int = 3, twin_end: int = END,
     return run, twin_bag
 
 
+def _decaying_pair(tmp_path, name: str, x: np.ndarray, tracks: np.ndarray,
+                   tones: list[float], seed: int):
+    """(run bag, twin bag): ``x`` (m/s^2, z) in noise; in the run it decays 60 dB from ON.
+
+    ``tracks`` (END, L): the true line frequencies recorded on /pph/disturbance_frequencies.
+    """
+    n = np.arange(END)
+    noise = 1e-6 * np.random.default_rng(seed).standard_normal(END)
+    gain = np.where(n < ON, 1.0, np.maximum(np.exp(-(n - ON) / 500.0), 1e-3))
+    topics = {'/pph/disturbance_frequencies': [(s, frequencies_cdr(list(tracks[s]), s))
+                                               for s in range(0, END, 10)]}
+    run = write_bag(tmp_path / 'bag', struts_from_z(G0 + gain * x + noise),
+                    statuses=_statuses(ON), run_record=_record(name, ON, tones),
+                    topics=topics)
+    other = write_bag(tmp_path / 'twin', struts_from_z(G0 + x + noise),
+                      statuses=_statuses(-1), run_record=_record(name, -1, tones),
+                      topics=topics)
+    return run, other
+
+
 def test_analyze_against_the_twin_measures_the_filter(tmp_path, capsys):
     run, twin_bag = _lti_pair(tmp_path)
     out = tmp_path / 'out'
@@ -162,17 +182,7 @@ def test_a_drifting_tone_is_followed_over_time_against_the_twin(tmp_path, capsys
     phase = 2 * np.pi * 40.0 * t - 1.0 * 20.0 * np.cos(2 * np.pi * t / 20.0)
     track = 40.0 + np.sin(2 * np.pi * t / 20.0)
     x = np.sqrt(2) * G0 * 10 ** (-37 / 20) * np.sin(phase)
-    noise = 1e-6 * np.random.default_rng(5).standard_normal(END)
-    n = np.arange(END)
-    gain = np.where(n < ON, 1.0, np.maximum(np.exp(-(n - ON) / 500.0), 1e-3))
-    topics = {'/pph/disturbance_frequencies': [(s, frequencies_cdr([track[s]], s))
-                                               for s in range(0, END, 10)]}
-    run = write_bag(tmp_path / 'bag', struts_from_z(G0 + gain * x + noise),
-                    statuses=_statuses(ON), run_record=_record('drift', ON, [40.0]),
-                    topics=topics)
-    other = write_bag(tmp_path / 'twin', struts_from_z(G0 + x + noise),
-                      statuses=_statuses(-1), run_record=_record('drift', -1, [40.0]),
-                      topics=topics)
+    run, other = _decaying_pair(tmp_path, 'drift', x, track[:, None], [40.0], seed=5)
     out = tmp_path / 'out'
     assert analyze.main([str(run), '--twin', str(other), '--out', str(out), '--no-plots',
                          '--twin-segment', '2']) == 0
@@ -208,26 +218,20 @@ def test_a_moving_tone_is_not_compared_with_a_fixed_tone_prediction(tmp_path, ca
             assert sens['not_compared'].startswith('the notch ran up to 1.50 Hz from the tones')
 
 
+def _ramp_40_to_43_hz() -> np.ndarray:
+    """(END,) Hz: 40 Hz until ON, 3 Hz/s to 43 Hz, then held (a spin-up's end)."""
+    return 40.0 + 3.0 * np.clip((np.arange(END) - ON) / 1000.0, 0.0, 1.0)
+
+
 def test_a_tone_held_away_from_its_report_tone_is_measured_where_it_is(tmp_path):
     """A spin-up's end: the line ramps 40 -> 43 Hz after control-on and holds at 43 Hz.
 
     Over the controlled window the track does not move, but it is not at the report tone
     (40 Hz): the twin row follows it (a fixed band at 40 Hz would read the noise floor).
     """
-    n = np.arange(END)
-    track = 40.0 + 3.0 * np.clip((n - ON) / 1000.0, 0.0, 1.0)
-    phase = 2 * np.pi * np.cumsum(track) / FS
-    x = np.sqrt(2) * G0 * 10 ** (-37 / 20) * np.sin(phase)
-    noise = 1e-6 * np.random.default_rng(6).standard_normal(END)
-    gain = np.where(n < ON, 1.0, np.maximum(np.exp(-(n - ON) / 500.0), 1e-3))
-    topics = {'/pph/disturbance_frequencies': [(s, frequencies_cdr([track[s]], s))
-                                               for s in range(0, END, 10)]}
-    run = write_bag(tmp_path / 'bag', struts_from_z(G0 + gain * x + noise),
-                    statuses=_statuses(ON), run_record=_record('held', ON, [40.0]),
-                    topics=topics)
-    other = write_bag(tmp_path / 'twin', struts_from_z(G0 + x + noise),
-                      statuses=_statuses(-1), run_record=_record('held', -1, [40.0]),
-                      topics=topics)
+    track = _ramp_40_to_43_hz()
+    x = np.sqrt(2) * G0 * 10 ** (-37 / 20) * np.sin(2 * np.pi * np.cumsum(track) / FS)
+    run, other = _decaying_pair(tmp_path, 'held', x, track[:, None], [40.0], seed=6)
     out = tmp_path / 'out'
     assert analyze.main([str(run), '--twin', str(other), '--out', str(out), '--no-plots']) == 0
     row, = json.loads((out / 'report.json').read_text())['twin']['tones']
@@ -238,21 +242,11 @@ def test_a_tone_held_away_from_its_report_tone_is_measured_where_it_is(tmp_path)
 
 def test_a_second_line_that_started_on_a_report_tone_is_followed_there(tmp_path):
     """A rotor's order 2 (in the bank, not a notch tone): 80 -> 86 Hz, reported at 80 Hz."""
-    n = np.arange(END)
-    track = 40.0 + 3.0 * np.clip((n - ON) / 1000.0, 0.0, 1.0)
+    track = _ramp_40_to_43_hz()
     phase = 2 * np.pi * np.cumsum(track) / FS
-    level = np.sqrt(2) * G0 * 10 ** (-37 / 20)
-    x = level * (np.sin(phase) + 0.5 * np.sin(2 * phase))
-    noise = 1e-6 * np.random.default_rng(7).standard_normal(END)
-    gain = np.where(n < ON, 1.0, np.maximum(np.exp(-(n - ON) / 500.0), 1e-3))
-    topics = {'/pph/disturbance_frequencies': [
-        (s, frequencies_cdr([track[s], 2 * track[s]], s)) for s in range(0, END, 10)]}
-    run = write_bag(tmp_path / 'bag', struts_from_z(G0 + gain * x + noise),
-                    statuses=_statuses(ON), run_record=_record('orders', ON, [40.0, 80.0]),
-                    topics=topics)
-    other = write_bag(tmp_path / 'twin', struts_from_z(G0 + x + noise),
-                      statuses=_statuses(-1), run_record=_record('orders', -1, [40.0, 80.0]),
-                      topics=topics)
+    x = np.sqrt(2) * G0 * 10 ** (-37 / 20) * (np.sin(phase) + 0.5 * np.sin(2 * phase))
+    run, other = _decaying_pair(tmp_path, 'orders', x, np.column_stack([track, 2 * track]),
+                                [40.0, 80.0], seed=7)
     out = tmp_path / 'out'
     assert analyze.main([str(run), '--twin', str(other), '--out', str(out), '--no-plots']) == 0
     rows = {r['frequency_hz']: r for r in json.loads((out / 'report.json').read_text())[

@@ -181,7 +181,8 @@ def _auto_rates(evaluator: _RiseEvaluator, mu: float, n_tones: int, limit: float
 
     The rise right beside a notch does not shrink with the rate (its height is set by the
     phase of the weight loop, its width by the rate), so a limit may be out of reach at
-    any rate: then the rates stay at ``mu`` and the returned note says why.
+    any rate: then the rates are bounded to that floor plus :data:`FLOOR_MARGIN_DB`
+    instead, and the returned note says why.
     """
     full = np.full(n_tones, mu)
     if evaluator.rise(full)[0] <= limit:

@@ -467,11 +467,15 @@ class AdaptiveNotchCanceller:
 
     def set_weights(self, weights: np.ndarray) -> None:
         """Overwrite the complex (T, C) weights (N); the output follows immediately."""
-        w = np.array(weights, dtype=complex)
+        self._v[...] = self._channel_major(weights, 'weights')
+
+    def _channel_major(self, values: np.ndarray, what: str) -> np.ndarray:
+        """conj(X)^T (C, T) of a finite complex (T, C) array, the layout of the state."""
+        x = np.array(values, dtype=complex)
         shape = (self._freqs.size, self._c)
-        if w.shape != shape or not np.all(np.isfinite(w)):
-            raise ValueError(f'weights must be finite with shape {shape}, got {w.shape}')
-        self._v[...] = np.conj(w).T
+        if x.shape != shape or not np.all(np.isfinite(x)):
+            raise ValueError(f'{what} must be finite with shape {shape}, got {x.shape}')
+        return np.conj(x).T
 
     def set_enabled(self, flag: bool, ramp_samples: int = DEFAULT_RAMP_SAMPLES) -> None:
         """Enable/disable the output with a linear gain ramp 0 <-> 1 over ``ramp_samples``.
@@ -544,11 +548,7 @@ class AdaptiveNotchCanceller:
 
     def set_weight_rates(self, rates: np.ndarray) -> None:
         """Overwrite the weights' rates of change Z (T, C) (N per sample, type-2 update)."""
-        z = np.array(rates, dtype=complex)
-        shape = (self._freqs.size, self._c)
-        if z.shape != shape or not np.all(np.isfinite(z)):
-            raise ValueError(f'rates must be finite with shape {shape}, got {z.shape}')
-        self._zv[...] = np.conj(z).T
+        self._zv[...] = self._channel_major(rates, 'rates')
 
     def set_weight_limit(self, limit_n: float | None) -> None:
         """Apply :meth:`limit_weights` after every adaptation step (None: no limit)."""

@@ -1035,6 +1035,12 @@ _FOLLOW_SETTINGS = ("frequency_tracking", "tracking_range_hz", "reference_harmon
                     "reference_timeout_s", "harmonics", "tone_frequencies_hz")
 
 
+def _norm_ratio(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """(T,) ||a_t|| / ||b_t|| of two (T, C, C) stacks (Frobenius; b_t = 0 counts as tiny)."""
+    return (np.linalg.norm(a, axis=(1, 2))
+            / np.maximum(np.linalg.norm(b, axis=(1, 2)), 1e-300))
+
+
 class _ToneFollowing:
     """The tone set in force each block: nominal, tracked or reference-driven, + harmonics.
 
@@ -1354,9 +1360,7 @@ class _ToneFollowing:
                 return None, None
             # the rate each tone adapts at relative to mu: |P| / |P normalised on G|, the
             # slowest of the fundamentals' orders (the settling waits for it)
-            scale = (np.linalg.norm(p, axis=(1, 2))
-                     / np.maximum(np.linalg.norm(normal, axis=(1, 2)), 1e-300))
-            self._rate_scale = float(np.clip(scale.min(), 1e-6, None))
+            self._rate_scale = float(np.clip(_norm_ratio(p, normal).min(), 1e-6, None))
             self._detector_source = p
         return self._detector
 
@@ -1466,15 +1470,11 @@ class _ToneFollowing:
             coefficients = adaptation.normalized_coefficients(g_new, mode)
             # keep each tone's own rate (a mu policy folds per-tone rates into P)
             reference = adaptation.normalized_coefficients(g_old, mode)
-            scale = (np.linalg.norm(canceller.coefficients_view, axis=(1, 2))
-                     / np.maximum(np.linalg.norm(reference, axis=(1, 2)), 1e-300))
-            coefficients = coefficients * scale[:, None, None]
+            present = canceller.coefficients_view
+            coefficients = coefficients * _norm_ratio(present, reference)[:, None, None]
         except (ValueError, np.linalg.LinAlgError):     # G(f) unusable there: keep P
             return
-        present = canceller.coefficients_view
-        change = (np.linalg.norm(coefficients - present, axis=(1, 2))
-                  / np.maximum(np.linalg.norm(present, axis=(1, 2)), 1e-300))
-        if np.max(change) < P_RETUNE_CHANGE:
+        if np.max(_norm_ratio(coefficients - present, present)) < P_RETUNE_CHANGE:
             return
         # Only P moves; the weights are left to the adaptation. Carrying them through the
         # plant's change of response (W -> G_new^-1 G_old W) assumed the disturbance at
