@@ -472,6 +472,11 @@ NOTCH_CONTROLLER = NodeSpec("notch_controller", summary="six decentralized Adapt
                   "(3.2 s, eq. 18 bound); broadband = a 10 s multisine over 0..fs/2 that "
                   "survives a disturbance next to a tone (Nyquist bound on G(f), mu_policy, "
                   "predicted sensitivity)", choices=IDENTIFICATION_METHODS),
+    ParameterSpec("update_lowpass_hz", "double", 0.0, "corner of a first-order low-pass on "
+                  "each tone's weight correction: the canceller's gain far from its tones "
+                  "falls by update_lowpass_hz / |f - f_tone| more (no rise of a loop mode "
+                  "tens of Hz away); 0 = the paper's update", unit="Hz", low=0.0,
+                  high=100.0, read_only=True),
     EXECUTOR,
 ))
 

@@ -7,7 +7,8 @@ enable/identify sequencing. The node subscribes to ``/pph/accel`` (raw, gravity 
 passes each sample to the supervisor and publishes ``/pph/notch_command`` with the same
 sample index; parameters are checked by the supervisor in the on-set callback and applied
 in the post-set callback. Weights go out at 100 Hz on ``/pph/notch_weights``, status on
-``/diagnostics`` (every simulated second and whenever the supervisor reports a change).
+``/diagnostics`` (every simulated second, every second of wall time and whenever the
+supervisor reports a change).
 
 Frequencies: a tachometer on ``/pph/reference_frequency`` (one value, Hz, with its sample
 index; a loop subscription served before ``/pph/accel``) goes to
@@ -44,7 +45,7 @@ from hexapod_vibration.core.loop.signal_ranges import SignalRanges
 from hexapod_vibration.core.model.config import load_model_config
 from hexapod_vibration.parameter_specs import NOTCH_CONTROLLER
 from hexapod_vibration.paths import config_path
-from hexapod_vibration.ros.diagnostics import diagnostic_array
+from hexapod_vibration.ros.diagnostics import diagnostic_array, publish_status_periodically
 from hexapod_vibration.ros.executors import run_node
 from hexapod_vibration.ros.messages import (
     ControllerLoopPort,
@@ -90,6 +91,7 @@ class NotchControllerNode(Node):
         self._pub_w = self.create_publisher(Float64MultiArray, "/pph/notch_weights",
                                             LOOP_PUBLISHER_QOS)
         self._pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", DIAGNOSTICS_QOS)
+        publish_status_periodically(self, self.publish_diagnostics)
         self._pub_frequencies = self.create_publisher(Float64MultiArray, NOTCH_FREQUENCIES_TOPIC,
                                                       LOOP_PUBLISHER_QOS)
         self._pub_sensitivity = self.create_publisher(

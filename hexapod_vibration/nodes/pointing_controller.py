@@ -28,7 +28,7 @@ from hexapod_vibration.core.model.sensors import EddySensorArray
 from hexapod_vibration.core.sim.closed_loop import make_pointing_controller
 from hexapod_vibration.parameter_specs import POINTING_CONTROLLER
 from hexapod_vibration.paths import config_path
-from hexapod_vibration.ros.diagnostics import diagnostic_array
+from hexapod_vibration.ros.diagnostics import diagnostic_array, publish_status_periodically
 from hexapod_vibration.ros.executors import run_node
 from hexapod_vibration.ros.messages import (
     ControllerLoopPort,
@@ -67,6 +67,7 @@ class PointingControllerNode(Node):
                 Float64MultiArray, "/pph/pointing_command", LOOP_PUBLISHER_QOS)),
             self.get_logger())
         self._pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", DIAGNOSTICS_QOS)
+        publish_status_periodically(self, self.publish_diagnostics)
         self.loop_subscriptions = [create_loop_subscription(self, "/pph/eddy", self._on_eddy)]
         self.get_logger().info(f"pointing controller up: target {np.round(self.law.target, 6)}"
                                f", bandwidth {self.law.gains.bandwidth_hz} Hz")

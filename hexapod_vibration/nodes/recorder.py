@@ -78,6 +78,7 @@ from hexapod_vibration.analysis.bag_io import (
 )
 from hexapod_vibration.analysis.bag_writer import JazzyWriter, qos_from_rclpy, stamp_of_cdr
 from hexapod_vibration.parameter_specs import PPH_RECORDER
+from hexapod_vibration.ros.diagnostics import publish_status_periodically
 from hexapod_vibration.ros.parameters import NodeParameters
 from hexapod_vibration.ros.qos import (
     DIAGNOSTICS_QOS,
@@ -89,8 +90,6 @@ from hexapod_vibration.ros.qos import (
 from hexapod_vibration.ros.rclpy_internals import parameter_overrides, take_serialized_batch
 
 NODE_NAME = 'pph_recorder'
-STATUS_PERIOD_S = 1.0
-"""Period (s, wall time) of the recorder's status on ``/diagnostics``."""
 MAX_BATCH = 500
 """Messages taken from one subscription per wake-up before others get their turn."""
 DRAIN_IDLE_SPINS = 3
@@ -181,7 +180,7 @@ class BagRecorder(Node):
             DiagnosticArray, '/diagnostics', DIAGNOSTICS_QOS
         )
         steady = Clock(clock_type=ClockType.STEADY_TIME)
-        self.create_timer(STATUS_PERIOD_S, self._publish_status, clock=steady)
+        publish_status_periodically(self, self._publish_status)
         self.create_timer(FLUSH_PERIOD_S, self._flush, clock=steady)
         self.get_logger().info(f'recording {len(RECORDED_TOPICS)} topics into {self.bag_path}')
 
@@ -287,7 +286,7 @@ class BagRecorder(Node):
         )
 
     def _publish_status(self) -> None:
-        """Publish :meth:`status` on ``/diagnostics`` (every STATUS_PERIOD_S of wall time)."""
+        """Publish :meth:`status` on ``/diagnostics`` (every second of wall time)."""
         array = DiagnosticArray(status=[self.status()])
         array.header.stamp = self.get_clock().now().to_msg()
         self._status_publisher.publish(array)

@@ -5,12 +5,20 @@ The driver's ``/clock`` bytes are :func:`hexapod_vibration.ros.rclpy_internals.c
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from rclpy.clock import Clock, ClockType
+from rclpy.node import Node
+from rclpy.timer import Timer
 
 from hexapod_vibration.contract import SAMPLE_RATE_HZ, sample_sim_time
 
 HARDWARE_ID = "pph_sim"
+STATUS_PERIOD_S = 1.0
+"""Period (s, wall time) at which every node re-publishes its status on ``/diagnostics``,
+as ``diagnostic_updater`` does (1 Hz), whether or not its loop moves."""
 
 
 def sample_time(sample: int, sample_rate_hz: float = SAMPLE_RATE_HZ) -> Time:
@@ -36,3 +44,16 @@ def diagnostic_array(name: str, warn: bool, message: str, values: dict[str, obje
     msg = DiagnosticArray(status=[status])
     msg.header.stamp = sample_time(sample)
     return msg
+
+
+def publish_status_periodically(node: Node, publish: Callable[[], None],
+                                period_s: float = STATUS_PERIOD_S) -> Timer:
+    """Call ``publish`` every ``period_s`` of wall (steady) time, whatever the sim clock does.
+
+    A status published only as samples arrive stops when the loop stops (a lockstep driver
+    holding, a driver restarting): a ``ros2 topic echo /diagnostics`` started then, or a
+    subscriber whose match with this publisher completed late (discovery on a loaded
+    machine), would never see the node. The steady clock keeps the re-announcement going
+    under ``use_sim_time`` too.
+    """
+    return node.create_timer(period_s, publish, clock=Clock(clock_type=ClockType.STEADY_TIME))

@@ -260,14 +260,17 @@ def test_advance_equals_steps_with_zero_error():
     np.testing.assert_allclose(skipped.step(np.zeros(6)), stepped.step(np.zeros(6)), atol=1e-9)
 
 
-@pytest.mark.parametrize('centralized,integral', [(False, False), (True, False),
-                                                  (False, True), (True, True)])
-def test_step_does_not_allocate_arrays_across_phasor_resyncs(centralized, integral):
+@pytest.mark.parametrize('centralized,integral,lowpass', [
+    (False, False, False), (True, False, False), (False, True, False), (True, True, False),
+    (False, True, True), (True, False, True)])
+def test_step_does_not_allocate_arrays_across_phasor_resyncs(centralized, integral, lowpass):
     shape = (400, 6, 6) if centralized else (400, 6)
     anc = AdaptiveNotchCanceller(6, np.linspace(1.0, 499.0, 400), FS, 0.01,
                                  np.ones(shape, dtype=complex))
     if integral:
         anc.set_integral_ratio(0.5)
+    if lowpass:
+        anc.set_update_lowpass(10.0)
     e, out = np.full(6, 0.1), np.zeros(6)
     for _ in range(10):
         anc.step(e, out=out)
@@ -379,3 +382,68 @@ def test_type_2_state_is_kept_cleared_and_validated():
         with pytest.raises(ValueError, match='integral ratio'):
             anc.set_integral_ratio(bad)
     assert anc.integral_ratio.tolist() == [0.5, 0.5]
+
+
+# ----------------------------------------------------------------------------- update low-pass
+def _measured_canceller_response(anc, freq_hz, channel, seconds=20.0):
+    """Column ``channel`` of K at ``freq_hz``: the command's phasor per unit error phasor.
+
+    Open loop, a unit cosine error on one channel; the Hann-windowed lock-in over
+    ``seconds`` rejects the undamped tones the start-up leaves in the weights.
+    """
+    n = np.arange(int(seconds * FS))
+    e = np.zeros((n.size, anc.n_channels))
+    e[:, channel] = np.cos(2 * np.pi * freq_hz * n / FS)
+    u = np.array([anc.step(row) for row in e])
+    w = np.hanning(n.size)
+    return 2.0 * (w * np.exp(-2j * np.pi * freq_hz * n / FS)) @ u / w.sum()
+
+
+@pytest.mark.parametrize('corner_hz', [0.0, 10.0])
+def test_update_lowpass_shapes_k_as_the_closed_form_says(corner_hz):
+    """K measured on the canceller (full P, two tones) equals the closed form.
+
+    With and without the update low-pass; with it the tails 20 Hz from a tone are halved.
+    """
+    from hexapod_vibration.core.control.sensitivity import canceller_frequency_response
+
+    tones, mu = [40.0, 80.0], 0.002
+    rng = np.random.default_rng(3)
+    p = rng.standard_normal((2, 3, 3)) + 1j * rng.standard_normal((2, 3, 3))
+    for f in (18.7, 60.0, 130.0):
+        anc = AdaptiveNotchCanceller(3, tones, FS, mu, p)
+        anc.set_update_lowpass(corner_hz)
+        measured = _measured_canceller_response(anc, f, channel=1)
+        closed = canceller_frequency_response(tones, FS, p, mu, [f],
+                                              update_lowpass_hz=corner_hz)[0][:, 1]
+        np.testing.assert_allclose(measured, closed, rtol=0.01, atol=1e-3 * np.abs(closed).max())
+    far = [18.7]
+    with_lp = canceller_frequency_response(tones, FS, p, mu, far, update_lowpass_hz=10.0)
+    without = canceller_frequency_response(tones, FS, p, mu, far)
+    ratio = np.linalg.norm(with_lp) / np.linalg.norm(without)
+    assert 0.35 < ratio < 0.6, ratio                    # ~ 10 Hz / 21.3 Hz from 40 Hz
+
+
+def test_update_lowpass_keeps_the_notch_and_is_validated():
+    """Same converged cancellation at the tone; 0 is the paper's update bit for bit."""
+    plant = resonant_plant([60.0, 70.0], coupling=0.2)
+    g = frequency_response(plant, 40.0)[0]
+    p = -2.0 * np.linalg.inv(g)[None]
+    d = np.outer(np.cos(2 * np.pi * 40.0 * np.arange(8000) / FS + 0.3), [1.0, -0.5])
+    finals = {}
+    for corner in (0.0, 10.0):
+        anc = AdaptiveNotchCanceller(2, [40.0], FS, 0.01, p)
+        anc.set_update_lowpass(corner)
+        assert anc.update_lowpass_hz == corner
+        err = simulate(plant, anc, d)
+        finals[corner] = sp.to_db_re_g(np.sqrt(np.mean(err[-2000:] ** 2)))
+    assert finals[10.0] < -150.0 and finals[0.0] < -150.0, finals
+    plain = AdaptiveNotchCanceller(2, [40.0], FS, 0.01, p)
+    off = AdaptiveNotchCanceller(2, [40.0], FS, 0.01, p)
+    off.set_update_lowpass(0.0)
+    for e in np.random.default_rng(0).standard_normal((300, 2)):
+        np.testing.assert_array_equal(off.step(e), plain.step(e))
+    for bad in (-1.0, np.nan, 500.0):
+        with pytest.raises(ValueError, match='update_lowpass_hz'):
+            off.set_update_lowpass(bad)
+    assert off.update_lowpass_hz == 0.0

@@ -174,6 +174,28 @@ def test_bad_settings_are_refused_with_a_reason():
         sup.apply({"gain": 1.0})
 
 
+def test_the_update_lowpass_is_set_at_start_up_only():
+    """Given at construction it reaches the canceller; a later change is refused.
+
+    The reason says why (the bound was computed with it) and nothing changes; a bad value
+    and a combination with moving tones are refused too.
+    """
+    sup = NotchSupervisor(config(update_lowpass_hz=10.0))
+    assert sup.canceller.update_lowpass_hz == 10.0
+    with pytest.raises(ValueError, match="set at start-up"):
+        sup.check({"update_lowpass_hz": 5.0})
+    with pytest.raises(ValueError, match="update_lowpass_hz must be"):
+        sup.check({"update_lowpass_hz": -1.0})
+    sup.apply({"update_lowpass_hz": 10.0})          # the same value: nothing to refuse
+    assert sup.canceller.update_lowpass_hz == 10.0 == sup.config.update_lowpass_hz
+    with pytest.raises(ValueError, match="update_lowpass_hz must be"):
+        NotchSupervisor(config(update_lowpass_hz=600.0))
+    for moving in ({"frequency_tracking": True}, {"reference_harmonics": [1.0]}):
+        with pytest.raises(ValueError, match="for fixed tones"):
+            sup.check(moving)
+    assert not sup.config.frequency_tracking
+
+
 def test_a_new_run_restarts_the_sequence_and_keeps_what_was_identified():
     sup = NotchSupervisor(config(enabled=True))
     run(sup, coupled_gain(0.0), 100 + 3200 + 2000)

@@ -95,16 +95,18 @@ class _RiseEvaluator:
 
     def __init__(self, plant: sensitivity.PlantResponse, tones: np.ndarray, fs: float,
                  coefficients: np.ndarray, metric: str, output_weights: np.ndarray | None,
-                 disturbance_csd: sensitivity.PlantResponse | None) -> None:
+                 disturbance_csd: sensitivity.PlantResponse | None,
+                 update_lowpass_hz: float = 0.0) -> None:
         self._tones, self._fs, self._p, self._metric = tones, fs, coefficients, metric
         self._plant, self._c, self._phi = plant, output_weights, disturbance_csd
+        self._lowpass_hz = update_lowpass_hz
 
     def rise(self, rates: np.ndarray) -> tuple[float, float]:
         """(rise dB, at Hz); (inf, NaN) when the closed loop would be unstable."""
         prediction = sensitivity.predict_sensitivity(
             self._plant, self._tones, self._fs, self._p, rates,
             output_weights=self._c if self._metric == 'output' else None,
-            disturbance_csd=self._phi)
+            disturbance_csd=self._phi, update_lowpass_hz=self._lowpass_hz)
         return prediction.largest_rise(self._metric)
 
 
@@ -123,7 +125,8 @@ def choose_tone_rates(plant: sensitivity.PlantResponse,
                       coefficients: np.ndarray, mu: float, policy: str = 'manual',
                       max_rise_db: float = DEFAULT_MAX_RISE_DB, metric: str | None = None,
                       output_weights: np.ndarray | None = None,
-                      disturbance_csd: sensitivity.PlantResponse | None = None) -> MuChoice:
+                      disturbance_csd: sensitivity.PlantResponse | None = None,
+                      update_lowpass_hz: float = 0.0) -> MuChoice:
     """Per-tone rates for ``policy`` and the rise they predict (see the module).
 
     Args:
@@ -141,6 +144,7 @@ def choose_tone_rates(plant: sensitivity.PlantResponse,
         output_weights: c (C,) of the output view (e.g. the z row of ``J^-1``).
         disturbance_csd: callable frequencies (Hz) -> CSD (F, C, C) of the error without
             control (e.g. ``DisturbanceSpectrum.at`` of the broadband identification).
+        update_lowpass_hz: corner of the canceller's update low-pass (Hz; 0: none).
 
     Raises:
         ValueError: a bad policy, limit, metric, rate or tone list.
@@ -160,7 +164,8 @@ def choose_tone_rates(plant: sensitivity.PlantResponse,
     mu = float(mu)
     if tones.size == 0:
         return MuChoice(policy, mu, rates, limit, 0.0, float('nan'), metric, None)
-    evaluator = _RiseEvaluator(plant, tones, fs, p, metric, output_weights, disturbance_csd)
+    evaluator = _RiseEvaluator(plant, tones, fs, p, metric, output_weights, disturbance_csd,
+                               update_lowpass_hz)
     floor_note = ''
     if policy == 'auto' and mu > 0.0:
         rates, floor_note = _auto_rates(evaluator, mu, tones.size, limit)

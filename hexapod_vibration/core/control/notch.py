@@ -25,6 +25,16 @@ sweeping through the plant's and the disturbance path's response, its amplitude 
 with speed^2) then leaves no residual; the first-order update leaves ``1/mu`` samples of
 that change. With the normalised P (M = I) the averaged loop of the residual is
 ``s^2 + mu s + kappa mu`` (per sample): damping ``zeta = 1 / (2 sqrt(ratio))``.
+Optionally (:meth:`AdaptiveNotchCanceller.set_update_lowpass`) each tone's correction
+``mu P_t e_n e^{-j phi_t,n}`` (a baseband signal) passes a first-order low-pass of corner
+``f_c`` before it reaches the weights (and the rate integrator). At the tone nothing changes
+(unit gain at DC: the same notch, the same converged weights); away from it the canceller's
+gain falls by ``f_c / |f - f_t|`` more (its tails), so a tone no longer lifts a lightly damped
+loop mode tens of hertz away (Table 1: the 18.7 Hz mode's rise +1.9 dB -> +0.7 dB predicted
+at mu 0.002 with f_c = 20 Hz), and the weights' 2 f_t ripple is smoothed too. The price is
+phase lag near the tone, ``atan(df / f_c)`` at an offset df: negligible at the weight
+loop's bandwidth (``~mu fs / 2 pi``, 0.3 Hz at mu 0.002), and in the Nyquist bound and the
+predicted sensitivity (:func:`update_lowpass_response`).
 Timing (docs/architecture.md): the command returned for sample ``n`` is held over
 ``[n/fs, (n+1)/fs)`` and first seen in the error of sample ``n+1``.
 
@@ -48,6 +58,40 @@ from hexapod_vibration.core.control.phasor import TWO_PI, PhasorBank
 
 SAME_FREQUENCY_TOL_HZ = 1e-9
 DEFAULT_RAMP_SAMPLES = 50
+
+
+def validate_update_lowpass(corner_hz: float, sample_rate_hz: float) -> float:
+    """The update low-pass corner (Hz): 0 (off) or in (0, fs/2); ValueError otherwise."""
+    value = float(corner_hz)
+    if not math.isfinite(value) or value < 0.0 or value >= 0.5 * sample_rate_hz:
+        raise ValueError(f'update_lowpass_hz must be 0 (off) or in (0, '
+                         f'{0.5 * sample_rate_hz:g}) Hz, got {corner_hz!r}')
+    return value
+
+
+def update_lowpass_pole(corner_hz: float, sample_rate_hz: float) -> float:
+    """Pole ``a = exp(-2 pi f_c / fs)`` of the update low-pass ``(1 - a) / (1 - a z^-1)``.
+
+    0 for ``corner_hz = 0``: no filter (the paper's update).
+    """
+    return math.exp(-2.0 * math.pi * corner_hz / sample_rate_hz) if corner_hz > 0.0 else 0.0
+
+
+def update_lowpass_response(corner_hz: float, sample_rate_hz: float,
+                            baseband_z: np.ndarray) -> np.ndarray:
+    """The update low-pass at baseband ``zeta = z e^{-j w_t}`` (1 everywhere when off).
+
+    The correction of tone t is demodulated by ``e^{-j phi_t}``, so a frequency z of the
+    error reaches the filter at ``z e^{-j w_t}`` (and ``z e^{+j w_t}`` for the conjugate
+    branch); the filter is ``L(zeta) = (1 - a) zeta / (zeta - a)``, with no delay (the
+    filtered correction is applied in the same sample, as :meth:`AdaptiveNotchCanceller._adapt`
+    does).
+    """
+    a = update_lowpass_pole(corner_hz, sample_rate_hz)
+    zeta = np.asarray(baseband_z, dtype=complex)
+    if a == 0.0:
+        return np.ones_like(zeta)
+    return (1.0 - a) * zeta / (zeta - a)
 
 
 def validate_frequencies(
@@ -237,6 +281,8 @@ class AdaptiveNotchCanceller:
         self._u = np.zeros(self._c)
         self._weight_limit: float | None = None
         self._integral_base = 0.0
+        self._lowpass_hz = 0.0
+        self._lowpass_pole = 0.0
         self._limit_scratch: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
         self.clamped_samples = 0
         self._install(freqs, np.zeros((freqs.size, self._c), dtype=complex),
@@ -266,6 +312,7 @@ class AdaptiveNotchCanceller:
         self._m_stack = self._m.T[:, None, :]
         self._zv = np.ascontiguousarray(np.conj(z).T, dtype=complex)  # conj(Z)^T, (C, T)
         self._zy = np.zeros((self._c, t), dtype=complex)    # kappa * update of V
+        self._lp = np.zeros((self._c, t), dtype=complex)    # low-passed update of V
         self._ratio = np.asarray(ratio, dtype=float).copy()
         self._adapting = adapting.astype(bool).copy()
         self._set_p(p_full)
@@ -362,6 +409,12 @@ class AdaptiveNotchCanceller:
         else:
             np.dot(self._q_stack, e, out=self._m_flat)
             np.matmul(self._z_stack, self._m_stack, out=self._y_stack)
+        if self._lowpass_pole:
+            a = self._lowpass_pole
+            np.multiply(self._lp, a, out=self._lp)
+            np.multiply(self._y, 1.0 - a, out=self._y)
+            np.add(self._lp, self._y, out=self._y)
+            np.copyto(self._lp, self._y)
         if self._integral:
             np.multiply(self._y, self._kappa, out=self._zy)
             np.add(self._zv, self._zy, out=self._zv)
@@ -464,6 +517,7 @@ class AdaptiveNotchCanceller:
         self._fading.add(self.weights, self.phases_rad, self._dphi.copy(), ramp)
         self._v[:] = 0.0
         self._zv[:] = 0.0
+        self._lp[:] = 0.0
 
     def set_weights(self, weights: np.ndarray) -> None:
         """Overwrite the complex (T, C) weights (N); the output follows immediately."""
@@ -486,6 +540,7 @@ class AdaptiveNotchCanceller:
         ramp = _validate_ramp(ramp_samples)
         if not flag:
             self._zv[:] = 0.0            # the weights hold: no rate left to resume with
+            self._lp[:] = 0.0            # nor a filtered correction still to come
         self._enabled = bool(flag)
         self._target = 1.0 if self._enabled else 0.0
         self._gain_step = 1.0 / ramp if ramp > 0 else 0.0
@@ -497,6 +552,7 @@ class AdaptiveNotchCanceller:
         """
         if flag:
             self._zv[:] = 0.0
+            self._lp[:] = 0.0
         self._frozen = bool(flag)
 
     def limit_weights(self, limit_n: float) -> bool:
@@ -546,6 +602,16 @@ class AdaptiveNotchCanceller:
         self._zv[:, values == 0.0] = 0.0
         self._update_rate()
 
+    def set_update_lowpass(self, corner_hz: float) -> None:
+        """Low-pass each tone's correction at ``corner_hz`` (Hz, see the module; 0: off).
+
+        The filter starts from rest. Raises ValueError (object unchanged) unless
+        ``corner_hz`` is 0 or in (0, fs/2).
+        """
+        self._lowpass_hz = validate_update_lowpass(corner_hz, self._fs)
+        self._lowpass_pole = update_lowpass_pole(self._lowpass_hz, self._fs)
+        self._lp[:] = 0.0
+
     def set_weight_rates(self, rates: np.ndarray) -> None:
         """Overwrite the weights' rates of change Z (T, C) (N per sample, type-2 update)."""
         self._zv[...] = self._channel_major(rates, 'rates')
@@ -574,6 +640,11 @@ class AdaptiveNotchCanceller:
     def integrating(self) -> bool:
         """True while some tone adapts with the type-2 update (a ratio > 0)."""
         return self._integral
+
+    @property
+    def update_lowpass_hz(self) -> float:
+        """Corner of the update low-pass (Hz; 0: the paper's update)."""
+        return self._lowpass_hz
 
     @property
     def integral_ratio(self) -> np.ndarray:

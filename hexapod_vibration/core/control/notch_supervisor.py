@@ -96,6 +96,7 @@ from hexapod_vibration.core.control.notch import (
     AdaptiveNotchCanceller,
     validate_frequencies,
     validate_mu,
+    validate_update_lowpass,
 )
 from hexapod_vibration.core.control.plant_identification import (
     BroadbandIdentifier,
@@ -172,6 +173,8 @@ GUARD_SETTLE_S = 0.5
 decay) the guard waits this long before the error counts as the level without control (s)."""
 DEFAULT_WEIGHT_LIMIT_N = 40.0
 """The model's strut dynamic force limit (config/pph_model.yaml force_limit_dynamic_n)."""
+DEFAULT_UPDATE_LOWPASS_HZ = 0.0
+"""Default corner of the update low-pass (Hz): 0, the paper's update."""
 
 
 @dataclass(frozen=True)
@@ -214,6 +217,11 @@ class NotchConfig:
             eq. 18 bound) or ``broadband`` (a 10 s multisine over 0..fs/2 that survives a
             disturbance a fraction of a hertz from a tone; the Nyquist bound on the
             identified G(f), the mu policy and the predicted sensitivity).
+        update_lowpass_hz: corner of the low-pass on each tone's weight correction (Hz;
+            0: the paper's update): the canceller's gain far from its tones falls by
+            ``update_lowpass_hz / |f - f_t|`` more, so its tails no longer lift a lightly
+            damped loop mode (never worse than off at the paper's rates); in the bound
+            and the prediction. Set at start-up.
     """
 
     mu: float = 0.002
@@ -239,6 +247,7 @@ class NotchConfig:
     guard_margin_db: float = 1.0
     weight_limit_n: float = DEFAULT_WEIGHT_LIMIT_N
     identification: str = "tones"
+    update_lowpass_hz: float = DEFAULT_UPDATE_LOWPASS_HZ
 
     def replaced(self, changes: Mapping[str, Any]) -> NotchConfig:
         """A copy with ``changes`` (parameter name -> value); unknown names raise KeyError."""
@@ -347,6 +356,7 @@ class NotchSupervisor:
             self.canceller.set_tone_frequencies(tones, ramp_samples=0)
         self.canceller.set_enabled(False, ramp_samples=0)
         self.canceller.set_weight_limit(config.weight_limit_n)
+        self.canceller.set_update_lowpass(config.update_lowpass_hz)
         self.dc_blocker = DCBlocker(self.channels, self.fs, config.dc_cutoff_hz)
         self._command = np.zeros(self.channels)
         self.identifier: adaptation.ToneResponseIdentifier | None = None
@@ -498,6 +508,10 @@ class NotchSupervisor:
                              f"got {ref.size}")
         if ref.size and not np.all(np.isfinite(ref) & (ref > 0.0)):
             raise ValueError(f"reference_harmonics must be finite and > 0, got {ref.tolist()}")
+        if cfg.update_lowpass_hz > 0.0 and (cfg.frequency_tracking or ref.size):
+            raise ValueError("update_lowpass_hz is for fixed tones: with frequency_tracking or "
+                             "reference_harmonics it must be 0 (the tracker reads the "
+                             "weights' rotation, which the low-pass delays)")
         timeout = float(cfg.reference_timeout_s)
         if not np.isfinite(timeout) or timeout <= 0.0:
             raise ValueError(f"reference_timeout_s must be finite and > 0, got {timeout}")
@@ -523,6 +537,15 @@ class NotchSupervisor:
             if not np.isfinite(value) or value <= 0.0:
                 raise ValueError(f"{name} must be finite and > 0, got {value!r}")
 
+    def _check_start_up_settings(self, changes: Mapping[str, Any]) -> None:
+        """Refuse a change of a setting that is fixed at start-up (the bound depends on it)."""
+        if ("update_lowpass_hz" in changes
+                and float(changes["update_lowpass_hz"]) != self._config.update_lowpass_hz):
+            validate_update_lowpass(changes["update_lowpass_hz"], self.fs)
+            raise ValueError("update_lowpass_hz is set at start-up (the stability bound and "
+                             "the prediction were computed with "
+                             f"{self._config.update_lowpass_hz:g} Hz)")
+
     def _plan(self, changes: Mapping[str, Any]) -> _Plan:
         """Check a set of changes as a whole, changing nothing.
 
@@ -536,6 +559,7 @@ class NotchSupervisor:
         """
         self._check_tones(changes)
         self._check_guard_settings(changes)
+        self._check_start_up_settings(changes)
         tones = self._bank_for(changes)
         mode = changes.get("adaptation", self._config.adaptation)
         if mode not in adaptation.COEFFICIENT_MODES:
@@ -649,7 +673,8 @@ class NotchSupervisor:
     def _nyquist_limit(self, tones: list[float], coefficients: np.ndarray) -> float:
         """Largest common rate the Nyquist test finds stable on the identified G(f)."""
         return sensitivity.stable_mu_limit(self.plant_frequency_response.at, tones, self.fs,
-                                           coefficients)
+                                           coefficients,
+                                           update_lowpass_hz=self._config.update_lowpass_hz)
 
     def _measured_response(self) -> tuple[np.ndarray, float, float, str]:
         """G at the tones from the finished identifier, its uncertainty, limit, what it is."""
@@ -745,10 +770,13 @@ class NotchSupervisor:
         largest stable common rate), found by doubling from 1e-5 and bisecting to 2 %;
         moving tones with the type-2 update they sweep with (:attr:`integral_ratio_setting`).
         """
+        cfg = self._config
+
         def stable(mu: float) -> bool:
             return sensitivity.closed_loop_is_stable(self.plant_frequency_response.at,
                                                      tones, self.fs, coefficients, mu,
-                                                     integral_ratio=self.integral_ratio_setting)
+                                                     integral_ratio=self.integral_ratio_setting,
+                                                     update_lowpass_hz=cfg.update_lowpass_hz)
 
         lo = 1e-5
         if not stable(lo):
@@ -776,13 +804,15 @@ class NotchSupervisor:
                                              policy=cfg.mu_policy,
                                              max_rise_db=cfg.max_rise_db,
                                              output_weights=self.output_weights,
-                                             disturbance_csd=phi.at)
+                                             disturbance_csd=phi.at,
+                                             update_lowpass_hz=cfg.update_lowpass_hz)
         self.mu_choice = choice
         folded = sensitivity.per_tone_coefficients(coefficients, mu, choice.tone_mu)
         self.canceller.set_coefficients(folded)
         self.sensitivity = sensitivity.predict_sensitivity(
             pfr.at, tones, self.fs, folded, mu, output_weights=self.output_weights,
-            disturbance_csd=phi.at, check_stability=False)
+            disturbance_csd=phi.at, check_stability=False,
+            update_lowpass_hz=cfg.update_lowpass_hz)
         self._event("warn" if choice.warning else "info",
                     choice.warning or f"mu_policy {choice.policy}: tone rates "
                     f"{np.round(choice.tone_mu, 6).tolist()}, predicted rise "

@@ -37,7 +37,7 @@ from functools import cached_property
 
 import numpy as np
 
-from hexapod_vibration.core.control.notch import validate_frequencies
+from hexapod_vibration.core.control.notch import update_lowpass_response, validate_frequencies
 
 DEFAULT_GRID_STEP_HZ = 0.1
 REFERENCE_MU = 0.002
@@ -86,12 +86,15 @@ def canceller_frequency_response(
     coefficients: np.ndarray, mu: float | Sequence[float] | np.ndarray,
     frequencies_hz: Sequence[float] | np.ndarray, radius: float = 1.0,
     integral_ratio: float | Sequence[float] | np.ndarray = 0.0,
+    update_lowpass_hz: float = 0.0,
 ) -> np.ndarray:
     """K (F, C, C) of the adapting canceller from error to command (closed form).
 
     With the type-2 update (:meth:`AdaptiveNotchCanceller.set_integral_ratio`,
     ``kappa_t = ratio_t mu_t``) each tone's ``z / (z - p)`` becomes
     ``g + kappa_t g^2`` with ``g = z / (z - p)`` (the rate integrates the same correction).
+    With the update low-pass (:meth:`AdaptiveNotchCanceller.set_update_lowpass`) each branch
+    is further multiplied by the filter at baseband, ``L(z / p)`` and ``L(z p)``.
 
     Args:
         tone_frequencies_hz: tones f_t (Hz).
@@ -102,6 +105,7 @@ def canceller_frequency_response(
         radius: |z| (1: the frequency response; slightly > 1 for a Nyquist contour that
             passes outside the canceller's poles).
         integral_ratio: the type-2 ratio, one or per tone (0: the first-order update).
+        update_lowpass_hz: corner of the update low-pass (Hz; 0: none).
     """
     tones = validate_frequencies(tone_frequencies_hz, sample_rate_hz)
     p = np.asarray(coefficients, dtype=complex)
@@ -117,6 +121,11 @@ def canceller_frequency_response(
     if np.any(kappa > 0.0):
         g_pos = g_pos * (1.0 + kappa[None, :] * g_pos)
         g_neg = g_neg * (1.0 + kappa[None, :] * g_neg)
+    if update_lowpass_hz > 0.0:
+        g_pos = g_pos * update_lowpass_response(update_lowpass_hz, sample_rate_hz,
+                                                z[:, None] * np.conj(pole)[None, :])
+        g_neg = g_neg * update_lowpass_response(update_lowpass_hz, sample_rate_hz,
+                                                z[:, None] * pole[None, :])
     half = 0.5 * rates[:, None, None] * p                                 # (T, C, C)
     return (np.einsum('ft,tij->fij', g_pos, half)
             + np.einsum('ft,tij->fij', g_neg, np.conj(half)))
@@ -265,7 +274,8 @@ def closed_loop_is_stable(plant: PlantResponse, tone_frequencies_hz: Sequence[fl
                           mu: float | Sequence[float] | np.ndarray,
                           frequencies_hz: np.ndarray | None = None,
                           max_refinements: int = 60,
-                          integral_ratio: float | Sequence[float] | np.ndarray = 0.0) -> bool:
+                          integral_ratio: float | Sequence[float] | np.ndarray = 0.0,
+                          update_lowpass_hz: float = 0.0) -> bool:
     """Nyquist test of the loop G + canceller from G's frequency response (G stable).
 
     The closed-loop poles are the zeros of ``det(I - G(z) K(z))``. With G stable and
@@ -290,6 +300,8 @@ def closed_loop_is_stable(plant: PlantResponse, tone_frequencies_hz: Sequence[fl
         max_refinements: bisection rounds of the grid.
         integral_ratio: the canceller's type-2 ratio (see :func:`canceller_frequency_response`;
             its double poles sit on the same circle, inside the contour).
+        update_lowpass_hz: corner of the update low-pass (Hz; 0: none; its poles
+            ``a e^{+-j w_t}`` lie inside the unit circle).
     """
     fs = float(sample_rate_hz)
     tones = validate_frequencies(tone_frequencies_hz, fs)
@@ -313,7 +325,7 @@ def closed_loop_is_stable(plant: PlantResponse, tone_frequencies_hz: Sequence[fl
     def det_on_contour(freqs: np.ndarray) -> np.ndarray:
         g = _plant_at(plant, freqs)
         k = canceller_frequency_response(tones, fs, coefficients, rates, freqs, radius,
-                                         integral_ratio)
+                                         integral_ratio, update_lowpass_hz)
         return np.linalg.det(np.eye(g.shape[1]) - g @ k)
 
     d = det_on_contour(f)
@@ -341,7 +353,8 @@ def predict_sensitivity(plant: PlantResponse, tone_frequencies_hz: Sequence[floa
                         frequencies_hz: np.ndarray | None = None,
                         output_weights: np.ndarray | None = None,
                         disturbance_csd: PlantResponse | np.ndarray | None = None,
-                        check_stability: bool = True) -> SensitivityPrediction:
+                        check_stability: bool = True,
+                        update_lowpass_hz: float = 0.0) -> SensitivityPrediction:
     """|S(f)| of the loop G + canceller (tones, P_t, mu or per-tone rates), before control.
 
     Args:
@@ -357,26 +370,29 @@ def predict_sensitivity(plant: PlantResponse, tone_frequencies_hz: Sequence[floa
         disturbance_csd: Phi for the ``output`` view, (F, C, C) on the grid or a callable
             of the frequencies; None: Phi = I.
         check_stability: run :func:`closed_loop_is_stable`.
+        update_lowpass_hz: corner of the canceller's update low-pass (Hz; 0: none).
     """
     fs = float(sample_rate_hz)
     tones = validate_frequencies(tone_frequencies_hz, fs)
     f = prediction_grid(tones, fs, mu) if frequencies_hz is None else np.asarray(
         frequencies_hz, dtype=float).reshape(-1)
     g = _plant_at(plant, f)
-    k = canceller_frequency_response(tones, fs, coefficients, mu, f)
+    k = canceller_frequency_response(tones, fs, coefficients, mu, f,
+                                     update_lowpass_hz=update_lowpass_hz)
     s = sensitivity_matrix(g, k)
     out = None
     if output_weights is not None:
         phi = disturbance_csd(f) if callable(disturbance_csd) else disturbance_csd
         out = output_sensitivity(s, output_weights, phi)
-    stable = (closed_loop_is_stable(plant, tones, fs, coefficients, mu)
+    stable = (closed_loop_is_stable(plant, tones, fs, coefficients, mu,
+                                    update_lowpass_hz=update_lowpass_hz)
               if check_stability else None)
     return SensitivityPrediction(f, tones, s, np.abs(strut_sensitivity(g, k)), out, stable)
 
 
 def stable_mu_limit(plant: PlantResponse, tone_frequencies_hz: Sequence[float] | np.ndarray,
                     sample_rate_hz: float, coefficients: np.ndarray, mu_max: float = 1.0,
-                    rtol: float = 0.01) -> float:
+                    rtol: float = 0.01, update_lowpass_hz: float = 0.0) -> float:
     """Largest common rate (to ``rtol``) the Nyquist test finds stable, from G's response.
 
     The exact counterpart, for a measured G, of
@@ -388,7 +404,7 @@ def stable_mu_limit(plant: PlantResponse, tone_frequencies_hz: Sequence[float] |
     """
     def stable(mu: float) -> bool:
         return closed_loop_is_stable(plant, tone_frequencies_hz, sample_rate_hz,
-                                     coefficients, mu)
+                                     coefficients, mu, update_lowpass_hz=update_lowpass_hz)
 
     grid = np.geomspace(mu_max * 1e-6, mu_max, 25)
     if not stable(grid[0]):
