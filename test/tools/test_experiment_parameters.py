@@ -79,3 +79,15 @@ def test_the_twin_scenario_never_switches_control_on():
     assert twin.control_on_s == twin.duration_s == scenario.duration_s
     assert twin.seed == scenario.seed and twin.identify_at_s == scenario.identify_at_s
     assert run_record(twin, "lockstep").control_on_sample == -1
+
+
+def test_notch_settings_the_controller_refuses_are_refused_with_the_scenario():
+    """Checked as the controller would at start-up, before a run brings anything up."""
+    import pytest
+
+    notch = {"tone_frequencies_hz": [40.0], "update_lowpass_hz": 10.0}
+    scenario = scenario_from_dict({**BASE, "notch": notch})
+    assert node_parameters(scenario, "lockstep")["notch_controller"]["ros__parameters"][
+        "update_lowpass_hz"] == 10.0
+    with pytest.raises(ValueError, match="notch: update_lowpass_hz is for fixed tones"):
+        scenario_from_dict({**BASE, "notch": {**notch, "frequency_tracking": True}})

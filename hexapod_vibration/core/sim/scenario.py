@@ -152,6 +152,22 @@ class Scenario:
             raise ValueError("the uncontrolled window must start after identification begins")
         if self.control_on_s > self.duration_s:
             raise ValueError("control_on_s must not be after duration_s")
+        if self.notch.tone_frequencies_hz:
+            self._check_notch_settings()
+
+    def _check_notch_settings(self) -> None:
+        """The notch settings as a whole, as the controller will check them at start-up.
+
+        A combination the controller refuses (e.g. ``update_lowpass_hz`` with frequency
+        tracking) is refused here, before a run brings anything up.
+        """
+        from hexapod_vibration.core.control.notch_supervisor import NotchSupervisor
+        from hexapod_vibration.core.sim.closed_loop import notch_config
+
+        try:
+            NotchSupervisor(notch_config(self))
+        except (ValueError, KeyError) as exc:
+            raise ValueError(f"notch: {exc}") from None
 
     def with_timeline(self, duration_s: float | None = None,
                       control_on_s: float | None = None) -> Scenario:
