@@ -71,3 +71,47 @@ def test_every_band_stays_within_1db_of_its_level_without_control(name):
     else:
         assert status['guard'] == 'off' and status['state'] == 'refused'
         assert 'divergence guard' in status['refusal'] and '79 Hz' in status['guard_action']
+
+
+def _following_db(z: np.ndarray, track_hz: np.ndarray, window: int = 1000) -> np.ndarray:
+    """Level (dB) of the line at ``track_hz`` (per sample) in consecutive 1 s windows.
+
+    Demodulated along the track's phase and averaged under a Hann window: a band that
+    follows the line (about 1.5 Hz wide), whatever its sweep.
+    """
+    baseband = z * np.exp(-2j * np.pi * np.cumsum(track_hz) / FS)
+    w = np.hanning(window)
+    rows = baseband[:baseband.size // window * window].reshape(-1, window)
+    return 20 * np.log10(np.abs(rows @ w) / w.sum())
+
+
+def test_spin_up_tracked_meets_the_ramp_and_steady_targets_and_is_never_worse():
+    """Issue 11's spin-up targets on the core loop (no tachometer, tracking, update low-pass).
+
+    Rotor 30 -> 50 Hz at 1 Hz/s (16..36 s), orders 1-3: against the twin, every order's
+    following band is >= 30 dB down in every 1 s window of the ramp (17..36 s) and >= 40 dB
+    at steady speed (38..50 s); no third octave 5..450 Hz rises by 1 dB over either span.
+    (Measured: ramp min 40 / 36 / 44 dB, steady min 58 / 58 / 64 dB, rises +0.21 / +0.54
+    dB; with the paper's update the ramp min was 38 / 32 / 14 dB at the rates the policy
+    then allowed.)
+    """
+    scenario = load_scenario(ROOT / 'config' / 'scenarios' / 'spin_up.yaml')
+    assert scenario.notch.settings['update_lowpass_hz'] > 0.0
+    runs = []
+    for sc in (scenario, dataclasses.replace(scenario, control_on_s=scenario.duration_s)):
+        loop = CoreLoop(CFG, sc)
+        runs.append((loop, CFG.geometry.platform_from_struts(loop.run().accel_m_s2)[:, 2]))
+    (loop, z_on), (_, z_off) = runs
+    speed = scenario.rotor.rotor().speed_hz(np.arange(z_on.size) / FS)
+    start_s = np.arange(z_on.size // 1000)
+    ramp, steady = (start_s >= 17) & (start_s < 36), (start_s >= 38) & (start_s < 50)
+    for order in scenario.rotor.orders:
+        reduction = (_following_db(z_off, order * speed) - _following_db(z_on, order * speed))
+        assert reduction[ramp].min() >= 30.0, (order, np.round(reduction[ramp], 1))
+        assert reduction[steady].min() >= 40.0, (order, np.round(reduction[steady], 1))
+    bands = third_octave_bands_hz(5.0, 450.0)[:, 1:]
+    for lo, hi in ((17, 36), (38, 50)):
+        span = slice(lo * 1000, hi * 1000)
+        rise = _band_db(z_on[span], bands) - _band_db(z_off[span], bands)
+        assert np.max(rise) < 1.0, (lo, hi, np.round(rise, 2))
+    assert loop.notch.status()['guard'] == 'watching'

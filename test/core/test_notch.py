@@ -447,3 +447,20 @@ def test_update_lowpass_keeps_the_notch_and_is_validated():
         with pytest.raises(ValueError, match='update_lowpass_hz'):
             off.set_update_lowpass(bad)
     assert off.update_lowpass_hz == 0.0
+
+
+def test_adapted_weights_are_the_weights_without_the_filters_lag():
+    """With the update low-pass the adapted weights are the paper canceller's weights.
+
+    Open loop (the same errors either way): the filter delays the corrections, loses none.
+    """
+    p = np.random.default_rng(5).standard_normal((2, 3)) + 0j
+    plain = AdaptiveNotchCanceller(3, [40.0, 80.0], FS, 0.01, p)
+    filtered = AdaptiveNotchCanceller(3, [40.0, 80.0], FS, 0.01, p)
+    filtered.set_update_lowpass(10.0)
+    for e in np.random.default_rng(6).standard_normal((500, 3)):
+        plain.step(e)
+        filtered.step(e)
+    np.testing.assert_allclose(filtered.adapted_weights, plain.weights, rtol=1e-9, atol=1e-12)
+    assert np.max(np.abs(filtered.weights - plain.weights)) > 1e-3   # the lag is real
+    np.testing.assert_array_equal(plain.adapted_weights, plain.weights)

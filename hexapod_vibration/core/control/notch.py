@@ -642,6 +642,21 @@ class AdaptiveNotchCanceller:
         return self._integral
 
     @property
+    def adapted_weights(self) -> np.ndarray:
+        """Complex (T, C) weights (N) with every correction so far applied in full.
+
+        Without the update low-pass these are :attr:`weights`. With it, the corrections
+        still inside the filter are added: the sum of the filter's inputs equals the sum of
+        its outputs plus ``a / (1 - a)`` times its state (first order, unit DC gain), so the
+        change of these over a block is the block's unfiltered correction, without the
+        filter's lag (what a phase detector on the weights must see).
+        """
+        if not self._lowpass_pole:
+            return self.weights
+        a = self._lowpass_pole
+        return np.conj(self._v + (a / (1.0 - a)) * self._lp).T
+
+    @property
     def update_lowpass_hz(self) -> float:
         """Corner of the update low-pass (Hz; 0: the paper's update)."""
         return self._lowpass_hz

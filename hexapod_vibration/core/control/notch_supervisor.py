@@ -508,10 +508,6 @@ class NotchSupervisor:
                              f"got {ref.size}")
         if ref.size and not np.all(np.isfinite(ref) & (ref > 0.0)):
             raise ValueError(f"reference_harmonics must be finite and > 0, got {ref.tolist()}")
-        if cfg.update_lowpass_hz > 0.0 and (cfg.frequency_tracking or ref.size):
-            raise ValueError("update_lowpass_hz is for fixed tones: with frequency_tracking or "
-                             "reference_harmonics it must be 0 (the tracker reads the "
-                             "weights' rotation, which the low-pass delays)")
         timeout = float(cfg.reference_timeout_s)
         if not np.isfinite(timeout) or timeout <= 0.0:
             raise ValueError(f"reference_timeout_s must be finite and > 0, got {timeout}")
@@ -1340,7 +1336,7 @@ class _ToneFollowing:
         if self.tracker is None:
             return None
         canceller = self.sup.canceller
-        weights = canceller.weights
+        weights = canceller.adapted_weights      # the update low-pass's lag left out
         previous, self._previous_w = self._previous_w, weights
         t = self.nominal_hz.size
         rate = canceller.mu if canceller.enabled and not canceller.frozen else 0.0
