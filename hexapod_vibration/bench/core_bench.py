@@ -213,6 +213,10 @@ def tone_frequencies(n_tones: int) -> np.ndarray:
     return np.linspace(20.0, 480.0, n_tones) if n_tones > 1 else np.array([40.0])
 
 
+UPDATE_LOWPASS_BENCH_HZ = 10.0
+"""Corner (Hz) of the update low-pass the benchmark times (the shipped scenarios')."""
+
+
 def make_notch(n_channels: int, n_tones: int, centralized: bool,
                seed: int = 0) -> AdaptiveNotchCanceller:
     """An adapting notch with random coefficients: diagonal P (decentralized) or full P."""
@@ -319,6 +323,9 @@ def cost_configurations(quick: bool) -> dict[str, tuple[Step, int]]:
             make_fxlms(n, DEFAULT_CONTROL_TAPS,
                        tones_hz=tuple(tone_frequencies(FXLMS_SAME_TONES))).step, STRUTS)
     configs['numpy_floor_6x8'] = (numpy_floor_step(STRUTS, RATIO_NOTCH_TONES), STRUTS)
+    lowpassed = make_notch(STRUTS, RATIO_NOTCH_TONES, False)
+    lowpassed.set_update_lowpass(UPDATE_LOWPASS_BENCH_HZ)
+    configs[f'notch_dec_6x{RATIO_NOTCH_TONES}_update_lowpass'] = (lowpassed.step, STRUTS)
     for mode in TRACKING_MODES:
         configs[f'supervisor_6x{RATIO_NOTCH_TONES}_{mode}'] = (
             make_tracking_supervisor(RATIO_NOTCH_TONES, mode), STRUTS)
@@ -368,7 +375,12 @@ def measure_costs(timing: TimingSettings, quick: bool) -> dict[str, Any]:
                                        DEFAULT_CONTROL_TAPS, len(FXLMS_TONES_HZ))
     supervisor = {mode: med[f'supervisor_6x{RATIO_NOTCH_TONES}_{mode}']
                   for mode in TRACKING_MODES}
+    lowpass = med[f'notch_dec_6x{RATIO_NOTCH_TONES}_update_lowpass']
     return {
+        'update_lowpass_us_per_sample': {
+            f'notch_dec_6x{RATIO_NOTCH_TONES}': lowpass,
+            'added': lowpass - notch[f'6x{RATIO_NOTCH_TONES}'],
+            'corner_hz': UPDATE_LOWPASS_BENCH_HZ},
         'tracking_us_per_sample': {
             'supervisor_6x8': supervisor,
             'added_by_tracking': supervisor['tracking'] - supervisor['fixed'],
