@@ -30,8 +30,8 @@ Optionally (:meth:`AdaptiveNotchCanceller.set_update_lowpass`) each tone's corre
 ``f_c`` before it reaches the weights (and the rate integrator). At the tone nothing changes
 (unit gain at DC: the same notch, the same converged weights); away from it the canceller's
 gain falls by ``f_c / |f - f_t|`` more (its tails), so a tone no longer lifts a lightly damped
-loop mode tens of hertz away (Table 1: the 18.7 Hz mode's rise +1.9 dB -> +0.7 dB predicted
-at mu 0.002 with f_c = 20 Hz), and the weights' 2 f_t ripple is smoothed too. The price is
+loop mode tens of hertz away (Table 1 at mu 0.002: the 18.7 Hz mode's predicted rise
++1.9 dB -> +0.3 dB with f_c = 10 Hz), and the weights' 2 f_t ripple is smoothed too. The price is
 phase lag near the tone, ``atan(df / f_c)`` at an offset df: negligible at the weight
 loop's bandwidth (``~mu fs / 2 pi``, 0.3 Hz at mu 0.002), and in the Nyquist bound and the
 predicted sensitivity (:func:`update_lowpass_response`).
