@@ -160,9 +160,11 @@ class CompiledNotch:
         """Copy the state; ValueError for states the kernel does not model."""
         c = canceller
         if (c._q is None or not c.enabled or c.frozen or c.output_gain != 1.0
-                or c._fading.active or c.mu <= 0.0):
+                or c._fading.active or c.mu <= 0.0 or c.integrating
+                or c.update_lowpass_hz > 0.0):
             raise ValueError('the compiled notch models only an adapting, enabled notch '
-                             'with diagonal P, output gain 1 and no fading tones')
+                             'with diagonal P, output gain 1, no fading tones, the paper\'s '
+                             'first-order update and no update low-pass')
         self.n_channels = c.n_channels
         self._v = c._v.copy()
         self._q = c._q.copy()

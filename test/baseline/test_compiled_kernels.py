@@ -82,6 +82,14 @@ def test_compiled_notch_refuses_states_it_does_not_model():
     fading.set_tone_frequencies([40.0])
     with pytest.raises(ValueError, match='fading'):
         CompiledNotch(fading)
+    lowpassed = make_notch(6, 2, centralized=False)
+    lowpassed.set_update_lowpass(10.0)
+    with pytest.raises(ValueError, match='no update low-pass'):
+        CompiledNotch(lowpassed)
+    type_2 = make_notch(6, 2, centralized=False)
+    type_2.set_integral_ratio(0.5)
+    with pytest.raises(ValueError, match='first-order update'):
+        CompiledNotch(type_2)
 
 
 def test_compiled_fxlms_refuses_a_used_or_frozen_controller():

@@ -330,7 +330,9 @@ class AdaptiveNotchCanceller:
         that its product with the real error is the complex (C, T) array
         ``sum_j mu_t conj(P_t[i, j]) e_j`` in memory. ``mu_t = mu`` for adapting tones, else 0.
         """
-        rate = self._mu * self._adapting
+        # the update low-pass's input gain (1 - a) is folded into the rates (one call less
+        # per sample); _adapt then filters the already-scaled correction
+        rate = self._mu * self._adapting * (1.0 - self._lowpass_pole)
         # kappa_t for every channel, complex (C, T): same shape and dtype as the update
         self._kappa = np.ascontiguousarray(np.broadcast_to(
             (self._ratio * self._mu).astype(complex), self._y.shape))
@@ -409,10 +411,8 @@ class AdaptiveNotchCanceller:
         else:
             np.dot(self._q_stack, e, out=self._m_flat)
             np.matmul(self._z_stack, self._m_stack, out=self._y_stack)
-        if self._lowpass_pole:
-            a = self._lowpass_pole
-            np.multiply(self._lp, a, out=self._lp)
-            np.multiply(self._y, 1.0 - a, out=self._y)
+        if self._lowpass_pole:              # y is (1 - a) x the correction already
+            np.multiply(self._lp, self._lowpass_pole, out=self._lp)
             np.add(self._lp, self._y, out=self._y)
             np.copyto(self._lp, self._y)
         if self._integral:
@@ -611,6 +611,7 @@ class AdaptiveNotchCanceller:
         self._lowpass_hz = validate_update_lowpass(corner_hz, self._fs)
         self._lowpass_pole = update_lowpass_pole(self._lowpass_hz, self._fs)
         self._lp[:] = 0.0
+        self._update_rate()
 
     def set_weight_rates(self, rates: np.ndarray) -> None:
         """Overwrite the weights' rates of change Z (T, C) (N per sample, type-2 update)."""
