@@ -158,8 +158,9 @@ class Scenario:
     def _check_notch_settings(self) -> None:
         """The notch settings as a whole, as the controller will check them at start-up.
 
-        A combination the controller refuses (e.g. ``update_lowpass_hz`` with frequency
-        tracking) is refused here, before a run brings anything up.
+        A combination the controller refuses (e.g. a harmonic that the tracking range takes
+        past fs/2, or ``reference_harmonics`` without one order per tone) is refused here,
+        before a run brings anything up.
         """
         from hexapod_vibration.core.control.notch_supervisor import NotchSupervisor
         from hexapod_vibration.core.sim.closed_loop import notch_config
