@@ -464,7 +464,9 @@ NOTCH_CONTROLLER = NodeSpec("notch_controller", summary="six decentralized Adapt
     ParameterSpec("divergence_guard", "bool", True, "back off (lower mu, then fade out) "
                   "when control makes a band worse than its level before control"),
     ParameterSpec("guard_margin_db", "double", 1.0, "rise over the level before control "
-                  "that counts as worse", unit="dB", low=0.1, high=10.0),
+                  "that counts as worse; also the least predicted reduction of a fixed "
+                  "tone's line (located from the weights' turning) that keeps control on",
+                  unit="dB", low=0.1, high=10.0),
     ParameterSpec("weight_limit_n", "double", 40.0, "anti-windup: each strut's weights "
                   "never add up to more than this (the actuator's dynamic rating)",
                   unit="N", low=0.0, high=1000.0, low_open=True),

@@ -40,6 +40,8 @@ WINDOW_SAMPLES = 1000            # 40 periods of the tone
 MIN_REDUCTION_DB = 20.0
 NOTCH = NOTCH_STATUS
 CONTROL_ON_SAMPLE = 6000         # after identification (0.5 s + 3.2 s + its checks) and a window
+MATCHED_BY_SAMPLE = 200
+"""First breakpoint: the loop waits there until this listener matched every publisher."""
 
 
 def _params_file(tmp_path) -> str:
@@ -47,7 +49,7 @@ def _params_file(tmp_path) -> str:
     params = {
         'pph_driver': {'clock_mode': 'lockstep', 'shaker_frequencies_hz': [TONE_HZ],
                        'shaker_amplitudes_n': [80.0],
-                       'hold_at_time_s': CONTROL_ON_SAMPLE / FS_HZ},
+                       'hold_at_time_s': MATCHED_BY_SAMPLE / FS_HZ},
         'notch_controller': {'tone_frequencies_hz': [TONE_HZ], 'mu': MU,
                              'identify_delay_s': IDENTIFY_DELAY_S, 'enabled': False},
         'pointing_controller': {'enabled': True},
@@ -90,6 +92,15 @@ def test_nodes_exchange_contract_topics_and_cancel_the_tone(ros_context, node_pr
         return (diagnostics.value(DRIVER_STATUS, 'held') == 'true'
                 and diagnostics.int_value(DRIVER_STATUS, 'sample') == sample)
 
+    # The judged windows must reach this listener: the loop goes on only once its
+    # subscriptions matched the nodes' publishers (discovery on a loaded machine can take
+    # longer than the composed graph's 6000 samples: CI once saw none of the control-off
+    # window).
+    assert wait_until(ros_context, lambda: not running() or (
+        held_at(MATCHED_BY_SAMPLE)
+        and all(t.subscription.get_publisher_count() >= 1 for t in topics.values()))), logs()
+    assert running(), logs()
+    assert driver_params.set('hold_at_time_s', CONTROL_ON_SAMPLE / FS_HZ).successful
     # Control off: the controller identifies the plant (test tones), then stays disabled;
     # the driver holds at CONTROL_ON_SAMPLE, after a window of control off.
     def progress() -> tuple:

@@ -34,7 +34,11 @@ the supervisor finds it):
 - the divergence guard (:mod:`~hexapod_vibration.core.control.divergence_guard`) records
   the error's band levels while control is off and nothing is injected, and under control
   lowers ``mu``, then fades out, when a band rises above that level; the
-  canceller clamps its weights to ``weight_limit_n`` after every update (anti-windup).
+  canceller clamps its weights to ``weight_limit_n`` after every update (anti-windup);
+- with the tones fixed (no tracking, no tachometer), the line under each tone is located
+  from the weights' turning (:mod:`~hexapod_vibration.core.control.line_offset`); a line
+  where the prediction gives control less than ``guard_margin_db`` of reduction (a
+  mismatch or a drift beyond the notch's width) fades control out before any band rises.
 
 Moving tones (``frequency_tracking``, ``reference_harmonics``): the phase-locked tracker
 pulls a tone in only from about the canceller's own bandwidth, so the tones are first
@@ -91,6 +95,7 @@ from hexapod_vibration.core.control.frequency_tracker import (
     strongest_lines_hz,
     weight_phase_error,
 )
+from hexapod_vibration.core.control.line_offset import MIN_COHERENCE, LineOffsetMonitor
 from hexapod_vibration.core.control.mu_policy import DEFAULT_MAX_RISE_DB
 from hexapod_vibration.core.control.notch import (
     AdaptiveNotchCanceller,
@@ -106,6 +111,11 @@ from hexapod_vibration.core.control.plant_identification import (
 )
 
 MAX_TONES = 16
+LINE_OFFSET_FADE_S = 5.0
+"""Fade (s) when a line is off the notch (nothing runs away there). Measured on ``drift``
+(core loop against its twin, the quiet 44.7-56.2 Hz third octave, worst 1 s block during
+the fade): +3.9 dB with 2 s, +3.0 with 3 s, +1.3 with 5 s (a raised-cosine ramp instead of
+the linear one changed nothing: the splatter is not the ramp's corners)."""
 """Largest number of tones the controller accepts (oscillators, harmonics included)."""
 MAX_HARMONICS = MAX_TONES - 1
 """Largest ``harmonics`` setting (orders 2..16 of one tone; tones x orders <= MAX_TONES)."""
@@ -383,6 +393,8 @@ class NotchSupervisor:
         self.identification_confidence = float("nan")
         self.guard = DivergenceGuard(self.channels, self.fs, tones, config.guard_margin_db)
         self.guard_action = ""
+        self.line_monitor = LineOffsetMonitor(len(tones), self.fs)
+        self._nominal_after_fade: np.ndarray | None = None
         self._guard_backed_off = False
         self._guard_gave_up = False
         self._quiet_from_sample = -1
@@ -872,6 +884,8 @@ class NotchSupervisor:
             self._weights_clamped()
         if self._config.divergence_guard:
             self._guard_step(error)
+        if self._nominal_after_fade is not None and self.canceller.output_gain == 0.0:
+            self._retune_back()
         if self._follow.active:
             self._follow.step(index, error)
         if self.identifier is not None:
@@ -930,10 +944,53 @@ class NotchSupervisor:
                        and self.plant_response is not None)
         verdict = self.guard.step(error, recording=quiet and off,
                                   judging=controlling and not self._guard_gave_up)
-        if verdict is None:
-            return
-        if verdict.action is not None:
+        if verdict is not None and verdict.action is not None:
             self._guard_act(verdict)
+        self._line_offset_step(controlling and not self._guard_gave_up)
+
+    def _line_offset_step(self, controlling: bool) -> None:
+        """Fixed tones: locate each tone's line from the weights; fade out off the notch.
+
+        The line sits ``offset_hz`` from its tone; the predicted change of the error there
+        (the same |S(f)| the mu policy bounds: the output's, else the worst strut's) says
+        what control does to it. Less than ``guard_margin_db`` of reduction for a line the
+        weights follow steadily (coherence >= MIN_COHERENCE) means the canceller's model
+        (the line at the tone) is wrong by more than its notch is wide: control can gain
+        at most the margin and a moving line beats against it (``drift``, without this:
+        +7 dB in 44.7-56.2 Hz for 0.5 s and the 79 Hz third octave +5.7 dB before the
+        guard's band levels saw it), so it fades out, saying where the line is.
+        """
+        monitor = self.line_monitor
+        if not controlling or self._follow.active or self.sensitivity is None:
+            if monitor.started:
+                monitor.reset()
+            return
+        tones = self.canceller.tone_frequencies_hz
+        if monitor.tones != tones.size:
+            self.line_monitor = monitor = LineOffsetMonitor(tones.size, self.fs)
+        if not monitor.step(self.canceller.adapted_weights) or not monitor.ready:
+            return
+        lines = tones + monitor.offset_hz
+        change_db = self.sensitivity.db_at(lines)
+        bad = (monitor.coherence >= MIN_COHERENCE) & (change_db > -self._config.guard_margin_db)
+        if not np.any(bad):
+            return
+        k = int(np.flatnonzero(bad)[0])
+        self.guard_action = (
+            f"tone {tones[k]:g} Hz: its line is at {lines[k]:.2f} Hz (the weights turn at "
+            f"{monitor.offset_hz[k]:+.2f} Hz), where control is predicted to change it by "
+            f"{change_db[k]:+.1f} dB (less than guard_margin_db "
+            f"{self._config.guard_margin_db:g} dB of reduction) at sample {self.last_sample}")
+        # Frozen weights stop turning: on the oscillators the output would jump from the
+        # line's frequency to the tone's (a kink of its phase: a 1/df^2 skirt, +14 dB over
+        # the quiet 44.7-56.2 Hz third octave on drift). Each oscillator is put where its
+        # weights were turning (phase-continuous), and back once the output is off.
+        self._nominal_after_fade = tones.copy()
+        steady = monitor.coherence >= MIN_COHERENCE
+        self.canceller.retune(tones + np.where(steady, monitor.recent_offset_hz, 0.0))
+        self._fade_out(f"line off the notch: {self.guard_action}: control faded out "
+                       "(frequency_tracking follows a line that is not where it was told)",
+                       LINE_OFFSET_FADE_S)
 
     def _guard_act(self, verdict: GuardVerdict) -> None:
         """Lower mu, or fade out; say what and why."""
@@ -946,15 +1003,29 @@ class NotchSupervisor:
             self._event("warn", f"divergence guard: {self.guard_action}: mu lowered to "
                                 f"{mu:.4g}", ("mu", mu))
             return
+        self._fade_out(f"divergence guard: {self.guard_action}: control faded out "
+                       "(worse than off at any rate tried)")
+
+    def _fade_out(self, reason: str, fade_s: float = FADE_S) -> None:
+        """Freeze the weights and fade the output to 0 over ``fade_s`` (s); say why.
+
+        Control stays off until the settings change or a new identification succeeds.
+        """
         self._guard_gave_up = True
-        self.refusal = (f"divergence guard: {self.guard_action}: control faded out "
-                        "(worse than off at any rate tried)")
+        self.refusal = reason
         self.canceller.set_frozen(True)
-        self.canceller.set_enabled(False, int(round(FADE_S * self.fs)))
+        self.canceller.set_enabled(False, int(round(fade_s * self.fs)))
         self._event("error", self.refusal)
+
+    def _retune_back(self) -> None:
+        """The tones a line-offset fade moved go back to their nominal frequencies."""
+        nominal, self._nominal_after_fade = self._nominal_after_fade, None
+        if nominal is not None and nominal.shape == self.canceller.tone_frequencies_hz.shape:
+            self.canceller.retune(nominal)
 
     def _guard_restart(self) -> None:
         """New coefficients or settings: the guard's action sequence starts again."""
+        self._retune_back()
         self.guard.restart()
         self._guard_backed_off = self._guard_gave_up = False
 
@@ -1045,7 +1116,15 @@ class NotchSupervisor:
                 "predicted_rise_at_hz": round(float(at_hz), 3),
                 "guard": self.guard_state, "guard_action": self.guard_action,
                 "guard_reference_blocks": self.guard.reference_blocks,
-                "weight_clamps": self.weight_clamps}
+                "weight_clamps": self.weight_clamps, **self._line_status()}
+
+    def _line_status(self) -> dict[str, Any]:
+        """The lines located under fixed tones (``line_offset_hz``, ``line_coherence``)."""
+        monitor = self.line_monitor
+        if not monitor.ready:
+            return {}
+        return {"line_offset_hz": np.round(monitor.offset_hz, 4).tolist(),
+                "line_coherence": np.round(monitor.coherence, 3).tolist()}
 
     def _event(self, level: str, message: str,
                parameter: tuple[str, Any] | None = None) -> None:

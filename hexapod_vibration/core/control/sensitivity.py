@@ -251,6 +251,16 @@ class SensitivityPrediction:
         k = int(np.argmax(db))
         return float(db[k]), float(self.frequencies_hz[k])
 
+    def db_at(self, frequencies_hz: np.ndarray) -> np.ndarray:
+        """``20 log10 |S|`` (dB) at ``frequencies_hz``, interpolated on the grid.
+
+        The output's |S| when the prediction has one (the ratio for the disturbance's own
+        direction, what the mu policy bounds), else the worst strut's.
+        """
+        metric = 'output' if self.output is not None else 'strut'
+        return np.interp(np.asarray(frequencies_hz, dtype=float), self.frequencies_hz,
+                         self.db(metric))
+
     def rise_near(self, tone_hz: float, half_width_hz: float = NEAR_TONE_SPAN_HZ,
                   metric: str = 'sigma_max') -> float:
         """Largest ``20 log10 |S|`` (dB) within ``half_width_hz`` of ``tone_hz``."""
