@@ -395,6 +395,7 @@ class NotchSupervisor:
         self.guard_action = ""
         self.line_monitor = LineOffsetMonitor(len(tones), self.fs)
         self._nominal_after_fade: np.ndarray | None = None
+        self._lines_hz = np.zeros(0)
         self._guard_backed_off = False
         self._guard_gave_up = False
         self._quiet_from_sample = -1
@@ -728,6 +729,9 @@ class NotchSupervisor:
                          f"{100 * limit:.0f} % (a disturbance "
                          "next to a tone?); control stays off")
             return
+        self._lines_hz = (np.array([line.frequency_hz for line in
+                                    identifier.disturbance_lines()])
+                          if isinstance(identifier, BroadbandIdentifier) else np.zeros(0))
         if (self._follow.tracker is not None and isinstance(identifier, BroadbandIdentifier)
                 and self._follow.reference_state != "following"):
             self._follow.acquire(identifier.disturbance_lines())
@@ -972,7 +976,13 @@ class NotchSupervisor:
             return
         lines = tones + monitor.offset_hz
         change_db = self.sensitivity.db_at(lines)
-        bad = (monitor.coherence >= MIN_COHERENCE) & (change_db > -self._config.guard_margin_db)
+        # only a tone with a disturbance line in its band (fitted by the identification):
+        # weights driven by broadband noise alone turn too, at about the notch's width,
+        # where a fast notch may reduce little (a false fade on the linear-plant test)
+        has_line = np.array([np.any(np.abs(self._lines_hz - f) <= self.guard.half_width_hz)
+                             for f in tones], dtype=bool)
+        bad = (has_line & (monitor.coherence >= MIN_COHERENCE)
+               & (change_db > -self._config.guard_margin_db))
         if not np.any(bad):
             return
         k = int(np.flatnonzero(bad)[0])
