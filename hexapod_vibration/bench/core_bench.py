@@ -46,6 +46,7 @@ from hexapod_vibration.baseline.fxlms import (
 )
 from hexapod_vibration.contract import SAMPLE_RATE_HZ, STRUT_COUNT
 from hexapod_vibration.core import spectrum
+from hexapod_vibration.core.control.line_offset import LineOffsetMonitor
 from hexapod_vibration.core.control.notch import AdaptiveNotchCanceller
 from hexapod_vibration.core.control.notch_supervisor import NotchConfig, NotchSupervisor
 from hexapod_vibration.core.model.config import load_model_config
@@ -326,10 +327,29 @@ def cost_configurations(quick: bool) -> dict[str, tuple[Step, int]]:
     lowpassed = make_notch(STRUTS, RATIO_NOTCH_TONES, False)
     lowpassed.set_update_lowpass(UPDATE_LOWPASS_BENCH_HZ)
     configs[f'notch_dec_6x{RATIO_NOTCH_TONES}_update_lowpass'] = (lowpassed.step, STRUTS)
+    configs[f'notch_dec_6x{RATIO_NOTCH_TONES}_line_monitor'] = (
+        line_monitored_step(STRUTS, RATIO_NOTCH_TONES), STRUTS)
     for mode in TRACKING_MODES:
         configs[f'supervisor_6x{RATIO_NOTCH_TONES}_{mode}'] = (
             make_tracking_supervisor(RATIO_NOTCH_TONES, mode), STRUTS)
     return configs
+
+
+def line_monitored_step(n_channels: int, n_tones: int) -> Step:
+    """The decentralized notch step and the supervisor's line-offset monitor on its weights.
+
+    What a fixed-tone supervisor adds per sample to locate each tone's line (the block mean
+    of the adapted weights; the turning itself once per 50 samples).
+    """
+    notch = make_notch(n_channels, n_tones, centralized=False)
+    monitor = LineOffsetMonitor(n_tones, SAMPLE_RATE_HZ)
+
+    def step(error: np.ndarray, out: np.ndarray) -> np.ndarray:
+        notch.step(error, out=out)
+        monitor.step(notch.adapted_weights)
+        return out
+
+    return step
 
 
 def numpy_floor_step(n_channels: int, n_tones: int) -> Step:
@@ -376,7 +396,11 @@ def measure_costs(timing: TimingSettings, quick: bool) -> dict[str, Any]:
     supervisor = {mode: med[f'supervisor_6x{RATIO_NOTCH_TONES}_{mode}']
                   for mode in TRACKING_MODES}
     lowpass = med[f'notch_dec_6x{RATIO_NOTCH_TONES}_update_lowpass']
+    monitored = med[f'notch_dec_6x{RATIO_NOTCH_TONES}_line_monitor']
     return {
+        'line_offset_monitor_us_per_sample': {
+            f'notch_dec_6x{RATIO_NOTCH_TONES}': monitored,
+            'added': monitored - notch[f'6x{RATIO_NOTCH_TONES}']},
         'update_lowpass_us_per_sample': {
             f'notch_dec_6x{RATIO_NOTCH_TONES}': lowpass,
             'added': lowpass - notch[f'6x{RATIO_NOTCH_TONES}'],
