@@ -17,7 +17,7 @@ and 40 Hz's ripple seen every 50 ms aliases to a few hundredths of a hertz of tu
   and the other, at rates within the notch's own width).
 
 The supervisor compares the predicted reduction of the line at ``tone + offset_hz`` with the
-guard's margin (:meth:`NotchSupervisor._check_line_offsets`). Pure numpy; no ROS.
+guard's margin (:meth:`NotchSupervisor._line_offset_step`). Pure numpy; no ROS.
 """
 
 from __future__ import annotations

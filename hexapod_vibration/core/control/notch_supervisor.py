@@ -111,14 +111,14 @@ from hexapod_vibration.core.control.plant_identification import (
 )
 
 MAX_TONES = 16
+"""Largest number of tones the controller accepts (oscillators, harmonics included)."""
+MAX_HARMONICS = MAX_TONES - 1
+"""Largest ``harmonics`` setting (orders 2..16 of one tone; tones x orders <= MAX_TONES)."""
 LINE_OFFSET_FADE_S = 5.0
 """Fade (s) when a line is off the notch (nothing runs away there). Measured on ``drift``
 (core loop against its twin, the quiet 44.7-56.2 Hz third octave, worst 1 s block during
 the fade): +3.9 dB with 2 s, +3.0 with 3 s, +1.3 with 5 s (a raised-cosine ramp instead of
 the linear one changed nothing: the splatter is not the ramp's corners)."""
-"""Largest number of tones the controller accepts (oscillators, harmonics included)."""
-MAX_HARMONICS = MAX_TONES - 1
-"""Largest ``harmonics`` setting (orders 2..16 of one tone; tones x orders <= MAX_TONES)."""
 DETECTOR_RAMP_TIME_CONSTANTS = 1.0
 """After the settling, the phase detector's gain rises linearly to 1 over this many
 adaptation time constants (1/mu samples)."""
@@ -969,20 +969,21 @@ class NotchSupervisor:
             if monitor.started:
                 monitor.reset()
             return
-        tones = self.canceller.tone_frequencies_hz
-        if monitor.tones != tones.size:
-            self.line_monitor = monitor = LineOffsetMonitor(tones.size, self.fs)
-        if not monitor.step(self.canceller.adapted_weights) or not monitor.ready:
+        weights = self.canceller.adapted_weights
+        if monitor.tones != weights.shape[0]:
+            self.line_monitor = monitor = LineOffsetMonitor(weights.shape[0], self.fs)
+        if not monitor.step(weights) or not monitor.ready:
             return
+        tones = self.canceller.tone_frequencies_hz
         lines = tones + monitor.offset_hz
         change_db = self.sensitivity.db_at(lines)
         # only a tone with a disturbance line in its band (fitted by the identification):
         # weights driven by broadband noise alone turn too, at about the notch's width,
         # where a fast notch may reduce little (a false fade on the linear-plant test)
-        has_line = np.array([np.any(np.abs(self._lines_hz - f) <= self.guard.half_width_hz)
-                             for f in tones], dtype=bool)
-        bad = (has_line & (monitor.coherence >= MIN_COHERENCE)
-               & (change_db > -self._config.guard_margin_db))
+        has_line = np.any(np.abs(self._lines_hz[None, :] - tones[:, None])
+                          <= self.guard.half_width_hz, axis=1)
+        steady = monitor.coherence >= MIN_COHERENCE
+        bad = has_line & steady & (change_db > -self._config.guard_margin_db)
         if not np.any(bad):
             return
         k = int(np.flatnonzero(bad)[0])
@@ -995,8 +996,7 @@ class NotchSupervisor:
         # line's frequency to the tone's (a kink of its phase: a 1/df^2 skirt, +14 dB over
         # the quiet 44.7-56.2 Hz third octave on drift). Each oscillator is put where its
         # weights were turning (phase-continuous), and back once the output is off.
-        self._nominal_after_fade = tones.copy()
-        steady = monitor.coherence >= MIN_COHERENCE
+        self._nominal_after_fade = tones
         self.canceller.retune(tones + np.where(steady, monitor.recent_offset_hz, 0.0))
         self._fade_out(f"line off the notch: {self.guard_action}: control faded out "
                        "(frequency_tracking follows a line that is not where it was told)",
