@@ -15,9 +15,12 @@ control: a moving tone, a drift or the noise floor is compared at the same time.
   the same track of the run, :func:`~hexapod_vibration.analysis.moving_tones.dechirp`).
 - ``following_over_time``: each tracked tone's reduction in consecutive windows of
   ``segment_s`` from control-on to the end of the run, and likewise every other recorded
-  true disturbance line (a rotor's orders: the bank's harmonics follow them).
+  true disturbance line (a rotor's orders: the bank's harmonics follow them); windows
+  whose controlled level is at the noise floor are flagged (their reduction is a bound).
 - ``bands``: third-octave band levels (lines included: a band's whole level) over the
-  controlled window, controlled minus twin, and the contract's ``never_worse``.
+  controlled window, controlled minus twin, and the contract's ``never_worse``;
+  ``bands_over_time``: the same in windows of the controlled window's length sliding from
+  control-on, with the worst of them.
 - ``sensitivity``: the measured |S(f)|, H1 from twin z to controlled z
   (:func:`~hexapod_vibration.analysis.moving_tones.transfer_function_db`), against the
   recorded prediction near the tones
@@ -63,6 +66,8 @@ A band needs no line resolution, but an averaged estimate: the controlled run's 
 segment scattered by +-0.7 dB on floor-level bands (Table 1, core loop, the same pair of
 signals: 63 Hz band -0.70 dB with it, +0.13 dB with 4 s Hann segments; through the graph
 +1.11 against +0.63 dB), enough to flip the never-worse verdict at its 1 dB margin."""
+BANDS_STEP_S = 1.0
+"""Step (s) of the windows of ``bands_over_time`` (each as long as the report's window)."""
 DIGITS = 2
 STEADY_TRACK_HZ = 1e-6
 """A track within this of its report tone over the whole window is held there (Hz)."""
@@ -163,6 +168,7 @@ def compare(signals: BagSignals, twin: BagSignals, result: Analysis,
                         _report_lines(result, others, on)),
         "following_over_time": _over_time(signals, twin, on, tracks + others, segment_s),
         "bands": _bands(z_ctl, z_twin),
+        "bands_over_time": _bands_over_time(signals, twin, on, (stop - first) / FS),
     }
     sensitivity = _sensitivity(signals, result, z_ctl, z_twin,
                                oscillators_moved_hz(signals, result.tracked_hz, [samples]))
@@ -249,38 +255,92 @@ def _other_lines(signals: BagSignals,
     return out
 
 
+def _paired_windows(signals: BagSignals, twin: BagSignals, on: int, width: int, step: int
+                    ) -> tuple[list[tuple[int, np.ndarray, np.ndarray]], int]:
+    """Windows of ``width`` samples every ``step`` from ``on``, each whole in both bags.
+
+    Returns ``([(first sample, run rows, twin rows)], skipped)``, to the end of the run. A
+    window with a sample missing from either bag is left out (counted in ``skipped``).
+    """
+    windows, skipped = [], 0
+    for a in range(on, signals.run_samples() - width + 1, step):
+        samples = np.arange(a, a + width)
+        (rows, missing), (twin_rows, twin_missing) = (_rows_of(signals, samples),
+                                                      _rows_of(twin, samples))
+        if missing or twin_missing:
+            skipped += 1
+        else:
+            windows.append((a, rows, twin_rows))
+    return windows, skipped
+
+
 def _over_time(signals: BagSignals, twin: BagSignals, on: int,
                tracks: list[tuple[float, tuple[str, np.ndarray, np.ndarray]]],
                segment_s: float) -> list[dict[str, Any]]:
     """Per tracked tone: its reduction (dB) in consecutive ``segment_s`` windows from ``on``.
 
-    A window with a sample missing from either bag is left out (counted).
+    A window whose controlled level is at its noise floor gives only a lower bound on the
+    reduction (the line is below what the window resolves: :func:`tone_levels`); one whose
+    twin level is at the floor has no line to reduce. ``at_noise_floor`` flags both per
+    window; ``min_measured_reduction_db`` is the smallest reduction of the windows where
+    neither is at the floor (None if there is none), ``min_reduction_db`` and
+    ``median_reduction_db`` are over every window, as before.
     """
     width = int(round(segment_s * FS))
-    end = signals.run_samples()
-    starts = list(range(on, end - width + 1, width))
+    windows, skipped = _paired_windows(signals, twin, on, width, width)
     out = []
     for nominal, (topic, at, hz) in tracks:
-        points, skipped = [], 0
-        for a in starts:
-            samples = np.arange(a, a + width)
-            (rows, missing), (twin_rows, twin_missing) = (_rows_of(signals, samples),
-                                                          _rows_of(twin, samples))
-            if missing or twin_missing:
-                skipped += 1
-                continue
-            track_hz = moving_tones.track_on_samples(at, hz, samples)
-            level_ctl, _ = _following_level(signals.z[rows], track_hz)
-            level_twin, _ = _following_level(twin.z[twin_rows], track_hz)
+        points, floor_ctl, floor_twin = [], [], []
+        for a, rows, twin_rows in windows:
+            track_hz = moving_tones.track_on_samples(at, hz, np.arange(a, a + width))
+            level_ctl, at_floor_ctl = _following_level(signals.z[rows], track_hz)
+            level_twin, at_floor_twin = _following_level(twin.z[twin_rows], track_hz)
             points.append([round(a / FS, 3), _round(level_twin - level_ctl)])
+            floor_ctl.append(at_floor_ctl)
+            floor_twin.append(at_floor_twin)
         values = [p[1] for p in points]
+        measured = [v for v, c, t in zip(values, floor_ctl, floor_twin, strict=True)
+                    if not (c or t)]
         out.append({"frequency_hz": float(nominal), "source": topic,
                     "segment_s": float(segment_s), "reduction_db": points,
+                    "at_noise_floor": {"controlled": floor_ctl, "twin": floor_twin},
                     "min_reduction_db": _round(min(values)) if values else None,
                     "median_reduction_db": _round(float(np.median(values))) if values
                     else None,
+                    "min_measured_reduction_db": _round(min(measured)) if measured else None,
+                    "windows_at_floor": int(np.count_nonzero(
+                        np.logical_or(floor_ctl, floor_twin))),
                     "windows_skipped": skipped})
     return out
+
+
+def _bands_over_time(signals: BagSignals, twin: BagSignals, on: int, window_s: float
+                     ) -> dict[str, Any]:
+    """The third-octave comparison (:func:`_bands`) in sliding ``window_s`` windows.
+
+    The windows start every :data:`BANDS_STEP_S` from control-on to the end of the run:
+    the contract's never-worse over every span of that length, not only over the report's
+    window (the start of control, a fade, a spin-up's start lie before it).
+    """
+    width = int(round(window_s * FS))
+    windows, skipped = _paired_windows(signals, twin, on, width,
+                                       int(round(BANDS_STEP_S * FS)))
+    starts, rises, where = [], [], []
+    for a, rows, twin_rows in windows:
+        bands = _bands(signals.z[rows], twin.z[twin_rows])
+        starts.append(round(a / FS, 3))
+        rises.append(bands["largest_rise_db"])
+        where.append(bands["largest_rise_at_hz"])
+    finite = [k for k, r in enumerate(rises) if r is not None]
+    worst = max(finite, key=lambda k: rises[k]) if finite else None
+    return {"window_s": float(window_s), "step_s": BANDS_STEP_S, "start_s": starts,
+            "largest_rise_db": rises, "largest_rise_at_hz": where,
+            "worst_start_s": starts[worst] if worst is not None else None,
+            "worst_rise_db": rises[worst] if worst is not None else None,
+            "worst_rise_at_hz": where[worst] if worst is not None else None,
+            "never_worse": bool(rises[worst] <= NEVER_WORSE_DB) if worst is not None
+            else None,
+            "windows_skipped": skipped}
 
 
 def _bands(z_ctl: np.ndarray, z_twin: np.ndarray) -> dict[str, Any]:
@@ -325,6 +385,23 @@ def _sensitivity(signals: BagSignals, result: Analysis, z_ctl: np.ndarray,
                                     segment_s, coherence, moved_hz)}
 
 
+def _over_time_line(tone: dict[str, Any]) -> str:
+    """One console line for a ``following_over_time`` entry (">=": at the noise floor)."""
+    at_floor = [c or t for c, t in zip(tone["at_noise_floor"]["controlled"],
+                                       tone["at_noise_floor"]["twin"], strict=True)]
+    values = [p[1] for p in tone["reduction_db"]]
+    lowest = values.index(tone["min_reduction_db"])
+    bound = ">= " if at_floor[lowest] else ""
+    text = (f"following {tone['frequency_hz']:g} Hz over {tone['segment_s']:g} s windows from "
+            f"control-on: min {bound}{tone['min_reduction_db']:.1f} dB, median "
+            f"{tone['median_reduction_db']:.1f} dB ({len(values)} windows")
+    if not tone["windows_at_floor"]:
+        return text + ")"
+    measured = tone["min_measured_reduction_db"]
+    above = "none" if measured is None else f"min {measured:.1f} dB"
+    return (text + f", {tone['windows_at_floor']} at the noise floor; above it: {above})")
+
+
 def format_twin(report: dict[str, Any]) -> str:
     """The twin comparison as a table (``format_table``'s layout) and three summary lines."""
     section = report.get("twin")
@@ -342,17 +419,21 @@ def format_twin(report: dict[str, Any]) -> str:
                      f"{level_text(row['twin_db'], floor['twin']):>18} "
                      f"{level_text(row['controlled_db'], floor['controlled']):>17} "
                      f"{reduction:>10}")
-    for tone in section["following_over_time"]:
-        if tone["min_reduction_db"] is not None:
-            lines.append(f"following {tone['frequency_hz']:g} Hz over {tone['segment_s']:g} s "
-                         f"windows from control-on: min {tone['min_reduction_db']:.1f} dB, "
-                         f"median {tone['median_reduction_db']:.1f} dB "
-                         f"({len(tone['reduction_db'])} windows)")
+    lines.extend(_over_time_line(tone) for tone in section["following_over_time"]
+                 if tone["min_reduction_db"] is not None)
     bands = section["bands"]
     if bands["largest_rise_db"] is not None:
         lines.append(f"third-octave bands {BAND_LOW_HZ:g}-{BAND_HIGH_HZ:g} Hz: largest rise "
                      f"{bands['largest_rise_db']:+.2f} dB at {bands['largest_rise_at_hz']:g} Hz"
                      f" (never worse than off: {'yes' if bands['never_worse'] else 'NO'})")
+    sliding = section.get("bands_over_time")
+    if sliding and sliding["worst_rise_db"] is not None:
+        start = sliding["worst_start_s"]
+        lines.append(f"  in every {sliding['window_s']:g} s window from control-on (step "
+                     f"{sliding['step_s']:g} s): worst {sliding['worst_rise_db']:+.2f} dB at "
+                     f"{sliding['worst_rise_at_hz']:g} Hz, {start:g}-"
+                     f"{start + sliding['window_s']:g} s (never worse than off: "
+                     f"{'yes' if sliding['never_worse'] else 'NO'})")
     sens = section.get("sensitivity")
     if sens and sens.get("not_compared"):
         lines.append(f"sensitivity H1 not compared with the prediction: {sens['not_compared']}")

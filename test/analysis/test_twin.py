@@ -119,17 +119,21 @@ def _lti_pair(tmp_path, twin_seed: int = 3, twin_end: int = END,
 
 
 def _decaying_pair(tmp_path, name: str, x: np.ndarray, tracks: np.ndarray,
-                   tones: list[float], seed: int):
+                   tones: list[float], seed: int, residual: float = 1e-3,
+                   burst: np.ndarray | None = None):
     """(run bag, twin bag): ``x`` (m/s^2, z) in noise; in the run it decays 60 dB from ON.
 
     ``tracks`` (END, L): the true line frequencies recorded on /pph/disturbance_frequencies.
+    ``residual``: the gain the run's ``x`` decays to (0: removed, down to the noise floor).
+    ``burst``: (END,) m/s^2 added to the run only (something control did).
     """
     n = np.arange(END)
     noise = 1e-6 * np.random.default_rng(seed).standard_normal(END)
-    gain = np.where(n < ON, 1.0, np.maximum(np.exp(-(n - ON) / 500.0), 1e-3))
+    gain = np.where(n < ON, 1.0, np.maximum(np.exp(-(n - ON) / 500.0), residual))
+    added = np.zeros(END) if burst is None else burst
     topics = {'/pph/disturbance_frequencies': [(s, frequencies_cdr(list(tracks[s]), s))
                                                for s in range(0, END, 10)]}
-    run = write_bag(tmp_path / 'bag', struts_from_z(G0 + gain * x + noise),
+    run = write_bag(tmp_path / 'bag', struts_from_z(G0 + gain * x + noise + added),
                     statuses=_statuses(ON), run_record=_record(name, ON, tones),
                     topics=topics)
     other = write_bag(tmp_path / 'twin', struts_from_z(G0 + x + noise),
@@ -178,10 +182,7 @@ def test_a_bag_that_is_not_the_twin_is_refused_in_one_line(tmp_path, capsys, wha
 
 def test_a_drifting_tone_is_followed_over_time_against_the_twin(tmp_path, capsys):
     """40 Hz drifting +-1 Hz (20 s period); the run's tone decays 60 dB from control-on."""
-    t = np.arange(END) / FS
-    phase = 2 * np.pi * 40.0 * t - 1.0 * 20.0 * np.cos(2 * np.pi * t / 20.0)
-    track = 40.0 + np.sin(2 * np.pi * t / 20.0)
-    x = np.sqrt(2) * G0 * 10 ** (-37 / 20) * np.sin(phase)
+    x, track = _drifting_40_hz()
     run, other = _decaying_pair(tmp_path, 'drift', x, track[:, None], [40.0], seed=5)
     out = tmp_path / 'out'
     assert analyze.main([str(run), '--twin', str(other), '--out', str(out), '--no-plots',
@@ -200,6 +201,86 @@ def test_a_drifting_tone_is_followed_over_time_against_the_twin(tmp_path, capsys
     assert over['reduction_db'][-1][1] == pytest.approx(60.0, abs=0.5)
     assert over['median_reduction_db'] == pytest.approx(60.0, abs=0.5)
     assert over['min_reduction_db'] == over['reduction_db'][0][1]
+
+
+def _drifting_40_hz() -> tuple[np.ndarray, np.ndarray]:
+    """(x m/s^2 at -37 dB re 1 g, track Hz): 40 Hz drifting +-1 Hz with a 20 s period."""
+    t = np.arange(END) / FS
+    phase = 2 * np.pi * 40.0 * t - 1.0 * 20.0 * np.cos(2 * np.pi * t / 20.0)
+    track = 40.0 + np.sin(2 * np.pi * t / 20.0)
+    return np.sqrt(2) * G0 * 10 ** (-37 / 20) * np.sin(phase), track
+
+
+def test_windows_at_the_noise_floor_are_flagged_and_their_reduction_is_a_bound(tmp_path,
+                                                                              capsys):
+    """A drifting tone removed entirely: its last windows are flagged as noise floor.
+
+    The run's tone decays 17.4 dB/s from control-on down to nothing: the last 2 s windows
+    read the controlled level at its noise floor, so their reductions say only how far the
+    floor lies below the line.
+    """
+    x, track = _drifting_40_hz()
+    run, other = _decaying_pair(tmp_path, 'drift', x, track[:, None], [40.0], seed=5,
+                                residual=0.0)
+    out = tmp_path / 'out'
+    assert analyze.main([str(run), '--twin', str(other), '--out', str(out), '--no-plots',
+                         '--twin-segment', '2']) == 0
+    printed = capsys.readouterr().out
+    over, = json.loads((out / 'report.json').read_text())['twin']['following_over_time']
+    floor = over['at_noise_floor']
+    assert floor['twin'] == [False] * 6
+    assert floor['controlled'][:2] == [False, False] and floor['controlled'][-1] is True
+    assert over['windows_at_floor'] == sum(floor['controlled']) >= 1
+    first = over['reduction_db'][0][1]
+    assert over['min_measured_reduction_db'] == first < 40.0
+    assert all(p[1] > 100.0 for p, at in zip(over['reduction_db'], floor['controlled'],
+                                             strict=True) if at)
+    assert (f"{over['windows_at_floor']} at the noise floor; above it: min {first:.1f} dB"
+            in printed)
+
+
+def test_a_minimum_at_the_noise_floor_is_printed_as_a_bound():
+    """The console line of a tone whose smallest reduction is a floor-limited bound."""
+    tone = {'frequency_hz': 90.0, 'segment_s': 1.0,
+            'reduction_db': [[13.0, 11.4], [14.0, 27.0], [15.0, 44.0]],
+            'at_noise_floor': {'controlled': [False, True, True], 'twin': [False] * 3},
+            'min_reduction_db': 11.4, 'median_reduction_db': 27.0,
+            'min_measured_reduction_db': 11.4, 'windows_at_floor': 2}
+    line = twin._over_time_line(tone)
+    assert line == ('following 90 Hz over 1 s windows from control-on: min 11.4 dB, median '
+                    '27.0 dB (3 windows, 2 at the noise floor; above it: min 11.4 dB)')
+    tone['reduction_db'][0][1] = tone['min_reduction_db'] = 30.0
+    tone['at_noise_floor']['controlled'][0] = True
+    tone.update(min_measured_reduction_db=None, windows_at_floor=3)
+    tone['reduction_db'][1][1] = tone['min_reduction_db'] = 27.0
+    assert twin._over_time_line(tone).endswith(
+        'min >= 27.0 dB, median 27.0 dB (3 windows, 3 at the noise floor; above it: none)')
+
+
+def test_never_worse_is_judged_in_every_window_from_control_on(tmp_path, capsys):
+    """A burst before the report's window is caught by the sliding windows.
+
+    Noise added 0.5 s after control-on, before the report's window (the last 10 s): the
+    report's own window is never worse, the sliding windows that hold the burst are not.
+    """
+    x, track = _drifting_40_hz()
+    n = np.arange(END)
+    burst = np.where((n >= ON + 500) & (n < ON + 1000),
+                     1e-4 * np.random.default_rng(9).standard_normal(END), 0.0)
+    run, other = _decaying_pair(tmp_path, 'drift', x, track[:, None], [40.0], seed=5,
+                                burst=burst)
+    out = tmp_path / 'out'
+    assert analyze.main([str(run), '--twin', str(other), '--out', str(out), '--no-plots']) == 0
+    printed = capsys.readouterr().out
+    section = json.loads((out / 'report.json').read_text())['twin']
+    assert section['bands']['never_worse'] is True
+    sliding = section['bands_over_time']
+    assert sliding['window_s'] == 10.0 and sliding['start_s'] == [12.0, 13.0, 14.0]
+    assert sliding['worst_start_s'] == 12.0 and sliding['worst_rise_db'] > 10.0
+    assert sliding['never_worse'] is False
+    assert sliding['largest_rise_db'][2] == section['bands']['largest_rise_db']
+    assert 'in every 10 s window from control-on (step 1 s): worst' in printed
+    assert '12-22 s (never worse than off: NO)' in printed
 
 
 def test_a_moving_tone_is_not_compared_with_a_fixed_tone_prediction(tmp_path, capsys):

@@ -40,11 +40,12 @@ def supervisor(tones, **changes) -> NotchSupervisor:
 
 
 def run(sup, frequencies_hz, amplitudes, start_s: float, samples: int, seed: int = 0,
-        reference=None, first: int = 0):
+        reference=None, first: int = 0, enable_at: int | None = None):
     """Close the loop; returns the disturbance-free residual (samples, 6) and estimates.
 
     ``frequencies_hz(n)`` gives the disturbance tones' frequencies (Hz) at sample n; the
     disturbance is 0 before ``start_s``. ``reference(n)``: a tachometer value or None.
+    ``enable_at``: the sample control is switched on (a supervisor built disabled).
     """
     rng = np.random.default_rng(seed)
     u = np.zeros(6)
@@ -58,6 +59,8 @@ def run(sup, frequencies_hz, amplitudes, start_s: float, samples: int, seed: int
         residual[n] = d + K @ u
         if reference is not None and reference(n) is not None:
             sup.set_reference_frequency(reference(n), n)
+        if n == enable_at:
+            sup.apply({"enabled": True})
         u = sup.step(first + n, GRAVITY + residual[n] + 1e-4 * rng.standard_normal(6)).copy()
         estimates[n] = sup.tone_estimates_hz
     return residual, estimates
@@ -244,6 +247,28 @@ def test_tones_follow_the_reference_and_hold_when_it_goes_stale():
     assert f"hold at {np.round(held, 3).tolist()} Hz" in messages
     ramp = demodulated_rms(residual[:6990], [speed(n) for n in range(6990)], 6000)
     assert 20 * np.log10(0.05 / ramp) > 40.0     # at nominal tones: 3 dB (measured)
+
+
+def test_a_stale_reference_hands_over_to_tracking_where_the_tones_are():
+    """A spin-up on the tachometer whose reference stops mid-ramp: tracking takes over.
+
+    The tracker starts where the reference had the tones, at the reference's rate (Hz/s),
+    and keeps the tone cancelled; it does not go back to the line of the record taken
+    before control on (the acquisition belongs to the start of adaptation, not to a
+    handover: 2 s before, at 30.5 Hz).
+    """
+    sup = supervisor([30.0], reference_harmonics=[1.0], reference_timeout_s=0.05,
+                     tracking_range_hz=10.0, enabled=False)
+    speed = lambda n: 30.5 + 1e-3 * max(n - 6000, 0)            # noqa: E731  (1 Hz/s)
+    residual, est = run(sup, lambda n: [speed(n)], [0.05], 3.3, 9000, enable_at=5000,
+                        reference=lambda n: speed(n) if n < 8000 else None)
+    messages = " | ".join(e.message for e in sup.drain_events())
+    assert "reference frequency stale" in messages and "acquisition" not in messages
+    assert sup.status()["reference"] == "stale"
+    # coasting on the reference's rate, then tracking: within 0.05 Hz of the line
+    assert np.max(np.abs(est[8050:9000, 0] - [speed(n) for n in range(8050, 9000)])) < 0.05
+    after = demodulated_rms(residual[:9000], [speed(n) for n in range(9000)], 8050)
+    assert 20 * np.log10(0.05 / after) > 30.0
 
 
 def static_plant_response(delay_samples: int = 1):

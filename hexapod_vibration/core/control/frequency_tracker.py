@@ -269,19 +269,20 @@ class FrequencyTracker:
                              self._max_step / self.block_samples)
         self._e_smooth = np.zeros(self.nominal_hz.size)
 
-    def recentre(self, frequencies_hz: Sequence[float] | np.ndarray) -> None:
+    def recentre(self, frequencies_hz: Sequence[float] | np.ndarray,
+                 rates_hz_per_s: Sequence[float] | np.ndarray | None = None) -> None:
         """Track from ``frequencies_hz`` (Hz, (T,)) within ``range_hz`` of them from now on.
 
         A tachometer that goes stale leaves the tones wherever the reference had them (a
         spin-up: far outside nominal +- range); the loops continue from there, bounded
         around there (:func:`tracking_bounds_hz` of those frequencies, so that the tones
-        still never merge).
+        still never merge), at ``rates_hz_per_s`` (Hz/s, the reference's; None: 0).
         """
         f = np.asarray(frequencies_hz, dtype=float).reshape(self.nominal_hz.shape)
         self.lower_hz, self.upper_hz = tracking_bounds_hz(f, self.range_hz, self.fs)
         self._lo = TWO_PI * self.lower_hz / self.fs
         self._hi = TWO_PI * self.upper_hz / self.fs
-        self.reset(f)
+        self.reset(f, rates_hz_per_s)
 
     def update(self, error_rad: np.ndarray, valid: np.ndarray, rate: float,
                coast: bool = False) -> np.ndarray:

@@ -1285,7 +1285,7 @@ class _ToneFollowing:
             return
         fundamentals = self._from_reference(index)
         if fundamentals is not None:
-            sweep = self.reference_slope * self.sup.fs * self.reference_orders
+            sweep = self.reference_rates_hz_per_s
         else:
             fundamentals = self._from_tracking(index)
             sweep = None if self.tracker is None else self.tracker.rates_hz_per_s
@@ -1400,9 +1400,25 @@ class _ToneFollowing:
         fundamentals = np.clip(self.reference_orders * reference, 1e-3 * nyquist,
                                0.999 * nyquist * self.reference_orders / top)
         if self.tracker is not None:       # a stale reference hands over from here
-            self.tracker.reset(fundamentals)
+            self.tracker.reset(fundamentals, self.reference_rates_hz_per_s)
+        # adaptation that starts on the reference needs no acquisition, and a later
+        # handover to tracking is not a start (the record is from before control on)
+        if self._adaptation_rate() <= 0.0:
+            self._adapting_since = -1
+        elif self._adapting_since < 0:
+            self._adapting_since = index
         self._previous_w = None
         return fundamentals
+
+    @property
+    def reference_rates_hz_per_s(self) -> np.ndarray:
+        """Each fundamental's rate of change (Hz/s) on the reference: order x its slope."""
+        return self.reference_slope * self.sup.fs * self.reference_orders
+
+    def _adaptation_rate(self) -> float:
+        """The rate the weights adapt at now (mu; 0 while off or frozen)."""
+        canceller = self.sup.canceller
+        return canceller.mu if canceller.enabled and not canceller.frozen else 0.0
 
     def _reference_changed(self, state: str) -> None:
         if state == "stale":
@@ -1413,7 +1429,7 @@ class _ToneFollowing:
                                     f"{self.sup.config.reference_timeout_s:g} s): tones "
                                     f"hold at {held} Hz, {then}")
             if self.tracker is not None:   # not back to nominal: a spin-up is far from it
-                self.tracker.recentre(self.fundamentals_hz)
+                self.tracker.recentre(self.fundamentals_hz, self.tracker.rates_hz_per_s)
         elif state == "following":
             self.sup._event("info", f"following the reference frequency "
                                     f"({self.reference_hz:g} Hz): tones at "
@@ -1428,7 +1444,7 @@ class _ToneFollowing:
         weights = canceller.adapted_weights      # the update low-pass's lag left out
         previous, self._previous_w = self._previous_w, weights
         t = self.nominal_hz.size
-        rate = canceller.mu if canceller.enabled and not canceller.frozen else 0.0
+        rate = self._adaptation_rate()
         if rate <= 0.0:
             self._adapting_since = -1
         elif self._adapting_since < 0:
