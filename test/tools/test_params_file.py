@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 import yaml
-from node_graph import HANG_GUARD_S, StrutTopic, run_experiment, wait_until
+from node_graph import HANG_GUARD_S, ParameterClient, StrutTopic, run_experiment, wait_until
 
 from hexapod_vibration.analysis.bag_io import read_strut_topics
 
@@ -24,6 +24,11 @@ SCENARIO = {
     'notch': {'tone_frequencies_hz': [40.0], 'mu': 0.01, 'adaptation': 'decentralized'},
 }
 COMPARED = 3000     # samples before control-on (5500)
+MATCHED_BY_SAMPLE = 200
+"""The relaunched driver holds here (``hold_at_time_s``, a lockstep breakpoint: the samples
+are the same) until this test's listener matched it: alone with two controllers the loop
+runs at ~3 kHz, faster than discovery on a loaded machine (CI once saw only the last 416
+of the 3000 compared samples)."""
 
 
 def test_params_yaml_starts_the_same_run(ros_env, ros_context, node_processes, tmp_path):
@@ -45,13 +50,20 @@ def test_params_yaml_starts_the_same_run(ros_env, ros_context, node_processes, t
     common = ['--ros-args', '--params-file', str(params_file)]
     for name in ('notch_controller', 'pointing_controller'):
         node_processes.start(name, *common)
-    driver = node_processes.start('pph_driver', *common, '-p', 'clock_mode:=lockstep')
+    driver = node_processes.start('pph_driver', *common, '-p', 'clock_mode:=lockstep',
+                                  '-p', f'hold_at_time_s:={MATCHED_BY_SAMPLE / 1000.0}')
+    assert wait_until(ros_context, lambda: not driver.running()
+                      or accel.subscription.get_publisher_count() >= 1, HANG_GUARD_S), \
+        driver.output()
+    driver_params = ParameterClient(ros_context, node, 'pph_driver')
+    assert driver_params.set('hold_at_time_s', (COMPARED + 100) / 1000.0).successful
     assert wait_until(ros_context, lambda: accel.last_index >= COMPARED, HANG_GUARD_S), \
         driver.output()
-    # This listener may match the new driver after its first samples (a loaded machine):
-    # every sample it did receive before COMPARED must be the recorded one, bit for bit.
+    # Every sample this listener received before COMPARED must be the recorded one, bit
+    # for bit (the first ones may have gone out before it matched the driver).
     idx, values = accel.window(0, COMPARED)
-    assert len(idx) >= COMPARED // 3, len(idx)
+    print(f"listener received {len(idx)} of the {COMPARED} compared samples")
+    assert len(idx) >= COMPARED // 2, len(idx)
     assert np.all(np.diff(idx) == 1), 'a gap in the middle of the stream'
     assert np.array_equal(recorded.sample_index[:COMPARED], np.arange(COMPARED))
     assert np.array_equal(recorded.values[idx], values)
