@@ -1,8 +1,11 @@
 """Issue 11 on the core loop: never worse than off, and saying why; with tracking too.
 
 Each scenario runs twice with the same seeds, with control and without (its twin); over the
-report's window (the last 10 s) every one-third-octave band 5..500 Hz and the 8 Hz band
-around the told tone of the top plate's z axis must stay within +1 dB of the twin's.
+report's window (the last 10 s), and over every window that long from control-on (1 s
+apart: the start of control, a fade), every one-third-octave band 5..500 Hz and the 8 Hz
+band around the told tone of the top plate's z axis must stay within +1 dB of the twin's
+(worst windows measured: mismatch +0.70, drift +0.78, drift_tracking +0.67,
+single_tone_harmonic +0.92 dB).
 ``mismatch`` (shaker 40.4 Hz, notch told 40 Hz): the identification survives the line
 0.4 Hz off, control works at the rate the policy allows (the tone's band drops); ``drift``
 (+-1 Hz, 20 s period): the supervisor locates the line from the weights' turning, sees it
@@ -39,24 +42,35 @@ def _band_db(z: np.ndarray, bands: np.ndarray) -> np.ndarray:
 
 
 def _twins(name: str):
+    """(loop, rise dB per band over the report's window, worst rise over every window).
+
+    The windows are as long as the report's (``window_s``) and start every second from
+    control-on (the report's ``bands_over_time``): the start of control and a fade lie
+    before the report's window.
+    """
     scenario = load_scenario(ROOT / 'config' / 'scenarios' / f'{name}.yaml')
     n = int(scenario.window_s * FS)
     out = []
     for sc in (scenario, dataclasses.replace(scenario, control_on_s=scenario.duration_s)):
         loop = CoreLoop(CFG, sc)
         record = loop.run()
-        out.append((loop, CFG.geometry.platform_from_struts(record.accel_m_s2)[-n:, 2]))
+        out.append((loop, CFG.geometry.platform_from_struts(record.accel_m_s2)[:, 2]))
     bands = third_octave_bands_hz(5.0, 450.0)[:, 1:]
     bands = np.vstack([bands, [[36.0, 44.0]]])
-    rise = _band_db(out[0][1], bands) - _band_db(out[1][1], bands)
-    return out[0][0], rise
+    (loop, z_on), (_, z_off) = out
+    rise = _band_db(z_on[-n:], bands) - _band_db(z_off[-n:], bands)
+    starts = range(int(scenario.control_on_s * FS), z_on.size - n + 1, int(FS))
+    worst = max(float(np.max(_band_db(z_on[a:a + n], bands) - _band_db(z_off[a:a + n], bands)))
+                for a in starts)
+    return loop, rise, worst
 
 
 @pytest.mark.parametrize('name', ['mismatch', 'drift', 'drift_tracking',
                                   'single_tone_harmonic'])
 def test_every_band_stays_within_1db_of_its_level_without_control(name):
-    loop, rise = _twins(name)
+    loop, rise, worst = _twins(name)
     assert np.max(rise) < 1.0, rise
+    assert worst < 1.0, worst          # in every window from control-on, too
     status = loop.notch.status()
     assert loop.notch.plant_frequency_response is not None       # identified with the line
     assert status['identification_confidence'] > 0.9
