@@ -264,6 +264,7 @@ def test_a_stale_reference_hands_over_to_tracking_where_the_tones_are():
                         reference=lambda n: speed(n) if n < 8000 else None)
     messages = " | ".join(e.message for e in sup.drain_events())
     assert "reference frequency stale" in messages and "acquisition" not in messages
+    assert "tracking from there at the reference's last rate [1.0] Hz/s" in messages
     assert sup.status()["reference"] == "stale"
     # coasting on the reference's rate, then tracking: within 0.05 Hz of the line
     assert np.max(np.abs(est[8050:9000, 0] - [speed(n) for n in range(8050, 9000)])) < 0.05

@@ -1423,11 +1423,15 @@ class _ToneFollowing:
     def _reference_changed(self, state: str) -> None:
         if state == "stale":
             held = np.round(self.fundamentals_hz, 3).tolist()
-            then = ("tracking from there" if self.tracker is not None
-                    else "held there until it comes back")
+            if self.tracker is None:
+                then = f"hold at {held} Hz, held there until it comes back"
+            else:
+                rates = np.round(self.tracker.rates_hz_per_s, 3).tolist()
+                then = (f"at {held} Hz, tracking from there at the reference's last rate "
+                        f"{rates} Hz/s")
             self.sup._event("warn", f"reference frequency stale (none for "
                                     f"{self.sup.config.reference_timeout_s:g} s): tones "
-                                    f"hold at {held} Hz, {then}")
+                                    f"{then}")
             if self.tracker is not None:   # not back to nominal: a spin-up is far from it
                 self.tracker.recentre(self.fundamentals_hz, self.tracker.rates_hz_per_s)
         elif state == "following":
