@@ -214,9 +214,16 @@ def test_restarted_controller_is_waited_for_again(ros_context, node_processes, m
     def logs() -> str:
         return '\n'.join(p.output() for p in node_processes.started)
 
-    assert wait_until(ros_context, lambda: commands.messages > BEFORE_SAMPLES
-                      and diagnostics.value(DRIVER_STATUS, 'run')), logs()
-    run = int(diagnostics.value(DRIVER_STATUS, 'run'))
+    def current_run() -> int | None:
+        value = diagnostics.value(DRIVER_STATUS, 'run')
+        return int(value) if value else None
+
+    # the driver's run as its /diagnostics names it, and that run's commands (the full
+    # suite once saw the status name a run none of the commands received so far carried)
+    assert wait_until(ros_context, lambda: (r := current_run()) is not None
+                      and len(commands.by_run.get(r, {})) > BEFORE_SAMPLES), (
+        current_run(), sorted(commands.by_run, key=str), logs())
+    run = current_run()
     before = commands.last_index
     assert all(np.any(c) for n, c in commands.by_run[run].items() if n >= 100)   # working
     pointing.process.kill()
