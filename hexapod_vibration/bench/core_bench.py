@@ -346,7 +346,7 @@ def line_monitored_step(n_channels: int, n_tones: int) -> Step:
 
     def step(error: np.ndarray, out: np.ndarray) -> np.ndarray:
         notch.step(error, out=out)
-        monitor.step(notch.adapted_weights)
+        monitor.step_from(notch)
         return out
 
     return step

@@ -71,3 +71,18 @@ def test_weights_that_wander_are_incoherent():
 def test_bad_settings_are_refused(block, tau):
     with pytest.raises(ValueError, match='block_samples'):
         LineOffsetMonitor(1, FS, block, tau)
+
+
+@pytest.mark.parametrize("lowpass_hz", [0.0, 10.0])
+def test_the_canceller_adds_its_adapted_weights_in_place_bit_for_bit(lowpass_hz):
+    """``step_from`` (no copy of the weights, the supervisor's 1 kHz path) is ``step``."""
+    canceller = AdaptiveNotchCanceller(6, [40.0, 80.0], FS, 0.01)
+    canceller.set_update_lowpass(lowpass_hz)
+    copied, in_place = LineOffsetMonitor(2, FS), LineOffsetMonitor(2, FS)
+    rng = np.random.default_rng(5)
+    for n in range(3000):
+        canceller.step(np.cos(2 * np.pi * 40.3 * n / FS) * 0.05 + 1e-3 * rng.standard_normal(6))
+        assert copied.step(canceller.adapted_weights) == in_place.step_from(canceller)
+    assert copied.ready and in_place.ready
+    assert np.array_equal(copied.offset_hz, in_place.offset_hz)
+    assert np.array_equal(copied.coherence, in_place.coherence)

@@ -24,6 +24,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from hexapod_vibration.core.control.notch import AdaptiveNotchCanceller
+
 DEFAULT_BLOCK_SAMPLES = 50
 DEFAULT_TIME_CONSTANT_S = 0.5
 MIN_COHERENCE = 0.8
@@ -59,7 +61,7 @@ class LineOffsetMonitor:
         """Forget the weights seen (control starts again, new tones)."""
         self._count = 0
         self._blocks = 0
-        self._sum: np.ndarray | None = None
+        self._sum_h: np.ndarray | None = None      # sum of conj(W).T over the block, (C, T)
         self._previous: np.ndarray | None = None
         self._z = np.zeros(self.tones, dtype=complex)
         self._last_z = np.zeros(self.tones, dtype=complex)
@@ -67,15 +69,31 @@ class LineOffsetMonitor:
 
     def step(self, weights: np.ndarray) -> bool:
         """Take this sample's complex (T, C) weights (N); True when a block was looked at."""
-        if self._count == 0:
-            self._sum = np.array(weights, dtype=complex)
-        else:
-            self._sum += weights
+        weights = np.asarray(weights)
+        total = self._block_sum(weights.shape[1])
+        np.add(total, np.conj(weights).T, out=total)
+        return self._counted()
+
+    def step_from(self, canceller: AdaptiveNotchCanceller) -> bool:
+        """:meth:`step` on the canceller's adapted weights, added in place (no copy)."""
+        canceller.add_adapted_weights_h(self._block_sum(canceller.n_channels))
+        return self._counted()
+
+    def _block_sum(self, channels: int) -> np.ndarray:
+        """The block's running sum (C, T), zeroed at the block's first sample."""
+        if self._sum_h is None or self._sum_h.shape != (channels, self.tones):
+            self._sum_h = np.zeros((channels, self.tones), dtype=complex)
+        elif self._count == 0:
+            self._sum_h.fill(0.0)
+        return self._sum_h
+
+    def _counted(self) -> bool:
+        """Count the sample; at a block's end, take the turning since the last block."""
         self._count += 1
         if self._count < self.block:
             return False
         self._count = 0
-        w = self._sum / self.block
+        w = np.conj(self._sum_h).T / self.block
         if self._previous is not None and self._previous.shape == w.shape:
             z = np.sum(w * np.conj(self._previous), axis=1)
             self._last_z = z

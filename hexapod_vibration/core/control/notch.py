@@ -284,6 +284,7 @@ class AdaptiveNotchCanceller:
         self._lowpass_hz = 0.0
         self._lowpass_pole = 0.0
         self._limit_scratch: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+        self._adapted_scratch: np.ndarray | None = None
         self.clamped_samples = 0
         self._install(freqs, np.zeros((freqs.size, self._c), dtype=complex),
                       np.zeros(freqs.size), p_full, np.ones(freqs.size, dtype=bool),
@@ -657,6 +658,24 @@ class AdaptiveNotchCanceller:
         a = self._lowpass_pole
         return np.conj(self._v + (a / (1.0 - a)) * self._lp).T
 
+    def add_adapted_weights_h(self, total: np.ndarray) -> None:
+        """``total += conj(adapted_weights).T`` in place: no array allocated (1 kHz path).
+
+        ``total`` is complex (C, T), the layout the canceller keeps its weights in
+        (``V = W^H``); summed over samples and conjugated once, it gives the sum of
+        :attr:`adapted_weights`, bit for bit.
+        """
+        if not self._lowpass_pole:
+            np.add(total, self._v, out=total)
+            return
+        if self._adapted_scratch is None or self._adapted_scratch.shape != self._v.shape:
+            self._adapted_scratch = np.empty_like(self._v)
+        scratch = self._adapted_scratch
+        a = self._lowpass_pole
+        np.multiply(self._lp, a / (1.0 - a), out=scratch)
+        np.add(scratch, self._v, out=scratch)
+        np.add(total, scratch, out=total)
+
     @property
     def update_lowpass_hz(self) -> float:
         """Corner of the update low-pass (Hz; 0: the paper's update)."""
@@ -721,6 +740,11 @@ class AdaptiveNotchCanceller:
     def n_channels(self) -> int:
         """Number of channels C."""
         return self._c
+
+    @property
+    def n_tones(self) -> int:
+        """Number of tones T (no copy of the frequencies)."""
+        return self._freqs.size
 
     @property
     def sample_rate_hz(self) -> float:

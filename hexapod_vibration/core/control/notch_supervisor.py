@@ -729,12 +729,12 @@ class NotchSupervisor:
                          f"{100 * limit:.0f} % (a disturbance "
                          "next to a tone?); control stays off")
             return
-        self._lines_hz = (np.array([line.frequency_hz for line in
-                                    identifier.disturbance_lines()])
-                          if isinstance(identifier, BroadbandIdentifier) else np.zeros(0))
-        if (self._follow.tracker is not None and isinstance(identifier, BroadbandIdentifier)
+        broadband = isinstance(identifier, BroadbandIdentifier)
+        lines = identifier.disturbance_lines() if broadband else []    # an FFT of the record
+        self._lines_hz = np.array([line.frequency_hz for line in lines])
+        if (self._follow.tracker is not None and broadband
                 and self._follow.reference_state != "following"):
-            self._follow.acquire(identifier.disturbance_lines())
+            self._follow.acquire(lines)
             tones = [float(f) for f in self.canceller.tone_frequencies_hz]
         current = response if tones == self._identifying_tones else self._known_response(
             tones)
@@ -969,10 +969,9 @@ class NotchSupervisor:
             if monitor.started:
                 monitor.reset()
             return
-        weights = self.canceller.adapted_weights
-        if monitor.tones != weights.shape[0]:
-            self.line_monitor = monitor = LineOffsetMonitor(weights.shape[0], self.fs)
-        if not monitor.step(weights) or not monitor.ready:
+        if monitor.tones != self.canceller.n_tones:
+            self.line_monitor = monitor = LineOffsetMonitor(self.canceller.n_tones, self.fs)
+        if not monitor.step_from(self.canceller) or not monitor.ready:
             return
         tones = self.canceller.tone_frequencies_hz
         lines = tones + monitor.offset_hz
@@ -1403,10 +1402,7 @@ class _ToneFollowing:
             self.tracker.reset(fundamentals, self.reference_rates_hz_per_s)
         # adaptation that starts on the reference needs no acquisition, and a later
         # handover to tracking is not a start (the record is from before control on)
-        if self._adaptation_rate() <= 0.0:
-            self._adapting_since = -1
-        elif self._adapting_since < 0:
-            self._adapting_since = index
+        self._adaptation_started(index)
         self._previous_w = None
         return fundamentals
 
@@ -1419,6 +1415,16 @@ class _ToneFollowing:
         """The rate the weights adapt at now (mu; 0 while off or frozen)."""
         canceller = self.sup.canceller
         return canceller.mu if canceller.enabled and not canceller.frozen else 0.0
+
+    def _adaptation_started(self, index: int) -> bool:
+        """Note when adaptation runs since (sample ``index`` if it starts now: True)."""
+        if self._adaptation_rate() <= 0.0:
+            self._adapting_since = -1
+            return False
+        if self._adapting_since >= 0:
+            return False
+        self._adapting_since = index
+        return True
 
     def _reference_changed(self, state: str) -> None:
         if state == "stale":
@@ -1448,13 +1454,10 @@ class _ToneFollowing:
         weights = canceller.adapted_weights      # the update low-pass's lag left out
         previous, self._previous_w = self._previous_w, weights
         t = self.nominal_hz.size
-        rate = self._adaptation_rate()
-        if rate <= 0.0:
-            self._adapting_since = -1
-        elif self._adapting_since < 0:
-            self._adapting_since = index
+        if self._adaptation_started(index):
             self._acquire_from_record()
             return self.tracker.frequencies_hz
+        rate = self._adaptation_rate()
         plant, inverse = self._detector_matrices()
         effective = rate * self._rate_scale               # a mu policy's per-tone rates
         if (previous is None or plant is None or rate <= 0.0
