@@ -65,12 +65,15 @@ def _run(name: str, factory, loop, args, companions) -> int:
         built.extend(make() for make in companions)
         gc.freeze()        # start-up objects: never scanned again by the collector
         executor_name = built[0].get_parameter("executor").value
-        executor = make_executor(executor_name)
-        for node in built:
-            executor.add_node(node)
         subscriptions = [sub for node in built[1:] + built[:1]
                          for sub in getattr(node, "loop_subscriptions", ())]
-        spinner = LoopSpinner(executor, subscriptions, fast=executor_name == "waitset")
+        # A signal in the middle of an rclpy constructor leaves a half-built object whose
+        # __del__ prints a traceback: the stop is raised once they are whole.
+        with cli.deferred():
+            executor = make_executor(executor_name)
+            for node in built:
+                executor.add_node(node)
+            spinner = LoopSpinner(executor, subscriptions, fast=executor_name == "waitset")
         (loop or spin_loop)(built[0], spinner)
     except cli.StopSignal as stop:
         code = stop.exit_code

@@ -445,7 +445,12 @@ class ExperimentRun:
         self.progress = Progress(sc.name, sc.duration_s)
 
     def start(self) -> None:
-        """Recorder first, then the controllers; the driver when the recorder matched them."""
+        """Recorder first, then the controllers; the driver when the recorder matched them.
+
+        Lockstep: the driver starts with the controllers (it holds before sample 0 until
+        the recorder matched every publisher, so nothing is lost and its start-up, ~2 s
+        of imports, overlaps theirs).
+        """
         logs = self.o.out
         common = ["--params-file", str(self.params_file)]
         self.children.append(start_child("pph_recorder", "hexapod_vibration.nodes.recorder", [
@@ -460,9 +465,10 @@ class ExperimentRun:
                 "notch_controller", "hexapod_vibration.nodes.notch_controller", common, logs))
         self.children.append(start_child(
             "pointing_controller", "hexapod_vibration.nodes.pointing_controller", common, logs))
-        controllers = [*POINTING_TOPICS, *(NOTCH_TOPICS if self.has_notch else ())]
-        self._wait(lambda: not self.sup.recorder_unmatched(controllers),
-                   "recorder matching the controllers")
+        if self.o.mode != "lockstep":
+            controllers = [*POINTING_TOPICS, *(NOTCH_TOPICS if self.has_notch else ())]
+            self._wait(lambda: not self.sup.recorder_unmatched(controllers),
+                       "recorder matching the controllers")
         self.children.append(start_child("pph_driver", "hexapod_vibration.nodes.pph_driver",
                                          common + self._breakpoint(), logs))
 

@@ -302,8 +302,10 @@ def _positive_finite(x):
 
 
 def test_bench_quick_writes_positive_finite_numbers(tmp_path, capsys):
-    assert bench.main(['--out', str(tmp_path), '--quick', '--skip-ros']) == 0
+    # --skip-sweep: the sweep's Dask cluster (~15 s here) is exercised by test/sweep
+    assert bench.main(['--out', str(tmp_path), '--quick', '--skip-ros', '--skip-sweep']) == 0
     results = json.loads((tmp_path / 'results.json').read_text())
+    assert 'sweep_throughput' not in results
     summary = (tmp_path / 'summary.md').read_text()
     assert summary in capsys.readouterr().out
     assert 'realtime' not in results and 'lockstep_speedup' not in results

@@ -88,7 +88,7 @@ def test_the_tachometer_drives_the_tones_through_the_graph(ros_env, tmp_path):
                    "reference_speed_hz": 45.5, "profile_time_s": [0.0],
                    "profile_speed_hz": [45.5], "tachometer": True},
          "report_tones_hz": [45.5, 91.0]},
-        {"tone_frequencies_hz": [45.0, 91.0], "reference_harmonics": [1.0, 2.0]}, short=False))
+        {"tone_frequencies_hz": [45.0, 91.0], "reference_harmonics": [1.0, 2.0]}))
     bag = run["bag"]
     ref_index, reference = bag.frequencies["/pph/reference_frequency"]
     samples = run["report"]["loop"]["samples"]

@@ -40,6 +40,14 @@ def children_of(pid: int) -> list[int]:
     return found
 
 
+def command_of(pid: int) -> str:
+    """The command line of ``pid`` (for messages)."""
+    try:
+        return Path(f'/proc/{pid}/cmdline').read_bytes().replace(b'\0', b' ').decode()[:200]
+    except OSError:
+        return f'pid {pid} (gone)'
+
+
 def wait_gone(pids: list[int]) -> list[int]:
     """Pids still alive after the hang guard (those are SIGKILLed, so none leaks)."""
     deadline = time.monotonic() + HANG_GUARD_S
@@ -106,9 +114,11 @@ def test_sigkill_of_the_experiment_leaves_no_process_and_a_readable_bag(ros_env,
             time.sleep(0.5)
         children = children_of(runner.pid)
         assert len(children) == 4, children          # recorder, notch, pointing, driver
+        names = {pid: command_of(pid) for pid in children}
         runner.kill()
         runner.wait()
-        assert wait_gone(children) == [], 'children outlived the experiment'
+        left = wait_gone(children)
+        assert left == [], f'children outlived the experiment: {[names[p] for p in left]}'
     finally:
         if runner.poll() is None:
             runner.kill()
