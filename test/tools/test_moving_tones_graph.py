@@ -33,22 +33,17 @@ IDENTIFY_AT_S, WINDOW_S, CONTROL_S = 0.5, 2.0, 4.5
 CONTROL_ON_S = IDENTIFY_AT_S + 10.0 + WINDOW_S    # the 10 s broadband record, then a window
 
 
-def _short(changes: dict, notch: dict, short: bool = True) -> dict:
+def _short(changes: dict, notch: dict) -> dict:
     """The mismatch scenario's timeline, shortened, with ``changes`` on top.
 
     ``notch`` is added to the scenario's own notch settings (its identification method
     stays), with ``mu_policy: manual``: these runs check the graph, not the policy's rate
     (the mismatch scenario's auto policy bounds 45/91 Hz to a slower rate than 5 s of
-    control need). ``short=False``: the scenario's own timeline with a 3 s window and 5 s
-    of control (the tachometer run: it failed on the short timeline, cause not
-    investigated).
+    control need).
     """
     base = yaml.safe_load(scenario_path("mismatch").read_text())
-    if short:
-        base.update(identify_at_s=IDENTIFY_AT_S, window_s=WINDOW_S, control_on_s=CONTROL_ON_S,
-                    duration_s=CONTROL_ON_S + CONTROL_S)
-    else:
-        base.update(window_s=3.0, duration_s=base["control_on_s"] + 5.0)
+    base.update(identify_at_s=IDENTIFY_AT_S, window_s=WINDOW_S, control_on_s=CONTROL_ON_S,
+                duration_s=CONTROL_ON_S + CONTROL_S)
     notch = {"mu_policy": "manual", **notch}
     base.update(changes)
     base["notch"] = {**base["notch"], **notch}
