@@ -96,9 +96,9 @@ def test_killed_notch_controller_is_dropped_within_the_timeout(ros_context, node
     assert held == list(range(last + 1, last + 1 + len(held))), held
     print(f'last notch command: sample {last}; held for {len(held)} samples; driver: '
           f'{diagnostics.values(DRIVER)}')
-    # The test may have missed the last command(s) the driver got (the controller was
-    # killed mid-send; a command whose sample the driver had already passed after a
-    # timeout is still applied as the latest): each one the driver got for sample
+    # The driver may have got command(s) after the status that named ``last`` (the
+    # controller was killed mid-send; a command whose sample the driver had already passed
+    # after a timeout is still applied as the latest): each one the driver got for sample
     # last + k ends the hold k samples later and adds at most one distinct value.
     # Without any, the hold is exactly TIMEOUT_SAMPLES samples of the last command.
     extra = len(held) - TIMEOUT_SAMPLES
