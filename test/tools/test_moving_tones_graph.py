@@ -5,8 +5,9 @@ node's reference input and estimates, the recorder and the report's following ba
 to end. They need the notch supervisor's tracking API (``tone_estimates_hz``,
 ``set_reference_frequency``): skipped where it does not exist yet.
 
-The settings are the ``mismatch`` scenario's (its broadband identification), on a shorter
-timeline: identification from 0.5 s (10 s), 2 s windows, 4.5 s of control at mu 0.002
+The settings are the ``mismatch`` scenario's (its broadband identification; the
+tachometer run identifies with test tones), on a shorter timeline: identification from
+0.5 s (10 s, or 3.5 s with test tones), 2 s windows, 4.5 s of control at mu 0.002
 (``mu_policy: manual``: these runs check the graph, not the policy's rate). Missed
 samples are not asserted here: a lockstep timeout depends on the machine's load.
 """
@@ -30,20 +31,23 @@ pytestmark = pytest.mark.skipif(
     reason="needs the notch supervisor's frequency tracking (branch tracking)")
 
 IDENTIFY_AT_S, WINDOW_S, CONTROL_S = 0.5, 2.0, 4.5
-CONTROL_ON_S = IDENTIFY_AT_S + 10.0 + WINDOW_S    # the 10 s broadband record, then a window
+BROADBAND_S, TONES_S = 10.0, 3.5
+"""Identification time (s): the broadband 10 s record; test tones at two tones (3.2 s)."""
 
 
-def _short(changes: dict, notch: dict) -> dict:
+def _short(changes: dict, notch: dict, identification_s: float = BROADBAND_S) -> dict:
     """The mismatch scenario's timeline, shortened, with ``changes`` on top.
 
     ``notch`` is added to the scenario's own notch settings (its identification method
-    stays), with ``mu_policy: manual``: these runs check the graph, not the policy's rate
-    (the mismatch scenario's auto policy bounds 45/91 Hz to a slower rate than 5 s of
-    control need).
+    stays unless ``notch`` names another, with its ``identification_s``), with
+    ``mu_policy: manual``: these runs check the graph, not the policy's rate (the mismatch
+    scenario's auto policy bounds 45/91 Hz to a slower rate than 5 s of control need).
+    Control goes on a window after the identification.
     """
     base = yaml.safe_load(scenario_path("mismatch").read_text())
-    base.update(identify_at_s=IDENTIFY_AT_S, window_s=WINDOW_S, control_on_s=CONTROL_ON_S,
-                duration_s=CONTROL_ON_S + CONTROL_S)
+    control_on_s = IDENTIFY_AT_S + identification_s + WINDOW_S
+    base.update(identify_at_s=IDENTIFY_AT_S, window_s=WINDOW_S, control_on_s=control_on_s,
+                duration_s=control_on_s + CONTROL_S)
     notch = {"mu_policy": "manual", **notch}
     base.update(changes)
     base["notch"] = {**base["notch"], **notch}
@@ -83,7 +87,9 @@ def test_the_tachometer_drives_the_tones_through_the_graph(ros_env, tmp_path):
                    "reference_speed_hz": 45.5, "profile_time_s": [0.0],
                    "profile_speed_hz": [45.5], "tachometer": True},
          "report_tones_hz": [45.5, 91.0]},
-        {"tone_frequencies_hz": [45.0, 91.0], "reference_harmonics": [1.0, 2.0]}))
+        # test tones at the reference's 45.5 / 91 Hz (the tracking run has the broadband one)
+        {"tone_frequencies_hz": [45.0, 91.0], "reference_harmonics": [1.0, 2.0],
+         "identification": "tones"}, TONES_S))
     bag = run["bag"]
     ref_index, reference = bag.frequencies["/pph/reference_frequency"]
     samples = run["report"]["loop"]["samples"]
