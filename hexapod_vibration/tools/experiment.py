@@ -444,6 +444,11 @@ class ExperimentRun:
         self._progress_at = now
         self.progress = Progress(sc.name, sc.duration_s)
 
+    @property
+    def lockstep(self) -> bool:
+        """True for a lockstep run (the driver holds at breakpoints), False for realtime."""
+        return self.o.mode == "lockstep"
+
     def start(self) -> None:
         """Recorder first, then the controllers; the driver when the recorder matched them.
 
@@ -458,7 +463,7 @@ class ExperimentRun:
         # Lockstep: the breakpoints and the progress come from the driver's status; a 1 kHz
         # /clock reader here only cost the runner (75 % of its CPU was rclpy's executor
         # waking for it) and the driver a reader to serve.
-        self.sup = Supervisor(watch_clock=self.o.mode != "lockstep")
+        self.sup = Supervisor(watch_clock=not self.lockstep)
         if self.o.composed:
             self.children.append(start_child("pph_graph", "hexapod_vibration.nodes.pph_graph",
                                              common + self._breakpoint("pph_driver:"), logs))
@@ -468,7 +473,7 @@ class ExperimentRun:
                 "notch_controller", "hexapod_vibration.nodes.notch_controller", common, logs))
         self.children.append(start_child(
             "pointing_controller", "hexapod_vibration.nodes.pointing_controller", common, logs))
-        if self.o.mode != "lockstep":
+        if not self.lockstep:
             controllers = [*POINTING_TOPICS, *(NOTCH_TOPICS if self.has_notch else ())]
             self._wait(lambda: not self.sup.recorder_unmatched(controllers),
                        "recorder matching the controllers")
@@ -490,7 +495,7 @@ class ExperimentRun:
 
     def _breakpoint(self, prefix: str = "") -> list[str]:
         """Lockstep: the driver starts held before sample 0 (after the params file: wins)."""
-        return ["-p", f"{prefix}hold_at_time_s:=0.0"] if self.o.mode == "lockstep" else []
+        return ["-p", f"{prefix}hold_at_time_s:=0.0"] if self.lockstep else []
 
     def _check(self, what: str) -> None:
         for child in self.children:
@@ -543,7 +548,7 @@ class ExperimentRun:
         # (lockstep: before the driver leaves its start breakpoint, so the bag has sample 0).
         self._wait(lambda: not self.sup.recorder_unmatched(self.recorded_topics()),
                    "recorder matching every publisher")
-        if self.o.mode == "lockstep":
+        if self.lockstep:
             self._run_lockstep()
         else:
             self._run_realtime()

@@ -655,8 +655,7 @@ class AdaptiveNotchCanceller:
         """
         if not self._lowpass_pole:
             return self.weights
-        a = self._lowpass_pole
-        return np.conj(self._v + (a / (1.0 - a)) * self._lp).T
+        return np.conj(self._adapted_h(np.empty_like(self._v))).T
 
     def add_adapted_weights_h(self, total: np.ndarray) -> None:
         """``total += conj(adapted_weights).T`` in place: no array allocated (1 kHz path).
@@ -670,11 +669,13 @@ class AdaptiveNotchCanceller:
             return
         if self._adapted_scratch is None or self._adapted_scratch.shape != self._v.shape:
             self._adapted_scratch = np.empty_like(self._v)
-        scratch = self._adapted_scratch
+        np.add(total, self._adapted_h(self._adapted_scratch), out=total)
+
+    def _adapted_h(self, out: np.ndarray) -> np.ndarray:
+        """``V + a / (1 - a) LP`` (the adapted weights, conjugated, (C, T)) into ``out``."""
         a = self._lowpass_pole
-        np.multiply(self._lp, a / (1.0 - a), out=scratch)
-        np.add(scratch, self._v, out=scratch)
-        np.add(total, scratch, out=total)
+        np.multiply(self._lp, a / (1.0 - a), out=out)
+        return np.add(out, self._v, out=out)
 
     @property
     def update_lowpass_hz(self) -> float:
