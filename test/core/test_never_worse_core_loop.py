@@ -111,6 +111,19 @@ def _following_db(z: np.ndarray, track_hz: np.ndarray, window: int = 1000) -> np
     return 20 * np.log10(np.abs(rows @ w) / w.sum())
 
 
+def _spin_up_runs(name: str):
+    """(loop, z with control, z of the twin, rotor speed per sample Hz) of a spin-up file."""
+    scenario = load_scenario(ROOT / 'config' / 'scenarios' / f'{name}.yaml')
+    assert scenario.notch.settings['update_lowpass_hz'] > 0.0
+    runs = []
+    for sc in (scenario, dataclasses.replace(scenario, control_on_s=scenario.duration_s)):
+        loop = CoreLoop(CFG, sc)
+        runs.append((loop, CFG.geometry.platform_from_struts(loop.run().accel_m_s2)[:, 2]))
+    (loop, z_on), (_, z_off) = runs
+    speed = scenario.rotor.rotor().speed_hz(np.arange(z_on.size) / FS)
+    return scenario, loop, z_on, z_off, speed
+
+
 def test_spin_up_tracked_meets_the_ramp_and_steady_targets_and_is_never_worse():
     """Issue 11's spin-up targets on the core loop (no tachometer, tracking, update low-pass).
 
@@ -121,14 +134,7 @@ def test_spin_up_tracked_meets_the_ramp_and_steady_targets_and_is_never_worse():
     dB; with the paper's update the ramp min was 38 / 32 / 14 dB at the rates the policy
     then allowed.)
     """
-    scenario = load_scenario(ROOT / 'config' / 'scenarios' / 'spin_up.yaml')
-    assert scenario.notch.settings['update_lowpass_hz'] > 0.0
-    runs = []
-    for sc in (scenario, dataclasses.replace(scenario, control_on_s=scenario.duration_s)):
-        loop = CoreLoop(CFG, sc)
-        runs.append((loop, CFG.geometry.platform_from_struts(loop.run().accel_m_s2)[:, 2]))
-    (loop, z_on), (_, z_off) = runs
-    speed = scenario.rotor.rotor().speed_hz(np.arange(z_on.size) / FS)
+    scenario, loop, z_on, z_off, speed = _spin_up_runs('spin_up')
     start_s = np.arange(z_on.size // 1000)
     ramp, steady = (start_s >= 17) & (start_s < 36), (start_s >= 38) & (start_s < 50)
     for order in scenario.rotor.orders:
@@ -141,3 +147,36 @@ def test_spin_up_tracked_meets_the_ramp_and_steady_targets_and_is_never_worse():
         rise = _band_db(z_on[span], bands) - _band_db(z_off[span], bands)
         assert np.max(rise) < 1.0, (lo, hi, np.round(rise, 2))
     assert loop.notch.status()['guard'] == 'watching'
+
+
+def test_spin_up_on_the_tachometer_meets_every_order_from_the_ramp_start():
+    """``spin_up_tachometer`` meets the spin-up targets from the ramp's first second.
+
+    >= 30 dB on every order in every 1 s window of the ramp (16..36 s), >= 50 dB over the
+    steady 38..50 s, every third octave within +1 dB of the twin in every 12 s window from
+    control-on.
+
+    Order 3's weight turns at 0.35 rad/s when the ramp starts (a zero of the disturbance path
+    near 90 Hz); at the 0.006 ceiling the policy gave it 0.006 and the first second kept
+    24.5 dB. With the 0.012 ceiling it gets 0.0114 (orders 1 and 2 keep theirs): 52.2 dB.
+    (Measured: ramp min 42.2 / 35.2 / 51.7 dB, worst 12 s window +0.79 dB.)
+    """
+    scenario, loop, z_on, z_off, speed = _spin_up_runs('spin_up_tachometer')
+    start_s = np.arange(z_on.size // 1000)
+    ramp = (start_s >= 16) & (start_s < 36)
+    steady = slice(38000, 50000)
+    for order in scenario.rotor.orders:
+        reduction = (_following_db(z_off, order * speed) - _following_db(z_on, order * speed))
+        assert reduction[ramp].min() >= 30.0, (order, np.round(reduction[ramp], 1))
+        track = order * speed[steady]
+        level = (_following_db(z_off[steady], track, 12000)
+                 - _following_db(z_on[steady], track, 12000))
+        assert level[0] >= 50.0, (order, level)
+    bands = third_octave_bands_hz(5.0, 450.0)[:, 1:]
+    n = int(scenario.window_s * FS)
+    worst = max(float(np.max(_band_db(z_on[a:a + n], bands) - _band_db(z_off[a:a + n], bands)))
+                for a in range(int(scenario.control_on_s * FS), z_on.size - n + 1, int(FS)))
+    assert worst < 1.0, worst
+    status = loop.notch.status()
+    assert status['guard'] == 'watching' and status['reference'] == 'following'
+    assert status['tone_mu'][2] > 0.01 > max(status['tone_mu'][:2]), status['tone_mu']
