@@ -21,6 +21,7 @@ now (``supervisor.tone_estimates_hz``) goes out on ``/pph/notch_frequencies`` ev
 from __future__ import annotations
 
 import inspect
+from typing import Any
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
@@ -47,6 +48,7 @@ from hexapod_vibration.parameter_specs import NOTCH_CONTROLLER
 from hexapod_vibration.paths import config_path
 from hexapod_vibration.ros.diagnostics import diagnostic_array, publish_status_periodically
 from hexapod_vibration.ros.executors import run_node
+from hexapod_vibration.ros.matching import MatchedReaders
 from hexapod_vibration.ros.messages import (
     ControllerLoopPort,
     StrutArrayPublisher,
@@ -85,15 +87,19 @@ class NotchControllerNode(Node):
         else:
             self.supervisor = NotchSupervisor(config, self.fs)
         accel_range = SignalRanges.from_model(model).accel_m_s2      # the accelerometers' +-2 g
+        self.readers = MatchedReaders(self.publish_diagnostics)
+
+        def loop_publisher(topic: str) -> Any:
+            return self.readers.watch(self.create_publisher(
+                Float64MultiArray, topic, LOOP_PUBLISHER_QOS,
+                event_callbacks=self.readers.callbacks()))
+
         self.port = ControllerLoopPort("/pph/accel", accel_range, StrutArrayPublisher(
-            self.create_publisher(Float64MultiArray, "/pph/notch_command", LOOP_PUBLISHER_QOS)),
-            self.get_logger())
-        self._pub_w = self.create_publisher(Float64MultiArray, "/pph/notch_weights",
-                                            LOOP_PUBLISHER_QOS)
+            loop_publisher("/pph/notch_command")), self.get_logger())
+        self._pub_w = loop_publisher("/pph/notch_weights")
         self._pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", DIAGNOSTICS_QOS)
         publish_status_periodically(self, self.publish_diagnostics)
-        self._pub_frequencies = self.create_publisher(Float64MultiArray, NOTCH_FREQUENCIES_TOPIC,
-                                                      LOOP_PUBLISHER_QOS)
+        self._pub_frequencies = loop_publisher(NOTCH_FREQUENCIES_TOPIC)
         self._pub_sensitivity = self.create_publisher(
             Float64MultiArray, NOTCH_SENSITIVITY_TOPIC, LATCHED_QOS)
         self._published_sensitivity: object | None = None
@@ -225,7 +231,8 @@ class NotchControllerNode(Node):
 
     def publish_diagnostics(self) -> None:
         """Controller state on /diagnostics: the supervisor's and the loop port's counters."""
-        status = {**self.supervisor.status(), **self.port.diagnostics()}
+        status = {**self.supervisor.status(), **self.port.diagnostics(),
+                  **self.readers.values()}
         self._pub_diag.publish(diagnostic_array(NOTCH_STATUS, bool(status["invalid"]),
                                                 status["state"], status,
                                                 self.supervisor.last_sample))

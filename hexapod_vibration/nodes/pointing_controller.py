@@ -30,6 +30,7 @@ from hexapod_vibration.parameter_specs import POINTING_CONTROLLER
 from hexapod_vibration.paths import config_path
 from hexapod_vibration.ros.diagnostics import diagnostic_array, publish_status_periodically
 from hexapod_vibration.ros.executors import run_node
+from hexapod_vibration.ros.matching import MatchedReaders
 from hexapod_vibration.ros.messages import (
     ControllerLoopPort,
     StrutArrayPublisher,
@@ -61,10 +62,12 @@ class PointingControllerNode(Node):
         self.law.set_gains(self._gains(values))
         self.law.set_target(self._target(values), model.strut.stroke_limit_m)
         self.enabled = bool(values["enabled"])
+        self.readers = MatchedReaders(self.publish_diagnostics)
         self.port = ControllerLoopPort(
             "/pph/eddy", SignalRanges.from_model(model).eddy_m,
-            StrutArrayPublisher(self.create_publisher(
-                Float64MultiArray, "/pph/pointing_command", LOOP_PUBLISHER_QOS)),
+            StrutArrayPublisher(self.readers.watch(self.create_publisher(
+                Float64MultiArray, "/pph/pointing_command", LOOP_PUBLISHER_QOS,
+                event_callbacks=self.readers.callbacks()))),
             self.get_logger())
         self._pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", DIAGNOSTICS_QOS)
         publish_status_periodically(self, self.publish_diagnostics)
@@ -119,7 +122,7 @@ class PointingControllerNode(Node):
         """State and the counts of refused /pph/eddy messages on /diagnostics."""
         counters = self.port.diagnostics()
         values = {"enabled": str(self.enabled).lower(), "last_sample": self.port.last_sample,
-                  "run": self.port.sequence.run, **counters,
+                  "run": self.port.sequence.run, **counters, **self.readers.values(),
                   "target_pose_m_rad": np.round(self.law.target, 9).tolist()}
         message = "enabled" if self.enabled else "disabled"
         self._pub_diag.publish(diagnostic_array(POINTING_STATUS, bool(counters["invalid"]),

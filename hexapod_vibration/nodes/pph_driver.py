@@ -23,6 +23,7 @@ drift, then the rotor's orders) goes out on ``/pph/disturbance_frequencies`` eve
 from __future__ import annotations
 
 import time
+from typing import Any
 
 import numpy as np
 import rclpy
@@ -55,6 +56,7 @@ from hexapod_vibration.parameter_specs import (
 from hexapod_vibration.paths import config_path
 from hexapod_vibration.ros.diagnostics import diagnostic_array
 from hexapod_vibration.ros.executors import LoopSpinner, run_node
+from hexapod_vibration.ros.matching import MatchedReaders
 from hexapod_vibration.ros.messages import (
     StrutArrayPublisher,
     create_loop_subscription,
@@ -105,19 +107,20 @@ class PPHDriver(Node):
                                       SignalRanges.from_model(self.model).command_n,
                                       latency_stream="notch")
         self.topics = {name: f"/pph/{name}_command" for name in STREAMS}
-        pub_qos = LOOP_PUBLISHER_QOS
-        self._pub_accel = StrutArrayPublisher(self.create_publisher(
-            Float64MultiArray, "/pph/accel", pub_qos))
-        self._pub_eddy = StrutArrayPublisher(self.create_publisher(
-            Float64MultiArray, "/pph/eddy", pub_qos))
-        self._pub_force = StrutArrayPublisher(self.create_publisher(
-            Float64MultiArray, "/pph/actuator_force", pub_qos))
-        self._pub_reference = self.create_publisher(Float64MultiArray, REFERENCE_FREQUENCY_TOPIC,
-                                                    pub_qos)
-        self._pub_frequencies = self.create_publisher(
-            Float64MultiArray, DISTURBANCE_FREQUENCIES_TOPIC, pub_qos)
+        self.readers = MatchedReaders(lambda: self.publish_diagnostics(held=self.held()))
+
+        def loop_publisher(msg_type: type, topic: str, qos: object = LOOP_PUBLISHER_QOS) -> Any:
+            return self.readers.watch(self.create_publisher(
+                msg_type, topic, qos, event_callbacks=self.readers.callbacks()))
+
+        self._pub_accel = StrutArrayPublisher(loop_publisher(Float64MultiArray, "/pph/accel"))
+        self._pub_eddy = StrutArrayPublisher(loop_publisher(Float64MultiArray, "/pph/eddy"))
+        self._pub_force = StrutArrayPublisher(loop_publisher(Float64MultiArray,
+                                                             "/pph/actuator_force"))
+        self._pub_reference = loop_publisher(Float64MultiArray, REFERENCE_FREQUENCY_TOPIC)
+        self._pub_frequencies = loop_publisher(Float64MultiArray, DISTURBANCE_FREQUENCIES_TOPIC)
         self._reference_msg: Float64MultiArray | None = None
-        self._pub_clock = serialized_publish(self.create_publisher(Clock, "/clock", CLOCK_QOS))
+        self._pub_clock = serialized_publish(loop_publisher(Clock, "/clock", CLOCK_QOS))
         self._pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", DIAGNOSTICS_QOS)
         self.loop_subscriptions = [
             create_loop_subscription(self, topic, lambda msg, n=name: self._on_command(n, msg),
@@ -309,7 +312,7 @@ class PPHDriver(Node):
         """Loop health and statistics on /diagnostics (``held``: at the breakpoint)."""
         values, warn, message = self.arbiter.report(time.perf_counter(),
                                                     self.mode == "lockstep")
-        values.update({"mode": self.mode, "held": held,
+        values.update({"mode": self.mode, "held": held, **self.readers.values(),
                        "fallback_samples": self.plant.fallback_samples,
                        "accel_clipped_samples": self.plant.accelerometers.clipped_samples})
         rotor = self.plant.shaker.rotor

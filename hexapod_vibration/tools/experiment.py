@@ -49,6 +49,7 @@ from hexapod_vibration.contract import (
     NOTCH_FREQUENCIES_TOPIC,
     NOTCH_SENSITIVITY_TOPIC,
     NOTCH_STATUS,
+    POINTING_STATUS,
     REFERENCE_FREQUENCY_TOPIC,
 )
 from hexapod_vibration.parameter_specs import STORAGES
@@ -70,6 +71,7 @@ STALL_TIMEOUT_S = 120.0
 """The run fails when neither sim time nor the recorder's loop topics move for this long
 (s, wall)."""
 RECORDER_DRAIN = "recorder writing the last samples"
+WRITERS_MATCHING = "every publisher matching its subscribers"
 EXPERIMENT_LOCKSTEP_TIMEOUT_S = 10.0
 """The driver's ``lockstep_timeout_s`` in an experiment (s, wall): the parameter's maximum."""
 DRIVER_TOPICS = ("/pph/accel", "/pph/eddy", "/pph/actuator_force", "/clock",
@@ -263,6 +265,7 @@ class Supervisor:
         self.sim_time_s = -1.0
         self.driver: dict[str, str] = {}
         self.notch: dict[str, str] = {}
+        self.pointing: dict[str, str] = {}
         self.recorder: dict[str, str] = {}
         self._watch_clock = watch_clock
         if watch_clock:
@@ -284,6 +287,8 @@ class Supervisor:
                     self.sim_time_s = max(self.sim_time_s, int(values.get("sample", 0)) / 1e3)
             elif status.name == NOTCH_STATUS:
                 self.notch = values
+            elif status.name == POINTING_STATUS:
+                self.pointing = values
             elif status.name.startswith("pph_recorder"):
                 self.recorder = values
 
@@ -312,6 +317,17 @@ class Supervisor:
     def recorder_unmatched(self, topics: list[str]) -> list[str]:
         """Topics on which the recorder itself reports no matched publisher yet."""
         return [t for t in topics if int(self.recorder.get(f"{t} publishers", "0")) < 1]
+
+    def writers_unmatched(self, topics: list[str]) -> list[str]:
+        """Topics whose publisher has not matched every subscription the graph shows yet.
+
+        The publishers' side (:mod:`hexapod_vibration.ros.matching`): a subscription that
+        matched its publisher may not be matched by it yet, and loses what it sends.
+        """
+        from hexapod_vibration.ros.matching import unmatched_topics
+
+        return unmatched_topics((self.driver, self.notch, self.pointing), topics,
+                                self.node.count_subscribers)
 
     def set_parameter(self, node: str, name: str, value: Any, timeout_s: float = 10.0) -> None:
         """Set a parameter through the node's parameter service; raise if rejected."""
@@ -487,6 +503,13 @@ class ExperimentRun:
         return [*DRIVER_TOPICS, *tachometer, *POINTING_TOPICS,
                 *(NOTCH_TOPICS if self.has_notch else ())]
 
+    def matched_topics(self) -> list[str]:
+        """The recorded topics whose publishers must match every subscriber before sample 0.
+
+        (The notch's latched sensitivity reaches a late subscriber anyway.)
+        """
+        return [t for t in self.recorded_topics() if t != NOTCH_SENSITIVITY_TOPIC]
+
     def loop_topics(self) -> list[str]:
         """The per-sample topics the bag must hold every sample of."""
         from hexapod_vibration.analysis.bag_io import STRUT_TOPICS
@@ -521,6 +544,9 @@ class ExperimentRun:
                                for t in sup.recorder_behind(self.loop_topics(), self.n_end))
             detail = (f" (recorded of {self.n_end} samples: {behind}; the rest never "
                       "reached the recorder)" if what == RECORDER_DRAIN and behind else "")
+            if what == WRITERS_MATCHING:
+                detail = (" (publishers short of the subscriptions on: "
+                          f"{', '.join(sup.writers_unmatched(self.matched_topics()))})")
             raise ExperimentError(f"the loop is not advancing: nothing changed for "
                                   f"{STALL_TIMEOUT_S:g} s while {what}{detail}")
 
@@ -548,6 +574,9 @@ class ExperimentRun:
         # (lockstep: before the driver leaves its start breakpoint, so the bag has sample 0).
         self._wait(lambda: not self.sup.recorder_unmatched(self.recorded_topics()),
                    "recorder matching every publisher")
+        if self.lockstep:      # and every publisher matching the recorder: see writers_unmatched
+            self._wait(lambda: not self.sup.writers_unmatched(self.matched_topics()),
+                       WRITERS_MATCHING)
         if self.lockstep:
             self._run_lockstep()
         else:

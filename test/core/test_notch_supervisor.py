@@ -205,3 +205,43 @@ def test_a_new_run_restarts_the_sequence_and_keeps_what_was_identified():
     assert np.array_equal(sup.plant_response, response)
     assert np.allclose(sup.canceller.weights, weights, atol=1e-3)
     assert sup.state == NotchState.ADAPTING and sup.status()["enabled_since_sample"] == 0
+
+
+def test_a_line_offset_fade_lowers_mu_to_zero_before_the_weights_freeze():
+    """The line-offset fade: mu falls to 0 with the weights adapting, then they freeze.
+
+    The fall is a raised cosine, then the output fades; the oscillators stay on their tones.
+    Settings that let control try again give mu back, unless they bring a mu of their own.
+    """
+    from hexapod_vibration.core.control import notch_supervisor as ns
+
+    sup = NotchSupervisor(config(enabled=True))
+    start = 100 + 3200 + 2000
+    run(sup, coupled_gain(0.0), start)
+    canceller, mu = sup.canceller, sup.canceller.mu
+    assert sup.state == NotchState.ADAPTING and mu > 0.0
+    sup._fade_out("line off the notch: test", fade_s=0.5, mu_fall_s=1.0)
+    assert sup.state == NotchState.REFUSED and sup.guard_state == "off"
+    mus, gains, frozen, weights = [], [], [], []
+    for n in range(start, start + 1600):
+        run(sup, coupled_gain(0.0), 1, n)
+        mus.append(canceller.mu)
+        gains.append(canceller.output_gain)
+        frozen.append(canceller.frozen)
+        weights.append(canceller.weights.copy())
+    mus, gains = np.array(mus), np.array(gains)
+    fall = int(1.0 * FS)
+    assert np.all(np.diff(mus) <= 0.0) and mus[fall // 2 - 1] == pytest.approx(mu / 2, rel=0.05)
+    assert mus[fall - 1] == 0.0 and frozen[fall - 1] and not frozen[fall - 2]
+    assert np.all(gains[:fall] == 1.0)                       # the output fades after the fall
+    assert gains[fall + 249] == pytest.approx(0.5, abs=0.01) and gains[-1] == 0.0
+    assert not np.array_equal(weights[100], weights[0])      # still adapting while mu falls
+    assert np.array_equal(weights[-1], weights[fall])        # frozen after
+    assert canceller.tone_frequencies_hz.tolist() == [TONE]
+    assert ns.MU_RAMP_STEP_SAMPLES > 1 and len(set(mus[:fall].tolist())) > 50   # a staircase
+    sup.apply({"adaptation": "decentralized"})              # control tries again: mu back
+    assert canceller.mu == mu and not canceller.frozen and canceller.enabled
+    sup._fade_out("line off the notch: test", fade_s=0.5, mu_fall_s=1.0)
+    run(sup, coupled_gain(0.0), 300, start + 1600)
+    sup.apply({"mu": mu / 4})                                 # ... with a mu of its own
+    assert canceller.mu == mu / 4

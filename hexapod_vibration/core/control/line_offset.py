@@ -64,7 +64,6 @@ class LineOffsetMonitor:
         self._sum_h: np.ndarray | None = None      # sum of conj(W).T over the block, (C, T)
         self._previous: np.ndarray | None = None
         self._z = np.zeros(self.tones, dtype=complex)
-        self._last_z = np.zeros(self.tones, dtype=complex)
         self._magnitude = np.zeros(self.tones)
 
     def step(self, weights: np.ndarray) -> bool:
@@ -96,7 +95,6 @@ class LineOffsetMonitor:
         w = np.conj(self._sum_h).T / self.block
         if self._previous is not None and self._previous.shape == w.shape:
             z = np.sum(w * np.conj(self._previous), axis=1)
-            self._last_z = z
             self._z += self._alpha * (z - self._z)
             self._magnitude += self._alpha * (np.abs(z) - self._magnitude)
             self._blocks += 1
@@ -117,11 +115,6 @@ class LineOffsetMonitor:
     def offset_hz(self) -> np.ndarray:
         """(T,) the lines' offsets from the oscillators (Hz, + above)."""
         return np.angle(self._z) / (2.0 * np.pi * self.block_s)
-
-    @property
-    def recent_offset_hz(self) -> np.ndarray:
-        """(T,) the turning over the last block alone (Hz): where the weights run now."""
-        return np.angle(self._last_z) / (2.0 * np.pi * self.block_s)
 
     @property
     def coherence(self) -> np.ndarray:

@@ -115,10 +115,25 @@ MAX_TONES = 16
 MAX_HARMONICS = MAX_TONES - 1
 """Largest ``harmonics`` setting (orders 2..16 of one tone; tones x orders <= MAX_TONES)."""
 LINE_OFFSET_FADE_S = 5.0
-"""Fade (s) when a line is off the notch (nothing runs away there). Measured on ``drift``
-(core loop against its twin, the quiet 44.7-56.2 Hz third octave, worst 1 s block during
-the fade): +3.9 dB with 2 s, +3.0 with 3 s, +1.3 with 5 s (a raised-cosine ramp instead of
-the linear one changed nothing: the splatter is not the ramp's corners)."""
+"""Fade (s) of the output when a line is off the notch (nothing runs away there), after
+:data:`LINE_OFFSET_MU_RAMP_S`. (Measured on ``drift`` when the weights froze at once, core
+loop against its twin, the quiet 44.7-56.2 Hz third octave, worst 1 s block during the
+fade: +3.9 dB with 2 s, +3.0 with 3 s, +1.3 with 5 s.)"""
+LINE_OFFSET_MU_RAMP_S = 2.0
+"""Before that fade, mu falls to 0 over this (s, raised cosine) with the weights still
+adapting; then they freeze. Weights that follow a line off the notch turn at the offset:
+frozen at once they stop turning and the output's frequency jumps back to the oscillator's
+(a kink of its phase, a 1/df^2 skirt). Until 2026-12-03 each oscillator was moved to where
+its weights had turned over the last 50 ms, which held for one steadily turning line
+(``drift``) but not for weights that wander: ``spin_up`` without tracking froze orders 2
+and 3 (0.09 and 0.03 N, 2-5 Hz off their lines) onto 60.69 and 95.22 Hz, and the kink put
++11 dB into the quiet 44.7-56.2 Hz band. With mu falling the weights slow down and shrink
+smoothly (for a line off the notch, ``|W|`` scales with mu). Core loop against the twin,
+worst 12 s window from control-on (Welch 4 s): ``spin_up`` without tracking +2.50 ->
++0.45 dB (a 1 s fall: +0.41), ``drift`` +0.63 -> +0.27 dB (1 s: +0.29)."""
+MU_RAMP_STEP_SAMPLES = 10
+"""The falling mu is set every this many samples (each setting rescales P: a few array
+operations)."""
 DETECTOR_RAMP_TIME_CONSTANTS = 1.0
 """After the settling, the phase detector's gain rises linearly to 1 over this many
 adaptation time constants (1/mu samples)."""
@@ -287,6 +302,22 @@ class SupervisorEvent:
     parameter: tuple[str, Any] | None = None
 
 
+@dataclass
+class _MuFall:
+    """A line-offset fade under way: mu falling to 0 before the weights freeze."""
+
+    mu: float
+    """mu when the fall started (restored if control is tried again)."""
+    samples: int
+    """Length of the fall (samples)."""
+    fade_samples: int
+    """The output's fade once the weights froze (samples)."""
+    done: int = 0
+    """Samples of the fall so far."""
+    last_mu: float = float("nan")
+    """The last mu the fall set: another one in force means someone else set it."""
+
+
 @dataclass(frozen=True)
 class _Plan:
     """A checked set of changes: resulting tones, mode, known response, P and bound."""
@@ -394,7 +425,7 @@ class NotchSupervisor:
         self.guard = DivergenceGuard(self.channels, self.fs, tones, config.guard_margin_db)
         self.guard_action = ""
         self.line_monitor = LineOffsetMonitor(len(tones), self.fs)
-        self._nominal_after_fade: np.ndarray | None = None
+        self._mu_fall: _MuFall | None = None
         self._lines_hz = np.zeros(0)
         self._guard_backed_off = False
         self._guard_gave_up = False
@@ -888,8 +919,8 @@ class NotchSupervisor:
             self._weights_clamped()
         if self._config.divergence_guard:
             self._guard_step(error)
-        if self._nominal_after_fade is not None and self.canceller.output_gain == 0.0:
-            self._retune_back()
+        if self._mu_fall is not None and self._mu_fall.done < self._mu_fall.samples:
+            self._mu_fall_step()
         if self._follow.active:
             self._follow.step(index, error)
         if self.identifier is not None:
@@ -991,15 +1022,11 @@ class NotchSupervisor:
             f"{monitor.offset_hz[k]:+.2f} Hz), where control is predicted to change it by "
             f"{change_db[k]:+.1f} dB (less than guard_margin_db "
             f"{self._config.guard_margin_db:g} dB of reduction) at sample {self.last_sample}")
-        # Frozen weights stop turning: on the oscillators the output would jump from the
-        # line's frequency to the tone's (a kink of its phase: a 1/df^2 skirt, +14 dB over
-        # the quiet 44.7-56.2 Hz third octave on drift). Each oscillator is put where its
-        # weights were turning (phase-continuous), and back once the output is off.
-        self._nominal_after_fade = tones
-        self.canceller.retune(tones + np.where(steady, monitor.recent_offset_hz, 0.0))
-        self._fade_out(f"line off the notch: {self.guard_action}: control faded out "
-                       "(frequency_tracking follows a line that is not where it was told)",
-                       LINE_OFFSET_FADE_S)
+        # frozen at once, weights that turn would kink the output's phase: mu falls first
+        self._fade_out(f"line off the notch: {self.guard_action}: control faded out (mu "
+                       f"to 0 over {LINE_OFFSET_MU_RAMP_S:g} s, then the output over "
+                       f"{LINE_OFFSET_FADE_S:g} s; frequency_tracking follows a line that is "
+                       "not where it was told)", LINE_OFFSET_FADE_S, LINE_OFFSET_MU_RAMP_S)
 
     def _guard_act(self, verdict: GuardVerdict) -> None:
         """Lower mu, or fade out; say what and why."""
@@ -1015,26 +1042,48 @@ class NotchSupervisor:
         self._fade_out(f"divergence guard: {self.guard_action}: control faded out "
                        "(worse than off at any rate tried)")
 
-    def _fade_out(self, reason: str, fade_s: float = FADE_S) -> None:
+    def _fade_out(self, reason: str, fade_s: float = FADE_S, mu_fall_s: float = 0.0) -> None:
         """Freeze the weights and fade the output to 0 over ``fade_s`` (s); say why.
 
-        Control stays off until the settings change or a new identification succeeds.
+        With ``mu_fall_s`` > 0 (s) and the weights adapting, mu first falls to 0 over that
+        time (:meth:`_mu_fall_step`), and the weights freeze only then. Control stays off
+        until the settings change or a new identification succeeds.
         """
         self._guard_gave_up = True
         self.refusal = reason
-        self.canceller.set_frozen(True)
-        self.canceller.set_enabled(False, int(round(fade_s * self.fs)))
+        canceller = self.canceller
+        fade = int(round(fade_s * self.fs))
+        if (mu_fall_s > 0.0 and canceller.enabled and not canceller.frozen
+                and canceller.mu > 0.0):
+            self._mu_fall = _MuFall(canceller.mu, max(int(round(mu_fall_s * self.fs)), 1),
+                                    fade, last_mu=canceller.mu)
+        else:
+            canceller.set_frozen(True)
+            canceller.set_enabled(False, fade)
         self._event("error", self.refusal)
 
-    def _retune_back(self) -> None:
-        """The tones a line-offset fade moved go back to their nominal frequencies."""
-        nominal, self._nominal_after_fade = self._nominal_after_fade, None
-        if nominal is not None and nominal.shape == self.canceller.tone_frequencies_hz.shape:
-            self.canceller.retune(nominal)
+    def _mu_fall_step(self) -> None:
+        """One sample of a mu fall: a raised cosine to 0, then freeze and fade the output."""
+        fall = self._mu_fall
+        fall.done += 1
+        if fall.done % MU_RAMP_STEP_SAMPLES and fall.done < fall.samples:
+            return
+        x = min(fall.done / fall.samples, 1.0)
+        fall.last_mu = fall.mu * 0.5 * (1.0 + float(np.cos(np.pi * x)))
+        self.canceller.set_mu(fall.last_mu)
+        if fall.done >= fall.samples:
+            self.canceller.set_frozen(True)
+            self.canceller.set_enabled(False, fall.fade_samples)
+
+    def _end_mu_fall(self) -> None:
+        """Forget a mu fall; give mu back unless someone else set one since."""
+        fall, self._mu_fall = self._mu_fall, None
+        if fall is not None and self.canceller.mu == fall.last_mu:
+            self.canceller.set_mu(fall.mu)
 
     def _guard_restart(self) -> None:
         """New coefficients or settings: the guard's action sequence starts again."""
-        self._retune_back()
+        self._end_mu_fall()
         self.guard.restart()
         self._guard_backed_off = self._guard_gave_up = False
 

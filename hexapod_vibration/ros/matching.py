@@ -1,0 +1,79 @@
+"""Writer-side matching: how many subscriptions each loop publisher has matched.
+
+Discovery is asymmetric. A subscription can report its publisher matched (the reader's
+side) while that publisher has not matched the subscription yet, and a VOLATILE publisher
+drops what it sends meanwhile. On 2026-12-03 the recorder of a lockstep ``drift`` twin had
+reported every publisher matched on its side, the runner released the driver, and the bag
+began at sample 290 on every loop topic (driver's and controllers' alike): the run then
+waited for samples that never came.
+
+So each node reports on ``/diagnostics`` how many subscriptions its loop publishers have
+matched (``<topic> readers``, :func:`readers_key`), publishes its status again as soon as
+one of those counts changes (:class:`MatchedReaders`), and the experiment runner starts a
+lockstep loop only once every loop publisher has matched every subscription the graph shows
+on its topic (:func:`unmatched_topics`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterable, Mapping
+
+from rclpy.event_handler import PublisherEventCallbacks
+from rclpy.publisher import Publisher
+
+READERS_SUFFIX = " readers"
+
+
+def readers_key(topic: str) -> str:
+    """The ``/diagnostics`` key of the subscriptions ``topic``'s publisher has matched."""
+    return f"{topic}{READERS_SUFFIX}"
+
+
+class MatchedReaders:
+    """The matched-subscription counts of a node's loop publishers, for its status.
+
+    Args:
+        on_change: called (from the executor) whenever a watched publisher's match count
+            changes; a node passes its ``publish_diagnostics``.
+    """
+
+    def __init__(self, on_change: Callable[[], None]) -> None:
+        """Nothing watched yet."""
+        self._on_change = on_change
+        self._publishers: dict[str, Publisher] = {}
+
+    def callbacks(self) -> PublisherEventCallbacks:
+        """The ``event_callbacks`` to create a watched publisher with."""
+        return PublisherEventCallbacks(matched=lambda _info: self._on_change())
+
+    def watch(self, publisher: Publisher) -> Publisher:
+        """Report ``publisher``'s matched subscriptions (returned, for chaining)."""
+        self._publishers[publisher.topic_name] = publisher
+        return publisher
+
+    def values(self) -> dict[str, int]:
+        """``{"<topic> readers": matched subscriptions}`` of every watched publisher."""
+        return {readers_key(topic): publisher.get_subscription_count()
+                for topic, publisher in self._publishers.items()}
+
+
+def unmatched_topics(statuses: Iterable[Mapping[str, str]], topics: Iterable[str],
+                     subscribers: Callable[[str], int]) -> list[str]:
+    """Topics whose publisher has not matched every subscription the graph shows.
+
+    Args:
+        statuses: the nodes' ``/diagnostics`` values (key -> text).
+        topics: the loop topics to check.
+        subscribers: the number of subscriptions the graph shows on a topic.
+
+    Returns:
+        The topics no status reports yet, or whose reported count is below the graph's.
+    """
+    statuses = list(statuses)
+    out = []
+    for topic in topics:
+        key = readers_key(topic)
+        reported = [int(s[key]) for s in statuses if key in s]
+        if not reported or max(reported) < subscribers(topic):
+            out.append(topic)
+    return out
