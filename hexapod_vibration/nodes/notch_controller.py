@@ -21,7 +21,6 @@ now (``supervisor.tone_estimates_hz``) goes out on ``/pph/notch_frequencies`` ev
 from __future__ import annotations
 
 import inspect
-from typing import Any
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
@@ -88,18 +87,15 @@ class NotchControllerNode(Node):
             self.supervisor = NotchSupervisor(config, self.fs)
         accel_range = SignalRanges.from_model(model).accel_m_s2      # the accelerometers' +-2 g
         self.readers = MatchedReaders(self.publish_diagnostics)
-
-        def loop_publisher(topic: str) -> Any:
-            return self.readers.watch(self.create_publisher(
-                Float64MultiArray, topic, LOOP_PUBLISHER_QOS,
-                event_callbacks=self.readers.callbacks()))
-
+        arrays = {topic: self.readers.publisher(self, Float64MultiArray, topic, LOOP_PUBLISHER_QOS)
+                  for topic in ("/pph/notch_command", "/pph/notch_weights",
+                                NOTCH_FREQUENCIES_TOPIC)}
         self.port = ControllerLoopPort("/pph/accel", accel_range, StrutArrayPublisher(
-            loop_publisher("/pph/notch_command")), self.get_logger())
-        self._pub_w = loop_publisher("/pph/notch_weights")
+            arrays["/pph/notch_command"]), self.get_logger())
+        self._pub_w = arrays["/pph/notch_weights"]
         self._pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", DIAGNOSTICS_QOS)
         publish_status_periodically(self, self.publish_diagnostics)
-        self._pub_frequencies = loop_publisher(NOTCH_FREQUENCIES_TOPIC)
+        self._pub_frequencies = arrays[NOTCH_FREQUENCIES_TOPIC]
         self._pub_sensitivity = self.create_publisher(
             Float64MultiArray, NOTCH_SENSITIVITY_TOPIC, LATCHED_QOS)
         self._published_sensitivity: object | None = None

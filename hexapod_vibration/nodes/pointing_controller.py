@@ -65,9 +65,8 @@ class PointingControllerNode(Node):
         self.readers = MatchedReaders(self.publish_diagnostics)
         self.port = ControllerLoopPort(
             "/pph/eddy", SignalRanges.from_model(model).eddy_m,
-            StrutArrayPublisher(self.readers.watch(self.create_publisher(
-                Float64MultiArray, "/pph/pointing_command", LOOP_PUBLISHER_QOS,
-                event_callbacks=self.readers.callbacks()))),
+            StrutArrayPublisher(self.readers.publisher(
+                self, Float64MultiArray, "/pph/pointing_command", LOOP_PUBLISHER_QOS)),
             self.get_logger())
         self._pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", DIAGNOSTICS_QOS)
         publish_status_periodically(self, self.publish_diagnostics)

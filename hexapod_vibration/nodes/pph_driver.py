@@ -23,7 +23,6 @@ drift, then the rotor's orders) goes out on ``/pph/disturbance_frequencies`` eve
 from __future__ import annotations
 
 import time
-from typing import Any
 
 import numpy as np
 import rclpy
@@ -108,19 +107,17 @@ class PPHDriver(Node):
                                       latency_stream="notch")
         self.topics = {name: f"/pph/{name}_command" for name in STREAMS}
         self.readers = MatchedReaders(lambda: self.publish_diagnostics(held=self.held()))
-
-        def loop_publisher(msg_type: type, topic: str, qos: object = LOOP_PUBLISHER_QOS) -> Any:
-            return self.readers.watch(self.create_publisher(
-                msg_type, topic, qos, event_callbacks=self.readers.callbacks()))
-
-        self._pub_accel = StrutArrayPublisher(loop_publisher(Float64MultiArray, "/pph/accel"))
-        self._pub_eddy = StrutArrayPublisher(loop_publisher(Float64MultiArray, "/pph/eddy"))
-        self._pub_force = StrutArrayPublisher(loop_publisher(Float64MultiArray,
-                                                             "/pph/actuator_force"))
-        self._pub_reference = loop_publisher(Float64MultiArray, REFERENCE_FREQUENCY_TOPIC)
-        self._pub_frequencies = loop_publisher(Float64MultiArray, DISTURBANCE_FREQUENCIES_TOPIC)
+        arrays = {topic: self.readers.publisher(self, Float64MultiArray, topic, LOOP_PUBLISHER_QOS)
+                  for topic in ("/pph/accel", "/pph/eddy", "/pph/actuator_force",
+                                REFERENCE_FREQUENCY_TOPIC, DISTURBANCE_FREQUENCIES_TOPIC)}
+        self._pub_accel = StrutArrayPublisher(arrays["/pph/accel"])
+        self._pub_eddy = StrutArrayPublisher(arrays["/pph/eddy"])
+        self._pub_force = StrutArrayPublisher(arrays["/pph/actuator_force"])
+        self._pub_reference = arrays[REFERENCE_FREQUENCY_TOPIC]
+        self._pub_frequencies = arrays[DISTURBANCE_FREQUENCIES_TOPIC]
         self._reference_msg: Float64MultiArray | None = None
-        self._pub_clock = serialized_publish(loop_publisher(Clock, "/clock", CLOCK_QOS))
+        self._pub_clock = serialized_publish(self.readers.publisher(self, Clock, "/clock",
+                                                                    CLOCK_QOS))
         self._pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", DIAGNOSTICS_QOS)
         self.loop_subscriptions = [
             create_loop_subscription(self, topic, lambda msg, n=name: self._on_command(n, msg),

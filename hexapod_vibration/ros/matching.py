@@ -17,8 +17,10 @@ on its topic (:func:`unmatched_topics`).
 from __future__ import annotations
 
 from collections.abc import Callable, Iterable, Mapping
+from typing import Any
 
 from rclpy.event_handler import PublisherEventCallbacks
+from rclpy.node import Node
 from rclpy.publisher import Publisher
 
 READERS_SUFFIX = " readers"
@@ -50,6 +52,11 @@ class MatchedReaders:
         """Report ``publisher``'s matched subscriptions (returned, for chaining)."""
         self._publishers[publisher.topic_name] = publisher
         return publisher
+
+    def publisher(self, node: Node, msg_type: Any, topic: str, qos: Any) -> Publisher:
+        """``node.create_publisher(msg_type, topic, qos)``, watched (with :meth:`callbacks`)."""
+        return self.watch(node.create_publisher(msg_type, topic, qos,
+                                                event_callbacks=self.callbacks()))
 
     def values(self) -> dict[str, int]:
         """``{"<topic> readers": matched subscriptions}`` of every watched publisher."""

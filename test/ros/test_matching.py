@@ -19,8 +19,7 @@ def test_a_watched_publisher_reports_its_matched_subscriptions_and_calls_back(ro
     listener = ros_context.create_node('matching_listener')
     changes: list[dict[str, int]] = []
     readers = MatchedReaders(lambda: changes.append(readers.values()))
-    readers.watch(talker.create_publisher(Float64MultiArray, '/match/loop', LOOP_PUBLISHER_QOS,
-                                          event_callbacks=readers.callbacks()))
+    readers.publisher(talker, Float64MultiArray, '/match/loop', LOOP_PUBLISHER_QOS)
     assert readers.values() == {'/match/loop readers': 0}
     sub = listener.create_subscription(Float64MultiArray, '/match/loop', lambda _m: None,
                                        LOOP_QOS)

@@ -130,7 +130,8 @@ and 3 (0.09 and 0.03 N, 2-5 Hz off their lines) onto 60.69 and 95.22 Hz, and the
 +11 dB into the quiet 44.7-56.2 Hz band. With mu falling the weights slow down and shrink
 smoothly (for a line off the notch, ``|W|`` scales with mu). Core loop against the twin,
 worst 12 s window from control-on (Welch 4 s): ``spin_up`` without tracking +2.50 ->
-+0.45 dB (a 1 s fall: +0.41), ``drift`` +0.63 -> +0.27 dB (1 s: +0.29)."""
++0.44 dB, ``drift`` +0.63 -> +0.35 dB (a 1 s fall, prototype: +0.41 / +0.29 dB; over 1 s
+blocks ``drift`` is +5.2 dB in 44.7-56.2 Hz while mu falls, +4.6 dB in 56-71 Hz before)."""
 MU_RAMP_STEP_SAMPLES = 10
 """The falling mu is set every this many samples (each setting rescales P: a few array
 operations)."""
