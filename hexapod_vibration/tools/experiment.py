@@ -542,11 +542,14 @@ class ExperimentRun:
         elif now - self._progress_at > STALL_TIMEOUT_S:
             behind = ", ".join(f"{t} {sup.recorder.get(f'{t} messages', '0')}"
                                for t in sup.recorder_behind(self.loop_topics(), self.n_end))
-            detail = (f" (recorded of {self.n_end} samples: {behind}; the rest never "
-                      "reached the recorder)" if what == RECORDER_DRAIN and behind else "")
-            if what == WRITERS_MATCHING:
+            if what == RECORDER_DRAIN and behind:
+                detail = (f" (recorded of {self.n_end} samples: {behind}; the rest never "
+                          "reached the recorder)")
+            elif what == WRITERS_MATCHING:
                 detail = (" (publishers short of the subscriptions on: "
                           f"{', '.join(sup.writers_unmatched(self.matched_topics()))})")
+            else:
+                detail = ""
             raise ExperimentError(f"the loop is not advancing: nothing changed for "
                                   f"{STALL_TIMEOUT_S:g} s while {what}{detail}")
 
@@ -577,7 +580,6 @@ class ExperimentRun:
         if self.lockstep:      # and every publisher matching the recorder: see writers_unmatched
             self._wait(lambda: not self.sup.writers_unmatched(self.matched_topics()),
                        WRITERS_MATCHING)
-        if self.lockstep:
             self._run_lockstep()
         else:
             self._run_realtime()

@@ -41,28 +41,41 @@ def _band_db(z: np.ndarray, bands: np.ndarray) -> np.ndarray:
     return np.array([10 * np.log10(np.sum(p[(f >= lo) & (f < hi)])) for lo, hi in bands])
 
 
+def _run_with_twin(scenario):
+    """(loop, z with control, z of the twin): the scenario and its run without control."""
+    runs = []
+    for sc in (scenario, dataclasses.replace(scenario, control_on_s=scenario.duration_s)):
+        loop = CoreLoop(CFG, sc)
+        runs.append((loop, CFG.geometry.platform_from_struts(loop.run().accel_m_s2)[:, 2]))
+    (loop, z_on), (_, z_off) = runs
+    return loop, z_on, z_off
+
+
+def _worst_window_rise(scenario, z_on: np.ndarray, z_off: np.ndarray,
+                       bands: np.ndarray) -> float:
+    """The largest band rise (dB) in any window of the report's length from control-on.
+
+    The windows are ``window_s`` long and start every second (the report's
+    ``bands_over_time``).
+    """
+    n = int(scenario.window_s * FS)
+    starts = range(int(scenario.control_on_s * FS), z_on.size - n + 1, int(FS))
+    return max(float(np.max(_band_db(z_on[a:a + n], bands) - _band_db(z_off[a:a + n], bands)))
+               for a in starts)
+
+
 def _twins(name: str):
     """(loop, rise dB per band over the report's window, worst rise over every window).
 
-    The windows are as long as the report's (``window_s``) and start every second from
-    control-on (the report's ``bands_over_time``): the start of control and a fade lie
-    before the report's window.
+    The start of control and a fade lie before the report's window: hence every window.
     """
     scenario = load_scenario(ROOT / 'config' / 'scenarios' / f'{name}.yaml')
-    n = int(scenario.window_s * FS)
-    out = []
-    for sc in (scenario, dataclasses.replace(scenario, control_on_s=scenario.duration_s)):
-        loop = CoreLoop(CFG, sc)
-        record = loop.run()
-        out.append((loop, CFG.geometry.platform_from_struts(record.accel_m_s2)[:, 2]))
+    loop, z_on, z_off = _run_with_twin(scenario)
     bands = third_octave_bands_hz(5.0, 450.0)[:, 1:]
     bands = np.vstack([bands, [[36.0, 44.0]]])
-    (loop, z_on), (_, z_off) = out
+    n = int(scenario.window_s * FS)
     rise = _band_db(z_on[-n:], bands) - _band_db(z_off[-n:], bands)
-    starts = range(int(scenario.control_on_s * FS), z_on.size - n + 1, int(FS))
-    worst = max(float(np.max(_band_db(z_on[a:a + n], bands) - _band_db(z_off[a:a + n], bands)))
-                for a in starts)
-    return loop, rise, worst
+    return loop, rise, _worst_window_rise(scenario, z_on, z_off, bands)
 
 
 @pytest.mark.parametrize('name', ['mismatch', 'drift', 'drift_tracking',
@@ -116,11 +129,7 @@ def _spin_up_runs(name: str):
     """(loop, z with control, z of the twin, rotor speed per sample Hz) of a spin-up file."""
     scenario = load_scenario(ROOT / 'config' / 'scenarios' / f'{name}.yaml')
     assert scenario.notch.settings['update_lowpass_hz'] > 0.0
-    runs = []
-    for sc in (scenario, dataclasses.replace(scenario, control_on_s=scenario.duration_s)):
-        loop = CoreLoop(CFG, sc)
-        runs.append((loop, CFG.geometry.platform_from_struts(loop.run().accel_m_s2)[:, 2]))
-    (loop, z_on), (_, z_off) = runs
+    loop, z_on, z_off = _run_with_twin(scenario)
     speed = scenario.rotor.rotor().speed_hz(np.arange(z_on.size) / FS)
     return scenario, loop, z_on, z_off, speed
 
@@ -173,10 +182,7 @@ def test_spin_up_on_the_tachometer_meets_every_order_from_the_ramp_start():
         level = (_following_db(z_off[steady], track, 12000)
                  - _following_db(z_on[steady], track, 12000))
         assert level[0] >= 50.0, (order, level)
-    bands = third_octave_bands_hz(5.0, 450.0)[:, 1:]
-    n = int(scenario.window_s * FS)
-    worst = max(float(np.max(_band_db(z_on[a:a + n], bands) - _band_db(z_off[a:a + n], bands)))
-                for a in range(int(scenario.control_on_s * FS), z_on.size - n + 1, int(FS)))
+    worst = _worst_window_rise(scenario, z_on, z_off, third_octave_bands_hz(5.0, 450.0)[:, 1:])
     assert worst < 1.0, worst
     status = loop.notch.status()
     assert status['guard'] == 'watching' and status['reference'] == 'following'
