@@ -37,7 +37,7 @@ MU_POLICIES = ("manual", "auto")
 IDENTIFICATION_METHODS = ("tones", "broadband")
 """Same as ``core.control.notch_supervisor.IDENTIFICATION_METHODS`` (tested)."""
 STORAGES = ("mcap", "sqlite3")
-TYPES = ("bool", "int", "double", "string", "double[]", "string[]")
+TYPES = ("bool", "int", "double", "string", "int[]", "double[]", "string[]")
 
 
 def _number(value: float) -> str:
@@ -243,6 +243,17 @@ EXECUTOR = ParameterSpec(
     "how the node is served: waitset (loop topics from a persistent wait set, the rest by a "
     "SingleThreadedExecutor), single_threaded or events (rclpy's executors for everything)",
     choices=EXECUTORS, read_only=True)
+REALTIME_PRIORITY = ParameterSpec(
+    "realtime_priority", "int", 0, "real-time priority of the process's threads: 1-98 runs "
+    "them under SCHED_FIFO at that priority (needs CAP_SYS_NICE or an rtprio limit), 0 = the "
+    "normal scheduler; refused at start-up where the OS does not permit it", low=0, high=98,
+    read_only=True)
+CPU_AFFINITY = ParameterSpec(
+    "cpu_affinity", "int[]", [], "CPUs the process's threads may run on (empty: every CPU it "
+    "may use); refused at start-up if one is not available to it", low=0, high=1023,
+    max_length=1024, distinct=True, read_only=True)
+LOOP_SCHEDULING = (EXECUTOR, REALTIME_PRIORITY, CPU_AFFINITY)
+"""The parameters of every 1 kHz node on how its loop is served and scheduled."""
 MODEL_FILE = ParameterSpec(
     "model_file", "string", "", "physical model YAML (empty: the packaged "
     "config/pph_model.yaml)", read_only=True)
@@ -397,7 +408,7 @@ PPH_DRIVER = NodeSpec("pph_driver", summary="the simulated hexapod (plant, senso
     ParameterSpec("hold_at_time_s", "double", -1.0, "lockstep breakpoint: stop before "
                   "publishing the sample at this sim time until it is changed; -1 = never",
                   unit="s", low=-1.0, high=1e6),
-    EXECUTOR,
+    *LOOP_SCHEDULING,
     ParameterSpec("lockstep_controllers", "string[]", list(LOCKSTEP_STREAMS), "controllers "
                   "the lockstep driver waits for before sample 0 and then every sample while "
                   "they are connected (may be empty)", choices=LOCKSTEP_STREAMS,
@@ -479,7 +490,7 @@ NOTCH_CONTROLLER = NodeSpec("notch_controller", summary="six decentralized Adapt
                   "falls by update_lowpass_hz / |f - f_tone| more (no rise of a loop mode "
                   "tens of Hz away); 0 = the paper's update", unit="Hz", low=0.0,
                   high=100.0, read_only=True),
-    EXECUTOR,
+    *LOOP_SCHEDULING,
 ))
 
 
@@ -504,7 +515,7 @@ POINTING_CONTROLLER = NodeSpec("pointing_controller", summary="the low-pass poin
     ParameterSpec("enabled", "bool", True, "pointing forces on (off: zero force, integral "
                   "reset)"),
     MODEL_FILE,
-    EXECUTOR,
+    *LOOP_SCHEDULING,
 ))
 
 

@@ -5,6 +5,7 @@
     ros2 launch hexapod_vibration pph.launch.py params_file:=/path/to/my_pph.yaml
     ros2 launch hexapod_vibration pph.launch.py record:=true bag_path:=/tmp/pph_bag
     ros2 launch hexapod_vibration pph.launch.py composed:=true
+    ros2 launch hexapod_vibration pph.launch.py clock_mode:=realtime realtime_priority:=50
 
 Starts ``pph_driver``, ``notch_controller`` and ``pointing_controller`` (node names = the
 executable names) with the parameters of ``config/pph.yaml`` from the package's share
@@ -13,6 +14,9 @@ directory (or ``params_file``); ``clock_mode`` overrides the driver's clock mode
 the bag directory ``bag_path`` (empty: ``rosbag2_<date>-<time>`` in the current directory).
 With ``composed:=true`` the three nodes run in one process (``pph_graph``: same node names,
 parameters and topics, intra-process delivery; see the README's Performance section).
+``realtime_priority`` (1-98; 0 = off) runs the loop processes under SCHED_FIFO, refused at
+start-up where the OS does not permit it; per-node CPUs (``cpu_affinity``) go in the params
+file.
 """
 
 import os
@@ -37,6 +41,7 @@ def generate_launch_description() -> LaunchDescription:
     record = LaunchConfiguration('record')
     bag_path = LaunchConfiguration('bag_path')
     composed = LaunchConfiguration('composed')
+    priority = LaunchConfiguration('realtime_priority')
     arguments = [
         DeclareLaunchArgument(
             'params_file', default_value=default_params,
@@ -52,19 +57,26 @@ def generate_launch_description() -> LaunchDescription:
             'composed', default_value='false', choices=['true', 'false'],
             description='run the driver and both controllers in one process (pph_graph)'),
         DeclareLaunchArgument(
+            'realtime_priority', default_value='0',
+            description='SCHED_FIFO priority (1-98) of the driver and controllers; 0: the '
+                        'normal scheduler (overrides the params file)'),
+        DeclareLaunchArgument(
             'bag_path', default_value='',
             description='bag directory of the recorder (must not exist); empty: '
                         'rosbag2_<date>-<time> in the current directory'),
     ]
-    driver_parameters = [params_file, {'clock_mode': ParameterValue(clock_mode, value_type=str)}]
+    scheduling = {'realtime_priority': ParameterValue(priority, value_type=int)}
+    controller_parameters = [params_file, scheduling]
+    driver_parameters = [*controller_parameters,
+                         {'clock_mode': ParameterValue(clock_mode, value_type=str)}]
     separate = UnlessCondition(composed)
     nodes = [
         Node(package=PACKAGE, executable='pph_driver', name='pph_driver', output='screen',
              parameters=driver_parameters, condition=separate),
         Node(package=PACKAGE, executable='notch_controller', name='notch_controller',
-             output='screen', parameters=[params_file], condition=separate),
+             output='screen', parameters=controller_parameters, condition=separate),
         Node(package=PACKAGE, executable='pointing_controller', name='pointing_controller',
-             output='screen', parameters=[params_file], condition=separate),
+             output='screen', parameters=controller_parameters, condition=separate),
         # No name=: a name remap would rename all three nodes of the process.
         Node(package=PACKAGE, executable='pph_graph', output='screen',
              parameters=driver_parameters, condition=IfCondition(composed)),

@@ -6,7 +6,9 @@
    thread, in the middle of whatever the node is doing, which is what made Ctrl-C print
    ``RCLError: context is not valid`` tracebacks).
 2. The node(s) are built, a bad parameter or file ends the process with exit code 2 and
-   the reason in one line, before the loop starts.
+   the reason in one line, before the loop starts. The first node's ``realtime_priority``
+   and ``cpu_affinity`` (:mod:`hexapod_vibration.ros.realtime`) then apply to the whole
+   process; where the OS refuses them, the process ends the same way.
 3. The loop runs until a signal; then the nodes are destroyed and rclpy is shut down in
    order, and the process ends with ``128 + signal`` (130, 143) at once (``cli.exit_now``:
    no interpreter teardown).
@@ -52,6 +54,7 @@ def _run(name: str, factory, loop, args, companions) -> int:
 
     from hexapod_vibration.ros.executors import LoopSpinner, make_executor, spin_loop
     from hexapod_vibration.ros.rclpy_internals import RCLError
+    from hexapod_vibration.ros.realtime import apply_scheduling
 
     cli.exit_if_stopped()
     try:
@@ -74,6 +77,7 @@ def _run(name: str, factory, loop, args, companions) -> int:
             for node in built:
                 executor.add_node(node)
             spinner = LoopSpinner(executor, subscriptions, fast=executor_name == "waitset")
+        _schedule(built[0], apply_scheduling)
         (loop or spin_loop)(built[0], spinner)
     except cli.StopSignal as stop:
         code = stop.exit_code
@@ -92,3 +96,19 @@ def _run(name: str, factory, loop, args, companions) -> int:
     if code == cli.EXIT_OK and cli.stop_requested() is not None:
         code = cli.interrupted_exit_code()
     return code
+
+
+def _schedule(node, apply_scheduling) -> None:
+    """Apply the node's ``realtime_priority`` and ``cpu_affinity`` to this process (logged).
+
+    Raises:
+        ValueError: The OS refuses them (``realtime.SchedulingRefused``).
+    """
+    names = node.get_parameters(["realtime_priority", "cpu_affinity"]) \
+        if node.has_parameter("realtime_priority") else []
+    if not names:
+        return
+    priority, cpus = int(names[0].value), list(names[1].value)
+    applied = apply_scheduling(priority, cpus)
+    if applied:
+        node.get_logger().info(f"scheduling: {applied}")

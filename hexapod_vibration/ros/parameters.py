@@ -54,7 +54,8 @@ Apply = Callable[[dict[str, Any]], None]
 _TYPES = {
     "bool": Parameter.Type.BOOL, "int": Parameter.Type.INTEGER,
     "double": Parameter.Type.DOUBLE, "string": Parameter.Type.STRING,
-    "double[]": Parameter.Type.DOUBLE_ARRAY, "string[]": Parameter.Type.STRING_ARRAY,
+    "int[]": Parameter.Type.INTEGER_ARRAY, "double[]": Parameter.Type.DOUBLE_ARRAY,
+    "string[]": Parameter.Type.STRING_ARRAY,
 }
 _ARRAY_TYPES = frozenset({
     Parameter.Type.BYTE_ARRAY, Parameter.Type.BOOL_ARRAY, Parameter.Type.INTEGER_ARRAY,
