@@ -46,7 +46,6 @@ from hexapod_vibration.core.model.config import load_model_config
 from hexapod_vibration.parameter_specs import NOTCH_CONTROLLER
 from hexapod_vibration.paths import config_path
 from hexapod_vibration.ros.diagnostics import diagnostic_array, publish_status_periodically
-from hexapod_vibration.ros.executors import run_node
 from hexapod_vibration.ros.matching import MatchedReaders
 from hexapod_vibration.ros.messages import (
     ControllerLoopPort,
@@ -55,6 +54,7 @@ from hexapod_vibration.ros.messages import (
     make_table_array,
     make_vector_array,
 )
+from hexapod_vibration.ros.node_runner import run_node
 from hexapod_vibration.ros.parameters import NodeParameters
 from hexapod_vibration.ros.qos import (
     DIAGNOSTICS_QOS,

@@ -29,13 +29,14 @@ from hexapod_vibration.core.sim.closed_loop import make_pointing_controller
 from hexapod_vibration.parameter_specs import POINTING_CONTROLLER
 from hexapod_vibration.paths import config_path
 from hexapod_vibration.ros.diagnostics import diagnostic_array, publish_status_periodically
-from hexapod_vibration.ros.executors import run_node
+from hexapod_vibration.ros.executors import loop_meter
 from hexapod_vibration.ros.matching import MatchedReaders
 from hexapod_vibration.ros.messages import (
     ControllerLoopPort,
     StrutArrayPublisher,
     create_loop_subscription,
 )
+from hexapod_vibration.ros.node_runner import run_node
 from hexapod_vibration.ros.parameters import NodeParameters
 from hexapod_vibration.ros.qos import DIAGNOSTICS_QOS, LOOP_PUBLISHER_QOS
 
@@ -71,6 +72,10 @@ class PointingControllerNode(Node):
         self._pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", DIAGNOSTICS_QOS)
         publish_status_periodically(self, self.publish_diagnostics)
         self.loop_subscriptions = [create_loop_subscription(self, "/pph/eddy", self._on_eddy)]
+        self.meter = loop_meter()
+        self._count = self.meter.counter("pointing_controller")
+        self._stage = {name: self.meter.stage(f"pointing {name}")
+                       for name in ("decode", "law", "publish", "report")}
         self.get_logger().info(f"pointing controller up: target {np.round(self.law.target, 6)}"
                                f", bandwidth {self.law.gains.bandwidth_hz} Hz")
 
@@ -107,22 +112,29 @@ class PointingControllerNode(Node):
             self.law.reset()
 
     def _on_eddy(self, msg: Float64MultiArray | bytes) -> None:
+        meter, stage = self.meter, self._stage
         sample = self.port.receive(msg)
+        meter.lap(stage["decode"])
         if sample is None:
             return
         if sample.new_run:
             self.law.reset()
         force = self.law.step(sample.values) if self.enabled else np.zeros(STRUT_COUNT)
+        meter.lap(stage["law"])
         self.port.answer(force, sample)
+        meter.lap(stage["publish"])
+        self._count()
         if sample.index % DIAGNOSTICS_EVERY_SAMPLES == 0:
             self.publish_diagnostics()
+            meter.lap(stage["report"])
 
     def publish_diagnostics(self) -> None:
         """State and the counts of refused /pph/eddy messages on /diagnostics."""
         counters = self.port.diagnostics()
         values = {"enabled": str(self.enabled).lower(), "last_sample": self.port.last_sample,
                   "run": self.port.sequence.run, **counters, **self.readers.values(),
-                  "target_pose_m_rad": np.round(self.law.target, 9).tolist()}
+                  "target_pose_m_rad": np.round(self.law.target, 9).tolist(),
+                  **self.meter.report()}
         message = "enabled" if self.enabled else "disabled"
         self._pub_diag.publish(diagnostic_array(POINTING_STATUS, bool(counters["invalid"]),
                                                 message, values, self.port.last_sample))

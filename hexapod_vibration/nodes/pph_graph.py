@@ -19,10 +19,11 @@ section of the file. The ``executor`` of ``pph_driver`` serves all three.
 
 from __future__ import annotations
 
+from hexapod_vibration.nodes.driver_loop import run_driver
 from hexapod_vibration.nodes.notch_controller import NotchControllerNode
 from hexapod_vibration.nodes.pointing_controller import PointingControllerNode
-from hexapod_vibration.nodes.pph_driver import PPHDriver, run_driver
-from hexapod_vibration.ros.executors import run_node
+from hexapod_vibration.nodes.pph_driver import PPHDriver
+from hexapod_vibration.ros.node_runner import run_node
 
 
 def main(args: list[str] | None = None) -> None:

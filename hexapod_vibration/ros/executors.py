@@ -27,13 +27,14 @@ falls back to the executor's own ``spin_once``.
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 
 import rclpy
 from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.subscription import Subscription
 
+from hexapod_vibration.core.loop.cost_meter import LoopCostMeter
 from hexapod_vibration.parameter_specs import EXECUTOR, EXECUTORS
 from hexapod_vibration.ros.parameters import declare_string
 from hexapod_vibration.ros.rclpy_internals import (
@@ -52,6 +53,17 @@ One service (an executor ``spin_once`` over every entity of the process's nodes)
 answered within 50 ms."""
 IDLE_SPIN_S = 0.01
 """Longest single wait (s) of a node's main loop, so shutdown is noticed promptly."""
+
+
+_LOOP_METER = LoopCostMeter()
+
+
+def loop_meter() -> LoopCostMeter:
+    """The CPU budget meter of this process's loop thread.
+
+    One per process: composed nodes share it, so its stages and totals are the process's.
+    """
+    return _LOOP_METER
 
 
 def declare_executor_parameter(node: Node) -> str:
@@ -92,6 +104,10 @@ class LoopSpinner:
         self.subscriptions = list(subscriptions)
         self.fast = fast and bool(self.subscriptions) and fast_path()
         self.service_period_s = service_period_s
+        self.meter = loop_meter()
+        self._wait_stage = self.meter.stage("wait")
+        self._take_stage = self.meter.stage("take")
+        self._service_stage = self.meter.stage("service")
         self._served_s = 0.0
         self._wait_set = None
         if self.fast:
@@ -101,6 +117,7 @@ class LoopSpinner:
         """Dispatch ready callbacks, waiting up to ``timeout_sec`` (s) for a loop message."""
         if not self.fast:
             self.executor.spin_once(timeout_sec=timeout_sec)
+            self.meter.lap(self._service_stage)
             return
         now = time.perf_counter()
         if now - self._served_s >= self.service_period_s:
@@ -108,36 +125,33 @@ class LoopSpinner:
             # caller sees it rather than waiting for the next one.
             self._served_s = now
             self.executor.spin_once(timeout_sec=0.0)
-            self._take_all()
-            return
-        if self._take_all() or timeout_sec <= 0.0:
-            return
-        if self._wait(timeout_sec):
-            self._take_all()
+            self.meter.lap(self._service_stage)
+            timeout_sec = 0.0
+        for sub in self._wait(max(timeout_sec, 0.0)):
+            self._take_all_of(sub)
 
-    def _wait(self, timeout_sec: float) -> bool:
-        """Block until a loop subscription has data or ``timeout_sec`` passes."""
+    def _wait(self, timeout_sec: float) -> list[Subscription]:
+        """The loop subscriptions with data, waiting up to ``timeout_sec`` for one."""
         try:
             ready = self._wait_set.wait(timeout_sec)
         except RCL_ERRORS:
             self._raise_if_shut_down()
             raise
+        self.meter.lap(self._wait_stage)
         self._raise_if_shut_down()
         return ready
 
-    def _take_all(self) -> int:
-        """Take every queued loop message and call its callback; the number taken."""
-        taken = 0
-        for sub in self.subscriptions:
-            while (raw := self._take(sub)) is not None:
-                sub.callback(raw)
-                taken += 1
-        return taken
+    def _take_all_of(self, sub: Subscription) -> None:
+        """Take every queued message of ``sub`` and call its callback with each."""
+        while (raw := self._take(sub)) is not None:
+            sub.callback(raw)
 
     def _take(self, sub: Subscription) -> bytes | None:
         """One serialized message of ``sub``, or None if none is queued."""
         try:
-            return take_serialized(sub)
+            raw = take_serialized(sub)
+            self.meter.lap(self._take_stage)
+            return raw
         except RCL_ERRORS:
             # rclpy's executors treat a failing take after shutdown (Ctrl-C) as the end.
             self._raise_if_shut_down()
@@ -152,14 +166,3 @@ def spin_loop(node: Node, spinner: LoopSpinner) -> None:
     """Serve ``node`` until shutdown (the main loop of a controller node)."""
     while rclpy.ok():
         spinner.spin_once(IDLE_SPIN_S)
-
-
-def run_node(name: str, factory: Callable[[], Node],
-             loop: Callable[[Node, LoopSpinner], None] = spin_loop,
-             args: list[str] | None = None,
-             companions: Sequence[Callable[[], Node]] = (),
-             nodes: Sequence[str] | None = None) -> None:
-    """Run a node executable to its exit code: see :mod:`hexapod_vibration.ros.node_runner`."""
-    from hexapod_vibration.ros.node_runner import run_node as run
-
-    run(name, factory, loop, args=args, companions=companions, nodes=nodes)

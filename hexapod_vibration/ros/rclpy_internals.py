@@ -146,22 +146,31 @@ class LoopWaitSet:
         from rclpy.impl.implementation_singleton import rclpy_implementation as impl
 
         self.subscriptions = list(subscriptions)
+        self._handles = [sub.handle for sub in self.subscriptions]
+        self._by_pointer = {sub.handle.pointer: sub for sub in self.subscriptions}
         self._wait_set = impl.WaitSet(len(self.subscriptions), 0, 0, 0, 0, 0, context.handle)
 
-    def wait(self, timeout_s: float) -> bool:
-        """Block until a subscription has data or ``timeout_s`` passes; True if one has."""
+    def wait(self, timeout_s: float) -> list[Any]:
+        """The subscriptions with data, waiting up to ``timeout_s`` (0: a poll) for one.
+
+        Data queued before the call counts: rcl returns at once then.
+        """
         wait_set = self._wait_set
         wait_set.clear_entities()
-        for sub in self.subscriptions:
-            wait_set.add_subscription(sub.handle)
+        for handle in self._handles:
+            wait_set.add_subscription(handle)
         wait_set.wait(int(timeout_s * 1e9))
-        return bool(wait_set.get_ready_entities("subscription"))
+        by_pointer = self._by_pointer
+        return [by_pointer[p] for p in wait_set.get_ready_entities("subscription")]
 
 
 def take_serialized(subscription: Any) -> bytes | None:
-    """One queued message of ``subscription`` as CDR bytes, None if none (fast path only)."""
-    with subscription.handle:
-        taken = subscription.handle.take_message(subscription.msg_type, True)
+    """One queued message of ``subscription`` as CDR bytes, None if none (fast path only).
+
+    Without rclpy's destruction guard (``with subscription.handle``): the loop that takes
+    runs in the node's thread, which destroys the node only after the loop ended.
+    """
+    taken = subscription.handle.take_message(subscription.msg_type, True)
     return None if taken is None else taken[0]
 
 

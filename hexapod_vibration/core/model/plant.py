@@ -77,14 +77,6 @@ def saturate_commands(notch_n: np.ndarray, pointing_n: np.ndarray,
     return np.clip(dynamic + pointing_n, -strut.force_limit_static_n, strut.force_limit_static_n)
 
 
-def actuator_test_sine(sample: int, frequency_hz: float, amplitude_n: float,
-                       sample_rate_hz: float) -> np.ndarray:
-    """The same sinusoid (N) for all six actuators at ``sample`` (paper Fig. 4); 0 N if off."""
-    if amplitude_n <= 0.0:
-        return np.zeros(6)
-    return np.full(6, amplitude_n * np.sin(2.0 * np.pi * frequency_hz * sample / sample_rate_hz))
-
-
 class LinearHexapodModel:
     """Mass, stiffness, damping and input matrices of the 18-DOF model (SI units)."""
 

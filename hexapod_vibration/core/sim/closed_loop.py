@@ -14,17 +14,13 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from hexapod_vibration.contract import STRUT_COUNT
-from hexapod_vibration.core.control.notch_supervisor import NotchConfig, NotchSupervisor
+from hexapod_vibration.core.control.notch_supervisor import NotchSupervisor
 from hexapod_vibration.core.control.pointing import PointingController
+from hexapod_vibration.core.model.actuation import ActuatedPlant
 from hexapod_vibration.core.model.config import ModelConfig
-from hexapod_vibration.core.model.plant import (
-    PPHPlant,
-    actuator_test_sine,
-    rigid_body_mass_matrix,
-    saturate_commands,
-)
+from hexapod_vibration.core.model.plant import PPHPlant, rigid_body_mass_matrix
 from hexapod_vibration.core.model.shaker import Shaker
-from hexapod_vibration.core.sim.scenario import Scenario
+from hexapod_vibration.core.sim.scenario import Scenario, notch_config
 
 STRUTS = STRUT_COUNT
 
@@ -62,19 +58,6 @@ def make_pointing_controller(config: ModelConfig, sensing_matrix: np.ndarray,
                               rigid_body_mass_matrix(config.top_plate), sample_rate_hz)
 
 
-def notch_config(scenario: Scenario) -> NotchConfig:
-    """The notch controller's settings for a scenario's run (what the runner gives the node).
-
-    Control starts off (``enabled`` goes on at ``control_on_s``); the identification starts
-    ``identify_at_s`` after the first sample.
-    """
-    notch = scenario.notch
-    return NotchConfig().replaced({
-        **notch.settings, "mu": notch.mu, "tone_frequencies_hz": notch.tone_frequencies_hz,
-        "adaptation": notch.adaptation, "enabled": False,
-        "identify_delay_s": scenario.identify_at_s})
-
-
 class CoreLoop:
     """Run a scenario on the core: the same steps the ROS nodes take each sample."""
 
@@ -90,6 +73,9 @@ class CoreLoop:
                         self.config.shaker.force_limit_n, seed=int(rng.integers(2**31)),
                         rotor=self.rotor)
         self.plant = PPHPlant(self.config, shaker=shaker, seed=int(rng.integers(2**31)))
+        self.actuated = ActuatedPlant(self.plant, self.config.strut, fs)
+        self.actuated.test_sine.frequency_hz = scenario.test_sine.frequency_hz
+        self.actuated.test_sine.amplitude_n = scenario.test_sine.amplitude_n
         self.pointing = make_pointing_controller(self.config, self.plant.eddy.sensing_matrix, fs)
         self.pointing.set_target(np.asarray(scenario.target_pose),
                                  self.config.strut.stroke_limit_m)
@@ -131,21 +117,17 @@ class CoreLoop:
                          weights=np.zeros((n_samples, bank, STRUTS), complex),
                          control_on_sample=int(round(sc.control_on_s * self.fs)),
                          tone_estimates_hz=np.zeros((n_samples, tones)))
-        sample = self.plant.step(np.zeros(STRUTS))
-        sine = sc.test_sine
         for n in range(n_samples):
+            sample = self.actuated.pending
             notch = self._controller_step(n, sample.accel_m_s2, rec)
-            notch = notch + actuator_test_sine(n, sine.frequency_hz, sine.amplitude_n, self.fs)
             pointing = self.pointing.step(sample.eddy_m)
-            applied = saturate_commands(notch, pointing, self.config.strut)
             rec.accel_m_s2[n], rec.eddy_m[n] = sample.accel_m_s2, sample.eddy_m
             rec.notch_command_n[n], rec.pointing_command_n[n] = notch, pointing
-            rec.actuator_force_n[n] = applied
             rec.relative_pose_true[n] = sample.relative_pose_true
             rec.top_accel_true[n] = sample.top_accel_true
             if self.notch is not None:
                 rec.weights[n] = self.notch.canceller.weights
                 rec.tone_estimates_hz[n] = self.notch.tone_estimates_hz
-            sample = self.plant.step(applied)
+            rec.actuator_force_n[n] = self.actuated.apply(n, notch, pointing)
         self._finish(rec)
         return rec

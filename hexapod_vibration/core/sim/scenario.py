@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 import yaml
 
+from hexapod_vibration.core.control.notch_supervisor import NotchConfig, NotchSupervisor
 from hexapod_vibration.core.model.rotor import Rotor, rotor_or_none
 from hexapod_vibration.core.model.shaker import ShakerTone, tones_from_arrays
 
@@ -89,8 +90,6 @@ class NotchSettings:
     @classmethod
     def from_yaml(cls, values: dict[str, Any]) -> NotchSettings:
         """Split the YAML's ``notch:`` mapping; a name that is no notch setting raises."""
-        from hexapod_vibration.core.control.notch_supervisor import NotchConfig
-
         values = _tuples(values)
         nested = values.pop("settings", None) or {}       # a dataclasses.asdict() round trip
         values = {**_tuples(nested), **values}
@@ -162,9 +161,6 @@ class Scenario:
         past fs/2, or ``reference_harmonics`` without one order per tone) is refused here,
         before a run brings anything up.
         """
-        from hexapod_vibration.core.control.notch_supervisor import NotchSupervisor
-        from hexapod_vibration.core.sim.closed_loop import notch_config
-
         try:
             NotchSupervisor(notch_config(self))
         except (ValueError, KeyError) as exc:
@@ -184,6 +180,19 @@ class Scenario:
     def samples(self) -> int:
         """Samples in the run at 1 kHz."""
         return int(round(self.duration_s * 1000.0))
+
+
+def notch_config(scenario: Scenario) -> NotchConfig:
+    """The notch controller's settings for a scenario's run (what the runner gives the node).
+
+    Control starts off (``enabled`` goes on at ``control_on_s``); the identification starts
+    ``identify_at_s`` after the first sample.
+    """
+    notch = scenario.notch
+    return NotchConfig().replaced({
+        **notch.settings, "mu": notch.mu, "tone_frequencies_hz": notch.tone_frequencies_hz,
+        "adaptation": notch.adaptation, "enabled": False,
+        "identify_delay_s": scenario.identify_at_s})
 
 
 def load_scenario(path: str | Path) -> Scenario:

@@ -1,0 +1,51 @@
+"""The topics ``pph_recorder`` records: name, message type and the QoS it subscribes with."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from diagnostic_msgs.msg import DiagnosticArray
+from rcl_interfaces.msg import ParameterEvent
+from rclpy.qos import QoSProfile
+from rosgraph_msgs.msg import Clock
+from std_msgs.msg import Float64MultiArray
+
+from hexapod_vibration.analysis.bag_io import (
+    FREQUENCY_TOPICS,
+    SENSITIVITY_TOPIC,
+    STRUT_TOPICS,
+    WEIGHTS_TOPIC,
+)
+from hexapod_vibration.ros.qos import (
+    LATCHED_QOS,
+    PARAMETER_EVENTS_QOS,
+    RECORDER_CLOCK_QOS,
+    RECORDER_QOS,
+)
+
+ARRAY_TYPE = "std_msgs/msg/Float64MultiArray"
+LOOP_TOPICS = frozenset((*STRUT_TOPICS, WEIGHTS_TOPIC, *FREQUENCY_TOPICS))
+"""Topics whose messages carry ``sample:<n>``: stamped n ms, one message per sample."""
+
+
+@dataclass(frozen=True)
+class RecordedTopic:
+    """A topic the recorder subscribes to."""
+
+    name: str
+    msg_class: type
+    msgtype: str
+    qos: QoSProfile
+
+
+RECORDED_TOPICS: tuple[RecordedTopic, ...] = (
+    *(RecordedTopic(t, Float64MultiArray, ARRAY_TYPE, RECORDER_QOS) for t in STRUT_TOPICS),
+    RecordedTopic(WEIGHTS_TOPIC, Float64MultiArray, ARRAY_TYPE, RECORDER_QOS),
+    *(RecordedTopic(t, Float64MultiArray, ARRAY_TYPE, RECORDER_QOS) for t in FREQUENCY_TOPICS),
+    RecordedTopic(SENSITIVITY_TOPIC, Float64MultiArray, ARRAY_TYPE, LATCHED_QOS),
+    RecordedTopic("/clock", Clock, "rosgraph_msgs/msg/Clock", RECORDER_CLOCK_QOS),
+    RecordedTopic("/diagnostics", DiagnosticArray, "diagnostic_msgs/msg/DiagnosticArray",
+                  RECORDER_QOS),
+    RecordedTopic("/parameter_events", ParameterEvent, "rcl_interfaces/msg/ParameterEvent",
+                  PARAMETER_EVENTS_QOS),
+)
