@@ -27,6 +27,12 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from hexapod_vibration.bench.node_budget import (
+    BUDGET_SETUPS,
+    budget_summary_markdown,
+    measure,
+    stages_markdown,
+)
 from hexapod_vibration.contract import SAMPLE_RATE_HZ
 from hexapod_vibration.core.sim.scenario import load_scenario
 from hexapod_vibration.paths import scenario_path
@@ -40,16 +46,17 @@ DESCRIPTIONS = {
 }
 
 
-def _write_params(out: Path, mode: str, executor: str) -> Path:
+def _write_params(out: Path, mode: str, executor: str, priority: int = 0) -> Path:
     import yaml
 
     scenario = load_scenario(scenario_path("single_tone_harmonic"))
     params = node_parameters(scenario, mode)
     for node in params.values():
         node["ros__parameters"]["executor"] = executor
+        node["ros__parameters"]["realtime_priority"] = priority
     params["pph_driver"]["ros__parameters"]["hold_at_time_s"] = -1.0
     params["notch_controller"]["ros__parameters"]["enabled"] = True
-    path = out / f"bench_{mode}_{executor}.yaml"
+    path = out / f"bench_{mode}_{executor}_{priority}.yaml"
     path.write_text(yaml.safe_dump(params))
     return path
 
@@ -193,8 +200,31 @@ def ros_loop_benchmark(out_dir: Path, quick: bool) -> dict[str, Any]:
     best = loops[CONFIGURATIONS[0].key]
     return {"realtime": best["realtime"],
             "lockstep_speedup": best["lockstep"].get("speedup"),
-            "loops": loops,
+            "loops": loops, "budget": measure_budget(out, quick),
             "ros_domain_id": int(os.environ["ROS_DOMAIN_ID"])}
+
+
+BUDGET_S = (15.0, 30.0)
+"""Warm-up (past the 10 s identification: control on) and measured wall seconds of every
+budget set-up; ``--quick``: QUICK_BUDGET_S."""
+QUICK_BUDGET_S = (3.0, 4.0)
+
+
+def measure_budget(out: Path, quick: bool) -> dict[str, Any]:
+    """The CPU budget of every set-up of ``node_budget.BUDGET_SETUPS``."""
+    warmup_s, measure_s = QUICK_BUDGET_S if quick else BUDGET_S
+    budget = {}
+    for setup in BUDGET_SETUPS:
+        print(f"CPU budget: {setup.key}, {warmup_s:g} + {measure_s:g} s ...", flush=True)
+        watch = Supervisor(watch_clock=False)
+        try:
+            params = _write_params(out, setup.mode, "waitset", setup.priority)
+            budget[setup.key] = measure(out, params, setup, warmup_s, measure_s, watch)
+        except (RuntimeError, ExperimentError) as exc:
+            budget[setup.key] = {"failed": str(exc)}
+        finally:
+            watch.close()
+    return budget
 
 
 def ros_summary_markdown(results: dict[str, Any]) -> str:
@@ -213,6 +243,13 @@ def ros_summary_markdown(results: dict[str, Any]) -> str:
         rows.append(f"| {key} | {_num(rt.get('duration_s'), 1)} | {_num(rt.get('rate_hz'), 2)}"
                     f" | {_num(100.0 * rt.get('missed_fraction', float('nan')), 3)}"
                     f" | {_num(rt.get('period_ms_p99'), 2)} | {latency} | {lockstep} |")
+    budget = results.get("budget")
+    if budget:
+        rows += ["", "### CPU budget per process (us of CPU per loop sample, /proc over the "
+                 "measured window; Table 1 graph, waitset)", "", budget_summary_markdown(budget)]
+        for key in (BUDGET_SETUPS[0].key, BUDGET_SETUPS[1].key):
+            rows += ["", f"Where the main threads' time goes, {key} (each node's meter, last "
+                     "1000 samples):", "", stages_markdown(budget, key)]
     return "\n".join(rows)
 
 

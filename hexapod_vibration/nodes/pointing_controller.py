@@ -72,6 +72,7 @@ class PointingControllerNode(Node):
         self._pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", DIAGNOSTICS_QOS)
         publish_status_periodically(self, self.publish_diagnostics)
         self.loop_subscriptions = [create_loop_subscription(self, "/pph/eddy", self._on_eddy)]
+        self.latest_only_subscriptions = self.loop_subscriptions   # stale samples: skipped
         self.meter = loop_meter()
         self._count = self.meter.counter("pointing_controller")
         self._stage = {name: self.meter.stage(f"pointing {name}")

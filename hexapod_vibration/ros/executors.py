@@ -98,10 +98,19 @@ class LoopSpinner:
     """
 
     def __init__(self, executor: Executor, subscriptions: Sequence[Subscription],
-                 fast: bool, service_period_s: float = SERVICE_PERIOD_S) -> None:
-        """Bind to ``executor`` (which holds the node) and its loop ``subscriptions``."""
+                 fast: bool, service_period_s: float = SERVICE_PERIOD_S,
+                 latest_only: Sequence[Subscription] = ()) -> None:
+        """Bind to ``executor`` (which holds the node) and its loop ``subscriptions``.
+
+        ``latest_only``: subscriptions (among ``subscriptions``) whose callback gets only the
+        newest of the messages queued at a wake-up, the older ones taken and dropped. A
+        controller that fell behind (a realtime loop after a stall) answers the sample the
+        driver waits for now instead of working through samples whose deadlines passed:
+        what it skipped is a gap in its sequence, counted as missed samples.
+        """
         self.executor = executor
         self.subscriptions = list(subscriptions)
+        self._latest_only = frozenset(latest_only)
         self.fast = fast and bool(self.subscriptions) and fast_path()
         self.service_period_s = service_period_s
         self.meter = loop_meter()
@@ -142,7 +151,14 @@ class LoopSpinner:
         return ready
 
     def _take_all_of(self, sub: Subscription) -> None:
-        """Take every queued message of ``sub`` and call its callback with each."""
+        """Take every queued message of ``sub``; call its callback with each (or the newest)."""
+        if sub in self._latest_only:
+            newest = None
+            while (raw := self._take(sub)) is not None:
+                newest = raw
+            if newest is not None:
+                sub.callback(newest)
+            return
         while (raw := self._take(sub)) is not None:
             sub.callback(raw)
 

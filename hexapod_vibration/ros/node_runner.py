@@ -30,7 +30,8 @@ def run_node(name: str, factory: Callable[[], object],
              nodes: Sequence[str] | None = None) -> None:
     """Init rclpy, build the node(s), run ``loop`` (default: serve them), exit the process.
 
-    The node's 1 kHz subscriptions are those it lists in ``loop_subscriptions``; its
+    The node's 1 kHz subscriptions are those it lists in ``loop_subscriptions`` (those it
+    also lists in ``latest_only_subscriptions`` get only the newest queued message); its
     ``executor`` parameter chooses how they are served (``ros/executors.py``).
     ``companions`` are more nodes composed into the same process and thread.
     ``nodes``: the node names whose parameters ``--help`` lists (default: ``name``).
@@ -70,13 +71,15 @@ def _run(name: str, factory, loop, args, companions) -> int:
         executor_name = built[0].get_parameter("executor").value
         subscriptions = [sub for node in built[1:] + built[:1]
                          for sub in getattr(node, "loop_subscriptions", ())]
+        latest = [sub for node in built for sub in getattr(node, "latest_only_subscriptions", ())]
         # A signal in the middle of an rclpy constructor leaves a half-built object whose
         # __del__ prints a traceback: the stop is raised once they are whole.
         with cli.deferred():
             executor = make_executor(executor_name)
             for node in built:
                 executor.add_node(node)
-            spinner = LoopSpinner(executor, subscriptions, fast=executor_name == "waitset")
+            spinner = LoopSpinner(executor, subscriptions, fast=executor_name == "waitset",
+                                  latest_only=latest)
         _schedule(built[0], apply_scheduling)
         (loop or spin_loop)(built[0], spinner)
     except cli.StopSignal as stop:

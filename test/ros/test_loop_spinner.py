@@ -139,3 +139,16 @@ def test_strut_array_publisher_rejects_bad_input_and_sends_nothing(ros_context, 
     assert len(graph.loop_msgs) == 1
     np.testing.assert_array_equal(graph.loop_msgs[0][0], np.ones(6))
     assert graph.loop_msgs[0][1] == 5
+
+
+def test_a_latest_only_subscription_gets_the_newest_queued_sample(ros_context):
+    graph = Graph(ros_context)
+    spinner = LoopSpinner(ros_context.executor, [graph.loop_sub], True, 10.0,
+                          latest_only=[graph.loop_sub])
+    graph.connect(spinner)
+    for n in range(1, 6):                   # queued while the listener is not served
+        graph.loop_pub.publish(np.full(6, float(n)), n)
+    assert graph.spin_until(spinner, lambda: graph.loop_msgs and graph.loop_msgs[-1][1] == 5)
+    indices = [index for _, index in graph.loop_msgs]
+    assert indices == [5], indices            # the older ones taken and dropped
+    np.testing.assert_array_equal(graph.loop_msgs[-1][0], np.full(6, 5.0))
