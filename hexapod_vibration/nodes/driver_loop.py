@@ -42,7 +42,7 @@ class PPHDriver(Protocol):
     def commands_ready(self) -> bool: ...                       # noqa: D102
     def unanswered(self) -> list[str]: ...                      # noqa: D102
     def publish_sample(self) -> None: ...                       # noqa: D102
-    def offer_again(self, repeated: bool = True) -> None: ...   # noqa: D102
+    def offer_again(self) -> None: ...                          # noqa: D102
     def timed_out(self) -> None: ...                            # noqa: D102
     def restart_stats(self) -> None: ...                        # noqa: D102
     def refresh_connections(self) -> None: ...                  # noqa: D102

@@ -11,11 +11,9 @@ one per sample; zero force once a stream is older than ``command_timeout_samples
 decided by :class:`~hexapod_vibration.core.loop.command_arbiter.CommandArbiter`. Health, loop
 statistics and the CPU budget go to ``/diagnostics`` once per simulated second.
 
-A rotating machine (parameters ``rotor_*``) may act at the shaker's point. With
-``rotor_tachometer`` on, its speed for sample n (Hz) goes out on
-``/pph/reference_frequency`` just before the sample's sensors. The true frequency of every
-sounding tone goes out on ``/pph/disturbance_frequencies`` every
-``FREQUENCIES_EVERY_SAMPLES`` samples, for the analysis.
+With ``rotor_tachometer`` on, the rotor's speed for sample n (Hz) goes out on
+``/pph/reference_frequency`` before the sample's sensors; the true frequency of every sounding
+tone goes out on ``/pph/disturbance_frequencies`` every ``FREQUENCIES_EVERY_SAMPLES`` samples.
 """
 
 from __future__ import annotations
@@ -24,37 +22,24 @@ import time
 
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.node import Node
-from rosgraph_msgs.msg import Clock
 from std_msgs.msg import Float64MultiArray
 
-from hexapod_vibration.contract import (
-    DISTURBANCE_FREQUENCIES_TOPIC,
-    DRIVER_STATUS,
-    FREQUENCIES_EVERY_SAMPLES,
-    REFERENCE_FREQUENCY_TOPIC,
-    new_run_id,
-)
+from hexapod_vibration.contract import DRIVER_STATUS, FREQUENCIES_EVERY_SAMPLES, new_run_id
 from hexapod_vibration.core.loop.command_arbiter import CommandArbiter
 from hexapod_vibration.core.loop.signal_ranges import SignalRanges
 from hexapod_vibration.core.model.actuation import ActuatedPlant
 from hexapod_vibration.core.model.config import load_model_config
 from hexapod_vibration.core.model.plant import PPHPlant
 from hexapod_vibration.nodes.driver_loop import run_driver
+from hexapod_vibration.nodes.driver_outputs import DriverOutputs
 from hexapod_vibration.nodes.driver_settings import DriverSettings
 from hexapod_vibration.parameter_specs import LOCKSTEP_STREAMS, PPH_DRIVER
 from hexapod_vibration.paths import config_path
 from hexapod_vibration.ros.diagnostics import diagnostic_array
 from hexapod_vibration.ros.executors import loop_meter
-from hexapod_vibration.ros.matching import MatchedReaders
-from hexapod_vibration.ros.messages import (
-    StrutArrayPublisher,
-    create_loop_subscription,
-    make_vector_array,
-    receive_strut_sample,
-)
+from hexapod_vibration.ros.messages import create_loop_subscription, receive_strut_sample
 from hexapod_vibration.ros.node_runner import run_node
-from hexapod_vibration.ros.qos import CLOCK_QOS, COMMAND_QOS, DIAGNOSTICS_QOS, LOOP_PUBLISHER_QOS
-from hexapod_vibration.ros.rclpy_internals import clock_cdr, serialized_publish
+from hexapod_vibration.ros.qos import COMMAND_QOS, DIAGNOSTICS_QOS
 
 
 class PPHDriver(Node):
@@ -78,7 +63,9 @@ class PPHDriver(Node):
                                       SignalRanges.from_model(self.model).command_n,
                                       latency_stream="notch")
         self.topics = {name: f"/pph/{name}_command" for name in LOCKSTEP_STREAMS}
-        self._create_publishers()
+        self.outputs = DriverOutputs(self, self.fs,
+                                     lambda: self.publish_diagnostics(held=self.held()))
+        self._pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", DIAGNOSTICS_QOS)
         self.loop_subscriptions = [
             create_loop_subscription(self, topic, lambda msg, n=name: self._on_command(n, msg),
                                      COMMAND_QOS)
@@ -87,27 +74,10 @@ class PPHDriver(Node):
         self._count = self.meter.counter("pph_driver")
         self._stage = {name: self.meter.stage(f"driver {name}")
                        for name in ("commands", "plant", "publish", "report")}
-        self._offer: tuple[bytes, ...] = ()
-        self._reference_msg: Float64MultiArray | None = None
         self.get_logger().info(
             f"PPH driver up: {self.mode}, {'nonlinear' if self.model is model else 'linear'}"
             f" plant, {self.fs:.0f} Hz, watchdog {self.settings.timeout_samples} samples, "
             f"run {self.run_id}")
-
-    def _create_publishers(self) -> None:
-        """The loop's publishers (watched for matched readers) and /diagnostics."""
-        self.readers = MatchedReaders(lambda: self.publish_diagnostics(held=self.held()))
-        arrays = {topic: self.readers.publisher(self, Float64MultiArray, topic, LOOP_PUBLISHER_QOS)
-                  for topic in ("/pph/accel", "/pph/eddy", "/pph/actuator_force",
-                                REFERENCE_FREQUENCY_TOPIC, DISTURBANCE_FREQUENCIES_TOPIC)}
-        self._pub_accel = StrutArrayPublisher(arrays["/pph/accel"])
-        self._pub_eddy = StrutArrayPublisher(arrays["/pph/eddy"])
-        self._pub_force = StrutArrayPublisher(arrays["/pph/actuator_force"])
-        self._pub_reference = arrays[REFERENCE_FREQUENCY_TOPIC]
-        self._pub_frequencies = arrays[DISTURBANCE_FREQUENCIES_TOPIC]
-        self._pub_clock = serialized_publish(self.readers.publisher(self, Clock, "/clock",
-                                                                    CLOCK_QOS))
-        self._pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", DIAGNOSTICS_QOS)
 
     # ------------------------------------------------------------------ state for the loop
     @property
@@ -132,7 +102,6 @@ class PPHDriver(Node):
     def unanswered(self) -> list[str]:
         """Expected controllers that did not answer the current sample (handshake)."""
         return self.arbiter.unanswered()
-
     def sensor_time_s(self) -> float:
         """Sim time (s) at which the current sample's sensors were read: (n + 1) / fs."""
         plant = self.actuated.plant
@@ -162,30 +131,20 @@ class PPHDriver(Node):
     # ------------------------------------------------------------------ loop steps
     def publish_sample(self) -> None:
         """Publish /clock, the tachometer and the sensors of the current sample."""
-        n, sensors, run = self.sample, self.actuated.pending, self.run_id
-        self._offer = (clock_cdr(n, self.fs), self._pub_accel.encode(sensors.accel_m_s2, n, run),
-                       self._pub_eddy.encode(sensors.eddy_m, n, run))
-        rotor = self.actuated.plant.shaker.rotor
-        self._reference_msg = (make_vector_array([float(rotor.speed_hz(self.sensor_time_s()))],
-                                                 n, run)
-                               if self.settings.tachometer and rotor is not None else None)
-        self.offer_again(repeated=False)
+        n, run, plant = self.sample, self.run_id, self.actuated.plant
+        rotor = plant.shaker.rotor
+        reference = (float(rotor.speed_hz(self.sensor_time_s()))
+                     if self.settings.tachometer and rotor is not None else None)
+        self.outputs.offer(n, run, self.actuated.pending, reference)
         self.arbiter.published(time.perf_counter())
         if n % FREQUENCIES_EVERY_SAMPLES == 0:
-            self._pub_frequencies.publish(make_vector_array(
-                self.actuated.plant.shaker.frequencies_hz(self.sensor_time_s()), n, run))
+            self.outputs.frequencies(plant.shaker.frequencies_hz(self.sensor_time_s()), n, run)
         self.meter.lap(self._stage["publish"])
 
-    def offer_again(self, repeated: bool = True) -> None:
-        """Publish the current sample's /clock, tachometer and sensors (again: the same)."""
-        clock, accel, eddy = self._offer
-        if self._reference_msg is not None:
-            self._pub_reference.publish(self._reference_msg)
-        self._pub_clock(clock)
-        self._pub_accel.publish_bytes(accel)
-        self._pub_eddy.publish_bytes(eddy)
-        if repeated:
-            self.arbiter.offered_again()
+    def offer_again(self) -> None:
+        """Publish the current sample's /clock, tachometer and sensors again (lockstep)."""
+        self.outputs.offer_again()
+        self.arbiter.offered_again()
 
     def timed_out(self) -> None:
         """Lockstep gave up waiting for the current sample's commands."""
@@ -205,7 +164,7 @@ class PPHDriver(Node):
                                    "force set to zero")
         applied = self.actuated.apply(self.sample, forces["notch"], forces["pointing"])
         self.meter.lap(self._stage["plant"])
-        self._pub_force.publish(applied, self.sample, self.run_id)
+        self.outputs.force(applied, self.sample, self.run_id)
         self.meter.lap(self._stage["publish"])
         self.arbiter.advance()
         self._count()
@@ -218,7 +177,7 @@ class PPHDriver(Node):
         values, warn, message = self.arbiter.report(time.perf_counter(),
                                                     self.mode == "lockstep")
         plant = self.actuated.plant
-        values.update({"mode": self.mode, "held": held, **self.readers.values(),
+        values.update({"mode": self.mode, "held": held, **self.outputs.readers.values(),
                        "fallback_samples": plant.fallback_samples,
                        "accel_clipped_samples": plant.accelerometers.clipped_samples,
                        **self.meter.report()})
