@@ -308,3 +308,34 @@ def test_identifier_validation():
         ad.ToneResponseIdentifier(6, [40.0], FS, amplitude_n=-1.0)
     with pytest.raises(ValueError):
         ad.ToneResponseIdentifier(6, [40.0], FS, measure_s=0.001)
+
+
+def test_the_tone_identification_leaves_missing_samples_out_of_its_fits():
+    a, b, c = resonance_bank([30.0, 55.0, 90.0], 0.1, 1.0)
+    plant = (a, b @ (np.eye(3) + 0.3 * np.random.default_rng(1).normal(size=(3, 3))), c)
+    ident = ad.ToneResponseIdentifier(3, [40.0, 80.0], FS)
+    n = int(round(ident.duration_s * FS))
+    t = np.arange(n) / FS
+    dist = (0.5 * np.sin(2 * np.pi * 40.0 * t)[:, None] * np.ones(3)
+            + 1e-4 * np.random.default_rng(3).normal(size=(n, 3)))
+    missing = np.random.default_rng(7).random(n) < 0.02
+    a, b, c = plant
+    x, u, pending = np.zeros(a.shape[0]), np.zeros(3), 0
+    for k in range(n):
+        e = c @ x + dist[k]
+        if missing[k]:
+            pending += 1                       # not received: the held command stays
+        else:
+            if pending:
+                ident.skip(pending)
+                pending = 0
+            u = ident.step(e)
+        x = a @ x + b @ u
+    if pending:
+        ident.skip(pending)
+    assert ident.done and 0 < ident.missing <= np.count_nonzero(missing)
+    assert ident.missing_refusal() == ''
+    exact = frequency_response(plant, [40.0, 80.0])
+    error = np.linalg.norm(ident.result() - exact, axis=(1, 2)) / np.linalg.norm(exact,
+                                                                                  axis=(1, 2))
+    assert np.all(error < 0.02), error

@@ -197,3 +197,77 @@ def test_disturbance_lines_hold_the_lines_on_and_off_the_grid(coupled_run):
     lines = sorted(ident.disturbance_lines(), key=lambda line: line.frequency_hz)
     assert [round(line.frequency_hz, 2) for line in lines] == [40.0, 63.3]
     assert np.allclose([np.max(line.amplitude) for line in lines], [0.5, 0.2], rtol=0.3)
+
+
+def _run_with_gaps(ident, plant, dist, missing):
+    """The loop with samples the identifier never receives: its command for them is not
+    computed, the previous one is held (as the driver holds a late command)."""
+    a, b, c = plant
+    x, u, pending = np.zeros(a.shape[0]), np.zeros(b.shape[1]), 0
+    for n in range(dist.shape[0]):
+        e = c @ x + dist[n]
+        if missing[n]:
+            pending += 1
+        else:
+            if pending:
+                ident.skip(pending)
+                pending = 0
+            u = ident.step(e)
+        x = a @ x + b @ u
+
+
+def test_missing_samples_are_left_out_of_the_broadband_record():
+    """Errors that never arrived are interpolated, not restarted over; the input is the
+    designed one here (the controller sent its commands, their sensor samples were lost)."""
+    plant = _coupled_plant()
+    exact = frequency_response(plant, np.arange(20.0, 300.0, 0.37))
+    for fraction, worst in ((0.01, 0.05), (0.06, None)):
+        ident = BroadbandIdentifier(3, FS, period_s=4.0, settle_s=1.0, periods=2)
+        n = int(round(ident.duration_s * FS))
+        t = np.arange(n) / FS
+        dist = (1e-3 * np.random.default_rng(2).normal(size=(n, 3))
+                + 0.5 * np.sin(2 * np.pi * 40.0 * t)[:, None])
+        lost = np.random.default_rng(7).random(n) < fraction
+        a, b, c = plant
+        x, table, pending = np.zeros(a.shape[0]), ident.design.period_table(), 0
+        for k in range(n):
+            e = c @ x + dist[k]
+            if lost[k]:
+                pending += 1
+                u = table[k % table.shape[0]]        # the command went out all the same
+            else:
+                if pending:
+                    ident.skip(pending)
+                    pending = 0
+                u = ident.step(e)
+            x = a @ x + b @ u
+        measured = lost[int(FS * 1.0):]
+        assert ident.done and ident.missing == np.count_nonzero(measured)
+        if worst is None:
+            assert ident.missing_refusal() == (
+                f'{ident.missing} of its 8000 measured samples '
+                f'({100 * ident.missing / 8000:.1f} %) missing (> 5 %)')
+            continue
+        assert ident.missing_refusal() == ''
+        got = ident.result().at(np.arange(20.0, 300.0, 0.37))
+        error = np.linalg.norm(got - exact, axis=(1, 2)) / np.linalg.norm(exact, axis=(1, 2))
+        assert np.median(error) < 0.01 and np.max(error) < worst
+
+
+def test_a_late_command_corrupts_the_broadband_input_and_the_uncertainty_says_so():
+    """1 % of the commands held (not the designed ones): G is off, and its uncertainty at
+    the tones is far above the 10 % the supervisor accepts; 0.1 % held: within it."""
+    plant = _coupled_plant()
+    for fraction, accepted in ((0.001, True), (0.01, False)):
+        ident = BroadbandIdentifier(3, FS, period_s=4.0, settle_s=1.0, periods=2)
+        n = int(round(ident.duration_s * FS))
+        dist = 1e-3 * np.random.default_rng(2).normal(size=(n, 3))
+        held = np.random.default_rng(7).random(n) < fraction
+        a, b, c = plant
+        x, u = np.zeros(a.shape[0]), np.zeros(3)
+        for k in range(n):
+            command = ident.step(c @ x + dist[k])
+            u = u if held[k] else command
+            x = a @ x + b @ u
+        uncertainty = float(np.max(ident.result().uncertainty_at([40.0, 80.0])))
+        assert (uncertainty < 0.1) == accepted, (fraction, uncertainty)

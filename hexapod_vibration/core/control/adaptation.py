@@ -307,8 +307,18 @@ def schroeder_phases(n_tones: int) -> np.ndarray:
     return -np.pi * k * (k - 1) / max(n_tones, 1)
 
 
+MAX_MISSING_FRACTION = 0.05
+"""Largest fraction of an identification's measured samples that may be missing (samples
+the controller never received: gaps of the loop); beyond it the run is refused."""
+
+
 class SampledRun:
-    """Bookkeeping of an identification run of ``_total`` samples at ``_fs`` (Hz)."""
+    """Bookkeeping of an identification run of ``_total`` samples at ``_fs`` (Hz).
+
+    Samples the controller never received are :meth:`skip`-ped: the run keeps its timing
+    (the excitation and the phase references move on by the sample index) and those
+    samples are left out of the fit; ``missing`` counts the measured ones among them.
+    """
 
     _n: int
     _total: int
@@ -316,6 +326,33 @@ class SampledRun:
     _c: int
     _seg_len: int
     _u: np.ndarray
+    missing: int = 0
+    """Measured samples (past each segment's settling) the run did not receive."""
+
+    def skip(self, samples: int) -> None:
+        """``samples`` samples of the run were not received (a gap before the next one)."""
+        for _ in range(min(int(samples), self._total - self._n)):
+            seg, k = divmod(self._n, self._seg_len)
+            self._skip_one(seg, k)
+            self._n += 1
+
+    def _skip_one(self, seg: int, k: int) -> None:
+        """Leave sample ``k`` of segment ``seg`` out (the run's own bookkeeping)."""
+        raise NotImplementedError
+
+    @property
+    def measured_samples(self) -> int:
+        """Samples of the run that are measured (not settling)."""
+        raise NotImplementedError
+
+    def missing_refusal(self) -> str:
+        """Why the run cannot be used because of missing samples ("" if it can)."""
+        total = self.measured_samples
+        if self.missing <= MAX_MISSING_FRACTION * total:
+            return ""
+        return (f"{self.missing} of its {total} measured samples "
+                f"({100.0 * self.missing / total:.1f} %) missing "
+                f"(> {100.0 * MAX_MISSING_FRACTION:.0f} %)")
 
     def _position(self, error: np.ndarray) -> tuple[np.ndarray, int, int] | None:
         """Check the error (C,), clear the command; (error, segment, sample in it) or None.
@@ -426,8 +463,28 @@ class ToneResponseIdentifier(SampledRun):
         self._n += 1
         return self._u.copy()
 
+    def _skip_one(self, seg: int, k: int) -> None:
+        """A missing sample: a zero row (no equation) in the segment's fit, phase moved on."""
+        if k >= self._settle:
+            row = k - self._settle
+            self._regress[row] = 0.0
+            self._errors[row] = 0.0
+            self.missing += 1
+            if row == self._measure - 1:
+                self._y[seg] = self._fit()
+        self._phi += self._dphi
+        np.remainder(self._phi, TWO_PI, out=self._phi)
+
+    @property
+    def measured_samples(self) -> int:
+        """Samples fitted over the run (every segment's measured part)."""
+        return self._n_seg * self._measure
+
     def _fit(self) -> np.ndarray:
-        """Least-squares phasors Y (T, C) = a - j b of the buffered segment."""
+        """Least-squares phasors Y (T, C) = a - j b of the buffered segment.
+
+        A missing sample's row is zero: it adds no equation to the fit.
+        """
         coef, *_ = np.linalg.lstsq(self._regress, self._errors, rcond=None)
         t = self._freqs.size
         return coef[1:1 + t] - 1j * coef[1 + t:]

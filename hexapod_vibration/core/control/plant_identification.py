@@ -494,6 +494,7 @@ class BroadbandIdentifier(SampledRun):
         self._seg_len = self._settle + self._p * self._periods
         self._total = self._seg_len
         self._record = np.zeros((self._p * self._periods, self._c))
+        self._received = np.ones(self._p * self._periods, dtype=bool)
         self._max_rel = float(max_relative_error)
         self._u = np.zeros(self._c)
         self._n = 0
@@ -509,6 +510,17 @@ class BroadbandIdentifier(SampledRun):
         self._u[:] = self._table[self._n % self._p]
         self._n += 1
         return self._u.copy()
+
+    def _skip_one(self, seg: int, k: int) -> None:
+        """A missing sample: marked in the record, filled in before the analysis."""
+        if k >= self._settle:
+            self._received[k - self._settle] = False
+            self.missing += 1
+
+    @property
+    def measured_samples(self) -> int:
+        """Samples of the record (the measured periods)."""
+        return self._record.shape[0]
 
     def result(self) -> PlantFrequencyResponse:
         """The measured response.
@@ -567,10 +579,26 @@ class BroadbandIdentifier(SampledRun):
     def _cleaned_periods(self) -> tuple[np.ndarray, list[RemovedLine]]:
         """The aligned periods with the strong disturbance lines removed (cached)."""
         if getattr(self, '_cleaned', None) is None:
-            record, removed = remove_strong_lines(self._record, self._fs, self.design)
+            record, removed = remove_strong_lines(self._filled_record(), self._fs, self.design)
             self._cleaned_record = record
             self._cleaned = (self._align(record), removed)
         return self._cleaned
+
+    def _filled_record(self) -> np.ndarray:
+        """The record with its missing samples interpolated (cubic, from the received ones).
+
+        The DFT needs every sample of a period. A gap of a few samples at 1 kHz is
+        short against the periods of the strong low-frequency lines, which a cubic
+        interpolation follows closely; what it misses spreads over the record as broadband
+        error, which the detection lines measure with the rest of the noise.
+        """
+        if self._received.all():
+            return self._record
+        received = np.flatnonzero(self._received)
+        missing = np.flatnonzero(~self._received)
+        filled = self._record.copy()
+        filled[missing] = CubicSpline(received, self._record[received], axis=0)(missing)
+        return filled
 
     def _align(self, record: np.ndarray) -> np.ndarray:
         periods = record.reshape(self._periods, self._p, self._c)
