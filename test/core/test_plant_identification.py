@@ -199,26 +199,11 @@ def test_disturbance_lines_hold_the_lines_on_and_off_the_grid(coupled_run):
     assert np.allclose([np.max(line.amplitude) for line in lines], [0.5, 0.2], rtol=0.3)
 
 
-def _run_with_gaps(ident, plant, dist, missing):
-    """The loop with samples the identifier never receives: its command for them is not
-    computed, the previous one is held (as the driver holds a late command)."""
-    a, b, c = plant
-    x, u, pending = np.zeros(a.shape[0]), np.zeros(b.shape[1]), 0
-    for n in range(dist.shape[0]):
-        e = c @ x + dist[n]
-        if missing[n]:
-            pending += 1
-        else:
-            if pending:
-                ident.skip(pending)
-                pending = 0
-            u = ident.step(e)
-        x = a @ x + b @ u
-
-
 def test_missing_samples_are_left_out_of_the_broadband_record():
-    """Errors that never arrived are interpolated, not restarted over; the input is the
-    designed one here (the controller sent its commands, their sensor samples were lost)."""
+    """Errors that never arrived are interpolated, not restarted over.
+
+    The input is the designed one here: the commands went out, their sensor samples were lost.
+    """
     plant = _coupled_plant()
     exact = frequency_response(plant, np.arange(20.0, 300.0, 0.37))
     for fraction, worst in ((0.01, 0.05), (0.06, None)):
@@ -255,8 +240,10 @@ def test_missing_samples_are_left_out_of_the_broadband_record():
 
 
 def test_a_late_command_corrupts_the_broadband_input_and_the_uncertainty_says_so():
-    """1 % of the commands held (not the designed ones): G is off, and its uncertainty at
-    the tones is far above the 10 % the supervisor accepts; 0.1 % held: within it."""
+    """Commands held instead of the designed ones: the uncertainty says how far G is off.
+
+    1 % held: far above the 10 % the supervisor accepts at the tones; 0.1 % held: within it.
+    """
     plant = _coupled_plant()
     for fraction, accepted in ((0.001, True), (0.01, False)):
         ident = BroadbandIdentifier(3, FS, period_s=4.0, settle_s=1.0, periods=2)
