@@ -8,7 +8,7 @@ PY := $(VENV)/bin/python
 STAMP := $(VENV)/.hexapod_vibration.installed
 BASE_PYTHON ?= $(shell command -v python3.11 || command -v python3)
 
-.PHONY: venv test lint demo bench soak clean
+.PHONY: venv test check lint demo bench soak clean
 
 venv: $(STAMP)
 
@@ -28,6 +28,11 @@ $(STAMP): requirements.txt setup.py setup.cfg package.xml | $(PY)
 test: venv
 	HEXAPOD_TEST_DOMAIN_BASE=$${HEXAPOD_TEST_DOMAIN_BASE:-$$((20 + RANDOM % 181))} \
 	  $(PY) -m pytest -q -n 2 --dist worksteal test
+
+# The fast tier (a developer's inner loop): the tests marked unit by test/conftest.py, no
+# ROS graph and no long scenario run. `make test` (and CI) runs every tier.
+check: venv
+	$(PY) -m pytest -q -n 2 --dist worksteal -m unit test
 
 lint: venv
 	$(VENV)/bin/ruff check .

@@ -1,8 +1,23 @@
-"""Shared test infrastructure: isolated ROS domains, node processes, an in-test rclpy context.
+"""Shared test infrastructure: the test tiers, isolated ROS domains, node processes, rclpy.
+
+**Tiers** (markers registered in ``setup.cfg``, ``--strict-markers``), given here, not in
+the test files, so that a test lands in its tier wherever it is moved:
+
+- ``graph``: the test uses a ROS fixture (:data:`ROS_FIXTURES`: it starts node processes,
+  an rclpy context, or console scripts on its own ROS domain); also marked ``ros``, the
+  older name of the same set;
+- ``scenario``: a long run of the core closed loop (a shipped scenario, often with its
+  twin), listed in :data:`SCENARIO_TESTS` by file name or ``file::test`` name;
+- ``unit``: every other test. ``make check`` runs ``-m unit``, ``make test`` all three.
+
+A test is in exactly one tier. When the whole suite is collected, a name in
+:data:`SCENARIO_TESTS` that matches no test stops the run (a renamed or moved test must
+not fall silently into ``unit``).
 
 Every test that uses ROS gets its own ``ROS_DOMAIN_ID`` (a per-run random base, or
 ``HEXAPOD_TEST_DOMAIN_BASE``, plus a per-test counter), with discovery limited to this
-machine, so that tests and concurrent runs never see each other's nodes.
+machine, so that tests and concurrent runs never see each other's nodes. rclpy is imported
+only by the ``ros_context`` fixture (``test/ros_test_context.py``).
 """
 
 from __future__ import annotations
@@ -11,16 +26,10 @@ import itertools
 import os
 import random
 import sys
-import time
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
-import rclpy
-from rclpy.context import Context
-from rclpy.executors import SingleThreadedExecutor
-from rclpy.node import Node
-from rclpy.signals import SignalHandlerOptions
 
 from hexapod_vibration.tools import processes
 
@@ -30,25 +39,69 @@ _domain_base = int(os.environ.get('HEXAPOD_TEST_DOMAIN_BASE') or random.randint(
 _domain_counter = itertools.count()
 
 ROS_FIXTURES = frozenset({'ros_env', 'node_processes', 'ros_context'})
-"""Fixtures that put a test on a ROS domain: such a test is marked ``ros``."""
+"""Fixtures that put a test on a ROS domain: such a test is in the ``graph`` tier."""
 
+TEST_DIR = Path(__file__).resolve().parent
 BIN_DIR = Path(sys.executable).parent
 """Folder of the virtualenv's console scripts (pph_recorder, ...)."""
 
+SCENARIO_TESTS = (
+    'test_never_worse_core_loop.py', 'test_sensitivity_core_loop.py', 'test_harmonic_rise.py',
+    'test_closed_loop.py::test_table1_reduces_40hz_by_60db_and_80hz_by_40db',
+    'test_closed_loop.py::test_table2_close_tones_each_reduced_by_55db',
+    'test_fxlms.py::test_bench_quick_writes_positive_finite_numbers',
+)
+"""The ``scenario`` tier: core closed-loop runs of a shipped scenario, 30-240 s each on a
+quiet 2-core machine (a file name: all its tests; ``file::test``: that test, every
+parametrization)."""
 
 LONG_FIRST = ('test_moving_tones_graph.py', 'test_experiment.py', 'test_twin_graph.py',
               'test_sensitivity_core_loop.py', 'test_params_file.py', 'test_fxlms.py',
               'test_colcon_layout.py', 'test_never_worse_core_loop.py',
               'test_harmonic_rise.py')
-"""Files of the longest tests (30-240 s each), collected first so that pytest-xdist's
-workers do not end on them one after the other (order only: none depends on another)."""
+"""Files of the longest tests, collected first so that pytest-xdist's workers do not end on
+them one after the other (order only: none depends on another)."""
 
 
-def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
-    """Mark every test that uses a ROS fixture ``ros``; the longest files first."""
+def _scenario_entry(item: pytest.Item) -> str | None:
+    """The :data:`SCENARIO_TESTS` entry that names ``item``, or None."""
+    name = getattr(item, 'originalname', item.name)
+    for entry in (item.path.name, f'{item.path.name}::{name}'):
+        if entry in SCENARIO_TESTS:
+            return entry
+    return None
+
+
+def _tier(item: pytest.Item) -> str:
+    """``graph``, ``scenario`` or ``unit`` (see the module docstring)."""
+    uses_ros = bool(ROS_FIXTURES.intersection(getattr(item, 'fixturenames', ())))
+    scenario = _scenario_entry(item) is not None
+    if uses_ros and scenario:
+        raise pytest.UsageError(f'{item.nodeid} is listed in SCENARIO_TESTS (test/conftest.py) '
+                                'but uses a ROS fixture: it is a graph test')
+    return 'graph' if uses_ros else 'scenario' if scenario else 'unit'
+
+
+def _whole_suite(config: pytest.Config) -> bool:
+    """Whether this run collects every test (``pytest test``, ``make test``/``check``)."""
+    paths = [(config.invocation_params.dir / arg).resolve() for arg in config.args]
+    return paths == [TEST_DIR]
+
+
+@pytest.hookimpl(tryfirst=True)     # before -m deselects anything
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """Give every test its tier marker (and ``ros`` to graph tests); the longest files first."""
     for item in items:
-        if ROS_FIXTURES.intersection(getattr(item, 'fixturenames', ())):
+        tier = _tier(item)
+        item.add_marker(tier)
+        if tier == 'graph':
             item.add_marker(pytest.mark.ros)
+    if _whole_suite(config):
+        used = {_scenario_entry(item) for item in items}
+        stale = [entry for entry in SCENARIO_TESTS if entry not in used]
+        if stale:
+            raise pytest.UsageError(f'SCENARIO_TESTS in test/conftest.py names no test: '
+                                    f'{", ".join(stale)} (renamed or moved? update the list)')
     rank = {name: k for k, name in enumerate(LONG_FIRST)}
     items.sort(key=lambda item: rank.get(item.path.name, len(LONG_FIRST)))    # stable
 
@@ -168,69 +221,11 @@ def node_processes(ros_env: dict[str, str], tmp_path: Path) -> Iterator[NodeProc
         processes.stop_all()
 
 
-class RosTestContext:
-    """An rclpy context of the test process on the test's domain, with an executor."""
-
-    def __init__(self, domain_id: int):
-        """Initialise rclpy on ``domain_id`` without touching the process's signal handlers."""
-        self.domain_id = domain_id
-        self.context = Context()
-        rclpy.init(
-            context=self.context,
-            domain_id=domain_id,
-            signal_handler_options=SignalHandlerOptions.NO,
-        )
-        self.executor = SingleThreadedExecutor(context=self.context)
-        self.nodes: list[Node] = []
-
-    def create_node(self, name: str, **kwargs) -> Node:
-        """A node in this context, spun by :meth:`wait_for`."""
-        node = rclpy.create_node(name, context=self.context, **kwargs)
-        self.executor.add_node(node)
-        self.nodes.append(node)
-        return node
-
-    def wait_for(
-        self,
-        predicate: Callable[[], bool],
-        timeout_s: float,
-        step: Callable[[], None] | None = None,
-        spin: Callable[[], None] | None = None,
-    ) -> bool:
-        """Spin until ``predicate()`` holds; False after ``timeout_s`` (a hang guard only).
-
-        Args:
-            predicate: Condition to wait for.
-            timeout_s: Give up after this long (s); choose it generously.
-            step: Called before each spin (e.g. to publish something repeatedly).
-            spin: One spin (default: the context's executor, up to 50 ms).
-        """
-        deadline = time.monotonic() + timeout_s
-        while not predicate():
-            if time.monotonic() > deadline:
-                return False
-            if step is not None:
-                step()
-            if spin is None:
-                self.executor.spin_once(timeout_sec=0.05)
-            else:
-                spin()
-        return True
-
-    def shutdown(self) -> None:
-        """Destroy the nodes and shut the context down."""
-        for node in self.nodes:
-            self.executor.remove_node(node)
-            node.destroy_node()
-        self.executor.shutdown()
-        rclpy.try_shutdown(context=self.context)
-
-
 @pytest.fixture
-def ros_context(
-    ros_env: dict[str, str], monkeypatch: pytest.MonkeyPatch
-) -> Iterator[RosTestContext]:
-    """An in-test rclpy context on the same domain as the test's node processes."""
+def ros_context(ros_env: dict[str, str], monkeypatch: pytest.MonkeyPatch) -> Iterator:
+    """An in-test rclpy context (``RosTestContext``) on the domain of the test's nodes."""
+    from ros_test_context import RosTestContext  # rclpy only for the tests that use it
+
     for key in ('ROS_AUTOMATIC_DISCOVERY_RANGE', 'RMW_IMPLEMENTATION'):
         monkeypatch.setenv(key, ros_env[key])
     monkeypatch.delenv('ROS_LOCALHOST_ONLY', raising=False)
