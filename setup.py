@@ -40,6 +40,7 @@ setup(
             'soak = hexapod_vibration.executables:soak',
             'hexapod_bench = hexapod_vibration.executables:hexapod_bench',
             'sweep = hexapod_vibration.executables:sweep',
+            'hexapod_param = hexapod_vibration.executables:hexapod_param',
         ],
     },
 )

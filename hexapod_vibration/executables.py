@@ -101,6 +101,11 @@ def sweep(argv: Sequence[str] | None = None) -> None:
     _tool("hexapod_vibration.tools.sweep", argv)
 
 
+def hexapod_param(argv: Sequence[str] | None = None) -> None:
+    """``hexapod_param``: a running node's parameters, without the ``ros2`` CLI."""
+    _tool("hexapod_vibration.tools.hexapod_param", argv)
+
+
 def hexapod_bench(argv: Sequence[str] | None = None) -> None:
     """``hexapod_bench``: the benchmarks."""
     _tool("hexapod_vibration.bench.cli", argv)
