@@ -13,8 +13,6 @@ from hexapod_vibration import parameter_specs as specs
 from hexapod_vibration.ros.parameters import descriptor_for
 
 ROOT = Path(__file__).resolve().parents[1]
-TABLE_START = '<!-- parameter table: generated'
-TABLE_END = '<!-- end of parameter table -->'
 
 
 def test_params_yaml_is_generated_from_the_specs():
@@ -24,13 +22,6 @@ def test_params_yaml_is_generated_from_the_specs():
     params = yaml.safe_load(specs.params_yaml())
     for node in specs.LOOP_NODES:
         assert params[node]['ros__parameters'] == specs.NODE_SPECS[node].defaults()
-
-
-def test_readme_parameter_table_is_generated_from_the_specs():
-    readme = (ROOT / 'README.md').read_text()
-    start = readme.index(TABLE_START)
-    table = readme[readme.index('\n', start) + 1:readme.index(TABLE_END)].strip()
-    assert table == specs.markdown_table()
 
 
 def test_spec_constants_are_the_cores():
