@@ -13,7 +13,7 @@ directory (or ``params_file``); ``clock_mode`` overrides the driver's clock mode
 ``record:=true`` it also starts ``pph_recorder``, which writes the contract topics into
 the bag directory ``bag_path`` (empty: ``rosbag2_<date>-<time>`` in the current directory).
 With ``composed:=true`` the three nodes run in one process (``pph_graph``: same node names,
-parameters and topics, intra-process delivery; see the README's Performance section).
+parameters and topics, intra-process delivery; see docs/performance.md).
 ``realtime_priority`` (1-98; 0 = off) runs the loop processes under SCHED_FIFO, refused at
 start-up where the OS does not permit it; per-node CPUs (``cpu_affinity``) go in the params
 file.

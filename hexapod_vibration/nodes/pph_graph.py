@@ -9,7 +9,7 @@ inter-process hop and no thread wake-up: the driver publishes ``/pph/accel`` and
 ``/pph/eddy``, the controllers' callbacks run in the same spin and publish their commands,
 and the driver applies them. On the project's 2-core machine this is what sustains
 1 kHz in realtime with sub-millisecond latency and runs lockstep faster than real time
-(numbers in the README's Performance section). Use the separate executables to put the
+(numbers in docs/performance.md). Use the separate executables to put the
 controllers on other machines or to restart one alone.
 
 Usage: ``ros2 run hexapod_vibration pph_graph --ros-args --params-file

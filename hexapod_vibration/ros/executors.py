@@ -12,7 +12,7 @@ Each node has a read-only ``executor`` parameter:
   entity of the node and go through a task per callback on every spin. Measured on the
   project's 2-core machine: a ping-pong between two processes takes 388 us per round trip
   with the executor and 222 us with a wait set; the notch controller's CPU per 1 kHz
-  sample fell from 656 to 288 us (the README's Performance section has the loop as a whole).
+  sample fell from 656 to 288 us (docs/performance.md has the loop as a whole).
 - ``single_threaded``: rclpy's SingleThreadedExecutor for everything.
 - ``events``: rclpy's experimental EventsExecutor (Jazzy), for comparison only: on this
   machine it misses more samples than ``waitset`` in realtime and does not stop on SIGINT

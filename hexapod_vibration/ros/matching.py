@@ -2,10 +2,9 @@
 
 Discovery is asymmetric. A subscription can report its publisher matched (the reader's
 side) while that publisher has not matched the subscription yet, and a VOLATILE publisher
-drops what it sends meanwhile. On 2026-12-03 the recorder of a lockstep ``drift`` twin had
-reported every publisher matched on its side, the runner released the driver, and the bag
-began at sample 290 on every loop topic (driver's and controllers' alike): the run then
-waited for samples that never came.
+drops what it sends meanwhile: a recorder that has reported every publisher matched on its
+side can still miss the first samples of every loop topic (a lockstep bag began at sample
+290, and the run waited for samples that never came).
 
 So each node reports on ``/diagnostics`` how many subscriptions its loop publishers have
 matched (``<topic> readers``, :func:`readers_key`), publishes its status again as soon as

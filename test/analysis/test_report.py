@@ -1,4 +1,4 @@
-"""The report from hand-made bags with known content (issue 13 and 14: the analysis)."""
+"""The report from hand-made bags with known content: levels, windows, samples, bad input."""
 
 from __future__ import annotations
 
@@ -172,7 +172,7 @@ def test_at_noise_floor_is_in_the_report_and_the_table(tmp_path, capsys):
         assert ('>=' in line) == (floor['controlled'] and not floor['uncontrolled'])
 
 
-# ---------------------------------------------------------------- issue 14: bad messages
+# ---------------------------------------------------------------- bad messages
 def test_one_undecodable_message_is_skipped_and_counted(tmp_path):
     z = G0 + tone(-31.0, 40.0, 24000)
     good = strut_cdr(np.zeros(6), 5000)

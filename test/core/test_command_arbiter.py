@@ -49,7 +49,7 @@ def test_first_valid_command_per_sample_is_applied():
 
 
 def test_late_duplicate_for_the_previous_sample_is_not_applied_now():
-    """Issue 14: a second command for n-1 arriving at n replaced the first and was held."""
+    """Regression: a second command for n-1 arriving at n replaced the first and was held."""
     arbiter = _arbiter(expected=("pointing",))
     arbiter.offer("notch", _force(1.0), 0, RUN, 0.0)
     _step(arbiter)

@@ -337,7 +337,7 @@ def test_a_recentred_tracker_is_bounded_around_its_new_place():
 
 
 def test_a_tone_0_4_hz_off_is_acquired_from_the_broadband_identification():
-    """Issue 11 pull-in: 40.4 Hz told 40 Hz at a rate whose lock range is ~0.1 Hz.
+    """Pull-in: 40.4 Hz told 40 Hz at a rate whose lock range is ~0.1 Hz.
 
     The broadband identification's fitted line puts the oscillator at 40.4 Hz (event,
     ``acquired_hz``), P from G(f) there; the tracker only fine-tracks: >= 40 dB.

@@ -1,4 +1,4 @@
-"""Issue 11 on the core loop: never worse than off, and saying why; with tracking too.
+"""On the core loop: never worse than off, and saying why; with tracking too.
 
 Each scenario runs twice with the same seeds, with control and without (its twin); over the
 report's window (the last 10 s), and over every window that long from control-on (1 s
@@ -10,8 +10,8 @@ once), drift_tracking +0.67, single_tone_harmonic +0.92 dB).
 0.4 Hz off, control works at the rate the policy allows (the tone's band drops); ``drift``
 (+-1 Hz, 20 s period): the supervisor locates the line from the weights' turning, sees it
 move off the notch (where control gains less than the 1 dB margin) and fades control out
-before any band rises, with the reason on /diagnostics (until this session the guard only
-faded out once the 80 Hz band had risen, at the window's start);
+before any band rises, with the reason on /diagnostics (the guard alone would fade out
+only once a band had risen);
 ``drift_tracking`` (the same drift, tracked): the tone's band drops by 30 dB and more while
 every other band stays within +1 dB (the weights are not stepped when P follows the tone:
 with that step, +2.8..+3.5 dB in 44.7-56.2 Hz); ``single_tone_harmonic`` (paper Table 1,
@@ -135,7 +135,7 @@ def _spin_up_runs(name: str):
 
 
 def test_spin_up_tracked_meets_the_ramp_and_steady_targets_and_is_never_worse():
-    """Issue 11's spin-up targets on the core loop (no tachometer, tracking, update low-pass).
+    """The spin-up targets on the core loop (no tachometer, tracking, update low-pass).
 
     Rotor 30 -> 50 Hz at 1 Hz/s (16..36 s), orders 1-3: against the twin, every order's
     following band is >= 30 dB down in every 1 s window of the ramp (17..36 s) and >= 40 dB

@@ -165,7 +165,7 @@ def _identify(identifier, disturbance_hz, amplitude, seed=4):
 
 
 def test_identification_survives_a_disturbance_04hz_from_the_tone():
-    """Issue 11: gain within 10 %, phase within 10 degrees of the disturbance-free result."""
+    """Gain within 10 %, phase within 10 degrees of the disturbance-free result."""
     quiet = _identify(BroadbandIdentifier(6, FS), 40.4, 0.0).result()
     disturbed_run = _identify(BroadbandIdentifier(6, FS), 40.4, 0.5)
     disturbed = disturbed_run.result()

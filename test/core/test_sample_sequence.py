@@ -1,6 +1,6 @@
 """Run identity and index plausibility (core/loop/sample_sequence.py), without ROS.
 
-The cases of issue 14: a restarted driver (new run from sample 0) is followed, one bogus
+The cases: a restarted driver (new run from sample 0) is followed, one bogus
 index or stray run changes nothing, repeats and late samples are told apart.
 """
 

@@ -1,4 +1,4 @@
-"""A flood of invalid commands does not cost lockstep a legitimate one (issue 14).
+"""A flood of invalid commands does not cost lockstep a legitimate one.
 
 Old driver: 20 000 invalid messages at 12-17 kHz pushed the real lockstep command out of its
 10-deep subscription queue, and the loop stalled for ``lockstep_timeout_s`` (2 s) per lost

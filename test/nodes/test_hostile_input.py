@@ -1,14 +1,14 @@
 """Hostile loop messages against the driver and the pointing controller, as real processes.
 
-Issue 14: one malformed serialized message killed a node (rclpy's deserializer raised
-RMWError), a huge ``dims`` count decoded to garbage that was applied, one absurd sample
-index stopped a controller for good, and nothing checked values against the physical
-range. Here every kind is sent (bytes published as they are) while the loop is held at a
-breakpoint and then while it runs in lockstep; the nodes must live, count each kind on
-/diagnostics, and act exactly as if nothing had been sent: from the breakpoint on (where
-the pointing law is reset by switching it off and on) the pointing controller's commands
-are replayed bit for bit by the same law stepped on the driver's eddy samples alone, and
-the driver applied the pointing command alone at every sample.
+Each kind once broke a node: one malformed serialized message killed it (rclpy's
+deserializer raised RMWError), a huge ``dims`` count decoded to garbage that was applied,
+one absurd sample index stopped a controller for good, and nothing checked values against
+the physical range. Here every kind is sent (bytes published as they are) while the loop is
+held at a breakpoint and then while it runs in lockstep; the nodes must live, count each
+kind on /diagnostics, and act exactly as if nothing had been sent: from the breakpoint on
+(where the pointing law is reset by switching it off and on) the pointing controller's
+commands are replayed bit for bit by the same law stepped on the driver's eddy samples
+alone, and the driver applied the pointing command alone at every sample.
 """
 
 from __future__ import annotations
@@ -201,7 +201,7 @@ def test_hostile_messages_are_counted_and_change_nothing(ros_context, node_proce
 
 
 def test_hostile_accelerations_never_reach_the_notch_weights(ros_context, node_processes):
-    """Issue 14: one accel message of 6 x 1e300 took the weights from 9.9 N to 7.1e298 N."""
+    """Regression: one accel message of 6 x 1e300 took the weights from 9.9 N to 7.1e298 N."""
     driver = node_processes.start('pph_driver', '--ros-args', '-p',
                                   'lockstep_controllers:=[notch]')
     notch = node_processes.start('notch_controller', '--ros-args', '-p', 'adaptation:=raw',

@@ -181,4 +181,4 @@ def test_nodes_exchange_contract_topics_and_cancel_the_tone(ros_context, node_pr
     assert np.all(before > 0.05), before    # tens of mg: the shaker is on
     assert reduction_db > MIN_REDUCTION_DB, (before, after)
     for process in processes:
-        assert process.stop() == 130, process.output()   # SIGINT: 128 + 2 (issue 15)
+        assert process.stop() == 130, process.output()   # SIGINT: 128 + 2

@@ -208,7 +208,7 @@ def test_driver_parameters(ros_context, node_processes):
     off = tone_amplitude(*accel.window(mark + 2000, mark + 3000), 40.0)
     assert np.all(on > 0.05) and db(np.linalg.norm(on) / np.linalg.norm(off)) > 20.0, (on, off)
 
-    # Shaker arrays: paired by index (issue 15: each can be set alone, in any order; a value
+    # Shaker arrays: paired by index (each can be set alone, in any order; a value
     # without its partner waits, inert), elements within bounds and finite, checked together.
     _check_accepted(client, 'shaker_frequencies_hz', [40.0, 80.0])   # 80 Hz: no amplitude
     _check_accepted(client, 'shaker_phases_rad', [0.1, 0.2])

@@ -78,7 +78,7 @@ def test_recorder_writes_published_samples(ros_context, node_processes, tmp_path
     )
     assert done, recorder.output()
 
-    assert recorder.stop() == 130, recorder.output()   # SIGINT: 128 + 2 (issue 15)
+    assert recorder.stop() == 130, recorder.output()   # SIGINT: 128 + 2
     assert (bag / 'metadata.yaml').is_file()
     assert 'closed' in recorder.output()
     series = read_strut_topics(bag)['/pph/accel']
@@ -116,7 +116,7 @@ def test_recorder_writes_queued_messages_at_sigint(ros_context, node_processes, 
     for n, row in enumerate(values):
         accel.publish(make_strut_array(row, n))
     assert accel.wait_for_all_acked(Duration(seconds=TIMEOUT_S)), recorder.output()
-    assert recorder.stop() == 130, recorder.output()   # SIGINT: 128 + 2 (issue 15)
+    assert recorder.stop() == 130, recorder.output()   # SIGINT: 128 + 2
     series = read_strut_topics(bag)['/pph/accel']
     assert series.missing_samples == 0
     np.testing.assert_array_equal(series.sample_index, np.arange(1000))

@@ -1,18 +1,17 @@
 """Any single node killed (SIGKILL) and started again: the loop resumes by itself.
 
-Issue 14: a restarted driver starts again at sample 0 and the controllers dropped every
-index not above the last one seen, so lockstep deadlocked in the handshake and realtime ran
-with no command at all. With the run identity (``layout.dim[2]``) a controller adopts the
-new run within a few messages (core/loop/sample_sequence.py). Judged on the data, per run
-and sample index: the restarted loop is answered from a sample within the first second of
-simulated progress (1000 samples). In lockstep the driver then waits for every sample again:
-by its own counts, 1000 samples without a timeout or a miss (after a restarted controller,
-once the driver has matched its new publisher; a controller a loaded machine stalls for
-five 0.5 s waits is dropped by the watchdog until it answers again, so the window is the
-first clean one, and the hang guard fails a loop never waited for again), and every answer
-this listener saw of them was applied. Realtime keeps up with the wall clock only on an
-idle machine, so there the test asks that answers come back, not that every sample is
-answered.
+A restarted driver starts again at sample 0; controllers that dropped every index not above
+the last one seen deadlocked lockstep in the handshake and left realtime with no command.
+With the run identity (``layout.dim[2]``) a controller adopts the new run within a few
+messages (core/loop/sample_sequence.py). Judged on the data, per run and sample index: the
+restarted loop is answered from a sample within the first second of simulated progress (1000
+samples). In lockstep the driver then waits for every sample again: by its own counts, 1000
+samples without a timeout or a miss (after a restarted controller, once the driver has
+matched its new publisher; a controller a loaded machine stalls for five 0.5 s waits is
+dropped by the watchdog until it answers again, so the window is the first clean one, and
+the hang guard fails a loop never waited for again), and every answer this listener saw of
+them was applied. Realtime keeps up with the wall clock only on an idle machine, so there
+the test asks that answers come back, not that every sample is answered.
 """
 
 from __future__ import annotations

@@ -109,7 +109,7 @@ def test_killed_notch_controller_is_dropped_within_the_timeout(ros_context, node
         np.testing.assert_allclose(_notch_part(force, pointing_cmd, held[0]),
                                    notch_cmd.by_index[last], atol=1e-9)
     for process in (driver, pointing):
-        assert process.stop() == 130, process.output()   # SIGINT: 128 + 2 (issue 15)
+        assert process.stop() == 130, process.output()   # SIGINT: 128 + 2
 
 
 def _invalid_commands(sample: int) -> list[Float64MultiArray]:
@@ -183,12 +183,12 @@ def test_invalid_notch_commands_are_counted_and_never_applied(ros_context, node_
     assert seen, driver.output()
     assert driver.running() and pointing.running()
     for process in (driver, pointing):
-        assert process.stop() == 130, process.output()   # SIGINT: 128 + 2 (issue 15)
+        assert process.stop() == 130, process.output()   # SIGINT: 128 + 2
 
 
 
 def test_only_the_first_command_of_a_sample_is_applied(ros_context, node_processes):
-    """Issue 14: the driver took a second command for a sample it had and applied it."""
+    """Regression: the driver took a second command for a sample it had and applied it."""
     driver = node_processes.start('pph_driver', '--ros-args', '-p', 'lockstep_controllers:=[notch]')
     node = ros_context.create_node('duplicating_notch')
     force = StrutTopic(node, '/pph/actuator_force')

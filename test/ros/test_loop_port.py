@@ -50,7 +50,7 @@ def port_and_answers(ros_context):
 
 
 def test_accel_beyond_the_accelerometer_range_is_refused(port_and_answers):
-    """Issue 14: one 6 x 1e300 accel message took the weights to 7e298 N."""
+    """Regression: one 6 x 1e300 accel message took the weights to 7e298 N."""
     _, port, _ = port_and_answers
     assert port.receive(encode_strut_cdr(GRAVITY, 0, RUN)) is not None
     for values in (np.full(6, 1e300), np.full(6, 2.01 * 9.80665), np.array([0, 0, 0, 0, 0, -30.0])):

@@ -1,8 +1,7 @@
 """The loop's hand-written CDR against rclpy's own serializer, hostile bytes, the version gate.
 
-Moved here from test_messages.py and test_diagnostics.py with the codec
-(hexapod_vibration.ros.rclpy_internals); the hostile-byte cases reproduce issue 14: each
-one crashed or fooled the old receiving path (rclpy's deserializer as the fallback).
+The codec is hexapod_vibration.ros.rclpy_internals; each hostile-byte case once crashed
+or fooled a receiving path that fell back on rclpy's deserializer.
 """
 
 import math
@@ -182,7 +181,7 @@ def test_clock_bytes_are_what_rclpy_serializes(sample):
     assert deserialize_message(raw, Clock) == expected
 
 
-# ------------------------------------------------------------------ hostile bytes (issue 14)
+# ------------------------------------------------------------------ hostile bytes
 def _hostile_bytes() -> dict[str, bytes]:
     raw = encode_strut_cdr(np.arange(1.0, 7.0), 77, RUN)
     cases = {

@@ -1,4 +1,4 @@
-"""The sweep tool: grids, Dask against serial, failures, resume, bad grids (issue 16)."""
+"""The sweep tool: grids, Dask against serial, failures, resume, bad grids."""
 
 import copy
 import dataclasses

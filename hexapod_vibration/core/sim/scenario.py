@@ -43,7 +43,7 @@ class ShakerSettings:
 
 @dataclass(frozen=True)
 class RotorSettings:
-    """A rotating machine at the shaker's point (issue 11): orders, N peak at Hz, profile.
+    """A rotating machine at the shaker's point: orders, N peak at Hz, profile.
 
     ``amplitudes_n`` are at ``reference_speed_hz`` and scale with the speed squared; the
     speed (Hz) is piecewise linear through (``profile_time_s``, ``profile_speed_hz``);
