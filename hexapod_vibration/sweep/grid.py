@@ -4,8 +4,11 @@ A grid names a base scenario and assigns values to **dotted paths** into the sce
 mapping, the way its YAML is written: ``notch.mu``, ``shaker.frequencies_hz[0]``,
 ``model_overrides.top_plate.mass_kg``, ``seed``. Every field of the scenario (with its
 defaults filled in) can be addressed, and so can every value of the physical model under
-``model_overrides.`` (the packaged ``pph_model.yaml``, or the grid's ``model_file``). A
-field added to :class:`~hexapod_vibration.core.sim.scenario.Scenario` is addressable
+``model_overrides.`` (the packaged ``pph_model.yaml``, or the grid's ``model_file``), and
+every notch setting under ``notch.settings.`` (``notch.settings.identification``,
+``notch.settings.divergence_guard``: the base's value or the controller's default). A
+field added to :class:`~hexapod_vibration.core.sim.scenario.Scenario` or
+:class:`~hexapod_vibration.core.control.notch_supervisor.NotchConfig` is addressable
 without any change here.
 
 Layout::
@@ -31,8 +34,10 @@ the point's assignments (SHA-256), so a point keeps its seed when the grid grows
 from cell to cell by the swept values only). A ``seed`` axis overrides both.
 
 :func:`load_grid` checks every path against the base scenario and builds every point's
-scenario and model before any simulation runs: a bad grid is a :class:`GridError` with a
-one-line message.
+scenario and model before any simulation runs, and refuses a point whose control-on or
+analysis window falls inside the notch's identification
+(:func:`~hexapod_vibration.sweep.timeline.timeline_conflict`): a bad grid is a
+:class:`GridError` with a one-line message.
 """
 
 from __future__ import annotations
@@ -49,9 +54,16 @@ from typing import Any
 
 import yaml
 
+from hexapod_vibration.core.control.notch_supervisor import NotchConfig
 from hexapod_vibration.core.model.config import ModelConfig, model_config_from_dict
-from hexapod_vibration.core.sim.scenario import Scenario, scenario_from_dict
+from hexapod_vibration.core.sim.scenario import (
+    RUNNER_NOTCH_SETTINGS,
+    NotchSettings,
+    Scenario,
+    scenario_from_dict,
+)
 from hexapod_vibration.paths import config_path, scenario_path
+from hexapod_vibration.sweep.timeline import timeline_conflict
 
 GRID_KEYS = {"name", "description", "base_scenario", "model_file", "set", "axes", "points",
              "seeds", "plot"}
@@ -61,7 +73,7 @@ SCALES = ("linear", "log")
 MODEL_KEY = "model_overrides"
 # Bump when the metrics of a point change meaning: results of an older version are then
 # not taken as done by a resumed sweep.
-METRICS_VERSION = 1
+METRICS_VERSION = 2
 _PART = re.compile(r"^([A-Za-z_][A-Za-z0-9_]*)((?:\[-?\d+\])*)$")
 _INDEX = re.compile(r"\[(-?\d+)\]")
 
@@ -377,9 +389,18 @@ def _base_mapping(grid: Grid, model_file: Any, source: Path) -> dict[str, Any]:
     except (TypeError, ValueError) as exc:
         raise GridError(f"base_scenario {scenario_file}: {exc}") from None
     full = dataclasses.asdict(scenario)
+    full["notch"]["settings"] = _notch_settings(scenario.notch)
     full[MODEL_KEY] = _merged(model, scenario.model_overrides)
     grid.raw = {**grid.raw, "_model": model}
     return full
+
+
+def _notch_settings(notch: NotchSettings) -> dict[str, Any]:
+    """Every notch setting a scenario may give, the base's or else its default."""
+    own = {f.name for f in dataclasses.fields(NotchSettings)} | RUNNER_NOTCH_SETTINGS
+    defaults = {f.name: getattr(NotchConfig(), f.name) for f in dataclasses.fields(NotchConfig)
+                if f.name not in own}
+    return copy.deepcopy({**defaults, **notch.settings})
 
 
 def _merged(base: dict[str, Any], overrides: dict[str, Any]) -> dict[str, Any]:
@@ -427,10 +448,12 @@ def _build_points(grid: Grid, base: dict[str, Any]) -> list[PointSpec]:
                                else point_seed(int(base["seed"]), assignment))
         assignments = {**assignment, "seed": mapping["seed"]}
         try:
-            build_point(mapping, model_base)
+            scenario, config = build_point(mapping, model_base)
+            conflict = timeline_conflict(scenario, config.simulation.sample_rate_hz)
         except (TypeError, ValueError) as exc:
-            text = " ".join(str(exc).split())
-            raise GridError(f"point {index} {_describe(assignment)}: {text}") from None
+            conflict = " ".join(str(exc).split())
+        if conflict is not None:
+            raise GridError(f"point {index} {_describe(assignment)}: {conflict}")
         point_id = _point_id(mapping, model_base)
         if point_id in seen:
             raise GridError(f"points {seen[point_id]} and {index} are the same point")

@@ -21,6 +21,8 @@ quantisation, clipping and saturation are left out (they are not linear).
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 from scipy import signal
 
@@ -115,3 +117,24 @@ def frequency_response(plant: StateSpace, frequencies_hz: np.ndarray | list[floa
     eye = np.eye(a.shape[0])
     return np.stack([c @ np.linalg.solve(np.exp(2j * np.pi * f / sample_rate_hz) * eye - a, b)
                      for f in np.atleast_1d(frequencies_hz)])
+
+
+def response_function(plant: StateSpace, sample_rate_hz: float
+                      ) -> Callable[[np.ndarray], np.ndarray]:
+    """G as a function of frequency (Hz) -> (F, 6, 6), :func:`frequency_response`'s values.
+
+    From the eigenvalues of A (one decomposition, then F x n products): what the Nyquist
+    test of :mod:`~hexapod_vibration.core.control.sensitivity` evaluates thousands of
+    times.
+    """
+    a, b, c = plant
+    poles, vectors = np.linalg.eig(a)
+    right = np.linalg.solve(vectors, b)
+    left = c @ vectors
+
+    def at(frequencies_hz: np.ndarray) -> np.ndarray:
+        z = np.exp(2j * np.pi * np.atleast_1d(np.asarray(frequencies_hz, dtype=float))
+                   / sample_rate_hz)
+        return np.einsum("ik,fk,kj->fij", left, 1.0 / (z[:, None] - poles[None, :]), right)
+
+    return at

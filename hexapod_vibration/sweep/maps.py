@@ -9,13 +9,17 @@ per row:
   control, same window and noise): red where control made a band or a line worse, the
   +1 dB of "never worse than off" marked.
 
-Every cell shows its value; a thick black frame marks a point whose loop diverged
-(:mod:`hexapod_vibration.sweep.point`: past the actuator rating, or a rise of more than
-20 dB), a grey hatched cell a point that failed or was refused (its
-error is in the table). When the map's y axis is ``notch.mu``, the predicted bounds of mu
-of each column are drawn over it: eq. 18 averaged (identified G), the exact LTI bound
-(linear plant's model) and, once it exists, the predicted-sensitivity limit. A bound beyond
-the map's range is drawn at its edge with an arrow and its value.
+A cell shows the point's value only where control ran at the requested setting
+(status ``ok``, :mod:`hexapod_vibration.sweep.outcome`). Hatched cells did not: a
+``clamped`` or ``backed_off`` point keeps its colour and value (measured, at the lower
+rate the supervisor ran) under a hatch with its status; a ``faded``, ``refused`` or
+``failed`` point is grey with its status (its reason is in the table). A thick black frame
+marks a point whose loop diverged (:mod:`hexapod_vibration.sweep.point`: past the
+actuator rating, or a rise of more than 20 dB). When the map's y axis is ``notch.mu``, the
+bounds of mu of each column are drawn over it (:mod:`hexapod_vibration.sweep.bounds`):
+the bound the supervisor identified and enforces (a mu at or above it is clamped), and the
+loop's stability limit on the linear plant's model with the update as it ran. A bound
+beyond the map's range is drawn at its edge with an arrow and its value.
 """
 
 from __future__ import annotations
@@ -34,8 +38,9 @@ from matplotlib import colors, patches  # noqa: E402
 from matplotlib import patheffects as effects  # noqa: E402
 from matplotlib.lines import Line2D  # noqa: E402
 
-from hexapod_vibration.contract import NEVER_WORSE_DB
+from hexapod_vibration.contract import NEVER_WORSE_DB  # noqa: E402
 from hexapod_vibration.sweep.grid import Axis, Grid  # noqa: E402
+from hexapod_vibration.sweep.outcome import NOT_CONTROLLED, OK  # noqa: E402
 
 DPI = 150
 MU_PATH = "notch.mu"
@@ -43,11 +48,17 @@ RISE_SCALE_MAX_DB = 20.0        # colour scale of the rise; larger values keep t
 FACETS_PER_FIGURE = 4
 ANNOTATE_MAX_CELLS = 15          # per axis: more cells than this are left unlabelled
 BOUND_STYLES = {                 # column -> (legend, line style, colour)
-    "mu_bound_eq18": ("eq. 18 averaged bound (identified G)", "--", "darkorange"),
-    "mu_bound_exact_lti": ("exact LTI bound (linear plant model)", "-", "black"),
+    "mu_bound_identified": ("identified bound ({methods}): a mu at or above it is clamped "
+                            "to half", "--", "darkorange"),
+    "mu_bound_model": ("stability limit, linear plant model, the update as it ran", "-",
+                       "black"),
     "mu_limit_sensitivity": ("predicted-sensitivity limit", ":", "magenta"),
 }
+HATCH = "////"
+STATUS_TEXT = {"clamped": "clamped", "backed_off": "backed off", "faded": "faded",
+               "refused": "refused", "failed": "failed"}
 OUTLINE = [effects.withStroke(linewidth=3.6, foreground="white")]
+OUTLINE_THIN = [effects.withStroke(linewidth=2.0, foreground="0.85")]
 PANELS = (("attenuation_db", "attenuation of the targeted lines (dB)", "viridis"),
           ("max_rise_vs_off_db", "largest rise elsewhere vs control off (dB; scale line: +1)",
            "RdBu_r"))
@@ -118,15 +129,21 @@ def _figure(grid: Grid, rows: list[dict], x: Axis, y: Axis, others: list[Axis],
     handles = _legend_handles(rows, y)
     fig.suptitle(f"{grid.name}: {grid.description}".strip(": "), fontsize=11)
     if handles:
-        fig.legend(handles=handles, loc="outside lower center", ncol=min(3, len(handles)),
+        fig.legend(handles=handles, loc="outside lower center", ncol=min(2, len(handles)),
                    fontsize=8, frameon=False)
     fig.savefig(path, dpi=DPI)
     plt.close(fig)
 
 
 def _values(cells: list[list[dict]], column: str) -> np.ndarray:
-    return np.array([[np.nan if row.get(column) is None else float(row[column])
-                      for row in line] for line in cells])
+    """The column's values; NaN where the point has none or control did not run."""
+    return np.array([[np.nan if row.get(column) is None or not _measured(row)
+                      else float(row[column]) for row in line] for line in cells])
+
+
+def _measured(row: dict) -> bool:
+    """Control ran in the controlled window (at the requested rate or a lower one)."""
+    return bool(row) and row.get("status") not in NOT_CONTROLLED
 
 
 def _panel(ax: Any, cells: list[list[dict]], x: Axis, y: Axis, column: str, cmap: str) -> None:
@@ -164,24 +181,30 @@ def _panel(ax: Any, cells: list[list[dict]], x: Axis, y: Axis, column: str, cmap
 
 
 def _cell(ax: Any, i: int, j: int, row: dict, value: float, mesh: Any, annotate: bool) -> None:
-    if not row or row.get("status") != "ok":
+    status = row.get("status") if row else None
+    if not _measured(row):
         ax.add_patch(patches.Rectangle((i, j), 1, 1, facecolor="0.85", edgecolor="0.5",
-                                       hatch="///", linewidth=0.5))
-        if annotate and row:
-            ax.text(i + 0.5, j + 0.5, "refused" if "stability bound" in (row.get("error")
-                                                                       or "") else "failed",
-                    ha="center", va="center", fontsize=6, color="0.2")
+                                       hatch=HATCH, linewidth=0.5))
+        if annotate and status:
+            ax.text(i + 0.5, j + 0.5, STATUS_TEXT.get(status, status), ha="center",
+                    va="center", fontsize=6, color="0.15", path_effects=OUTLINE_THIN)
         return
+    if status != OK:
+        ax.add_patch(patches.Rectangle((i, j), 1, 1, fill=False, edgecolor="0.25",
+                                       hatch=HATCH, linewidth=0.0, alpha=0.6))
     if row.get("diverged"):
         ax.add_patch(patches.Rectangle((i + 0.04, j + 0.04), 0.92, 0.92, fill=False,
                                        edgecolor="black", linewidth=2.0))
-    if annotate and math.isfinite(value):
-        rgba = mesh.cmap(mesh.norm(value))
-        light = 0.299 * rgba[0] + 0.587 * rgba[1] + 0.114 * rgba[2] > 0.55
-        text = f"{value:.1f}" if abs(value) < 9.95 else f"{value:.0f}"
-        ax.text(i + 0.5, j + 0.5, text, ha="center", va="center", fontsize=7,
-                color="black" if light else "white", zorder=5, path_effects=[
-                    effects.withStroke(linewidth=2.0, foreground="white" if light else "black")])
+    if not (annotate and math.isfinite(value)):
+        return
+    rgba = mesh.cmap(mesh.norm(value))
+    light = 0.299 * rgba[0] + 0.587 * rgba[1] + 0.114 * rgba[2] > 0.55
+    text = f"{value:.1f}" if abs(value) < 9.95 else f"{value:.0f}"
+    if status != OK:
+        text += f"\n{STATUS_TEXT.get(status, status)}"
+    ax.text(i + 0.5, j + 0.5, text, ha="center", va="center", fontsize=7 if status == OK
+            else 6, color="black" if light else "white", zorder=5, path_effects=[
+                effects.withStroke(linewidth=2.0, foreground="white" if light else "black")])
 
 
 def _tick(value: Any) -> str:
@@ -241,12 +264,19 @@ def _bounds(ax: Any, cells: list[list[dict]], y: Axis) -> None:
 def _legend_handles(rows: list[dict], y: Axis) -> list[Any]:
     handles: list[Any] = []
     if y.path == MU_PATH:
+        methods = sorted({str(r["mu_bound_method"]) for r in rows
+                          if r.get("mu_bound_method")})
         for column, (label, style, colour) in BOUND_STYLES.items():
             if any(r.get(column) is not None for r in rows):
                 handles.append(Line2D([], [], linestyle=style, color=colour, linewidth=2.2,
-                                      label=label, path_effects=OUTLINE))
+                                      label=label.format(methods=" / ".join(methods)),
+                                      path_effects=OUTLINE))
     handles.append(patches.Patch(facecolor="none", edgecolor="black", linewidth=2.0,
                                  label="diverged (past the actuator rating, or a rise > 20 dB)"))
-    handles.append(patches.Patch(facecolor="0.85", edgecolor="0.5", hatch="///",
-                                 label="refused or failed (see the table's error)"))
+    handles.append(patches.Patch(facecolor="white", edgecolor="0.25", hatch=HATCH,
+                                 label="clamped / backed off: measured at the lower mu the "
+                                       "supervisor ran"))
+    handles.append(patches.Patch(facecolor="0.85", edgecolor="0.5", hatch=HATCH,
+                                 label="faded / refused / failed: no control to measure "
+                                       "(reason: the table's control_note, error)"))
     return handles

@@ -1,7 +1,10 @@
 """One sweep point: the core closed loop (no ROS) and the metrics the report has.
 
 :func:`run_point` is what a Dask worker calls. It never raises: a point that fails comes
-back as a row with ``status = "failed"`` and its error, so it never stops a sweep. Every
+back as a row with ``status = "failed"`` and its error, so it never stops a sweep. A point
+that ran has the status of what control did (:mod:`hexapod_vibration.sweep.outcome`:
+``ok``, ``clamped``, ``backed_off``, ``faded`` or ``refused``, the reason in
+``control_note``). Every
 point runs with one BLAS thread (``threadpoolctl``), in the client's process or in any
 worker, so its numbers do not depend on where it ran.
 
@@ -35,7 +38,9 @@ before control-on and the last ``window_s``):
   more than ``DIVERGED_RISE_DB`` (on the nonlinear PPH an unstable loop can settle into a
   limit cycle below the rating, the joints' free-play bounding it: measured 31 N and
   +69 dB at 316 Hz for mu = 0.015; stable settings rise by 10 dB at most).
-- ``backed_off``: whether the supervisor backed off (None until the loop has one).
+- ``backed_off``: whether the divergence guard lowered mu during the run
+  (:func:`~hexapod_vibration.sweep.outcome.control_outcome`, with ``mu_in_force`` and the
+  per-tone rates ``tone_mu`` at the end of the run).
 - ``peak_notch_command_n``, ``peak_actuator_force_n``: largest canceller command and
   applied force (N) after control-on; ``saturated_fraction`` of those samples with a
   command clipped at the dynamic rating.
@@ -65,6 +70,7 @@ from hexapod_vibration.core.sim.closed_loop import CoreLoop, LoopRecord
 from hexapod_vibration.core.sim.scenario import Scenario
 from hexapod_vibration.sweep import bounds
 from hexapod_vibration.sweep.grid import PointSpec, build_point
+from hexapod_vibration.sweep.outcome import FAILED, control_outcome
 
 TARGET_RANGE_HZ = 2.0       # a report tone this close to a notch tone is one it aims at
 BAND_LOW_HZ, BAND_HIGH_HZ = 6.3, 400.0      # one-third-octave bands 6.3 .. 400 Hz
@@ -83,6 +89,7 @@ def run_point(spec: PointSpec) -> dict[str, Any]:
             scenario, config = build_point(spec.scenario, spec.model)
             loop = CoreLoop(config, scenario)
             record = loop.run()
+            row.update(control_outcome(loop.notch, record, scenario.notch.mu))
             row.update(point_metrics(record, scenario, loop.config))
             row.update(rise_versus_off(record, scenario, config))
             row.update(bounds.predicted_bounds(record, scenario, config))
@@ -98,7 +105,7 @@ def failed_row(spec: PointSpec, exc: BaseException) -> dict[str, Any]:
     frames = traceback.extract_tb(exc.__traceback__)
     where = f" (at {os.path.basename(frames[-1].filename)}:{frames[-1].lineno})" if frames else ""
     text = " ".join(f"{type(exc).__name__}: {exc}".split())
-    return {"point_id": spec.point_id, "index": spec.index, "status": "failed",
+    return {"point_id": spec.point_id, "index": spec.index, "status": FAILED,
             "error": (text[:ERROR_CHARS] + where)}
 
 
@@ -150,7 +157,6 @@ def point_metrics(record: LoopRecord, scenario: Scenario, config: ModelConfig
     }
     out.update(_rise(z, before, after, rows, targeted, excluded))
     out.update(_forces(record, config, before.stop, after))
-    out["backed_off"] = bounds.supervisor_backed_off(record)
     return out
 
 

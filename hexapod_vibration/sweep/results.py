@@ -3,8 +3,9 @@
 ``DIR/points/<point_id>.json`` is written (atomically: a temporary file renamed) as soon as
 a point is done, whether it succeeded or failed, so an interrupted sweep loses at most the
 points that were running. A point whose file exists is done: a resumed sweep skips it
-(``--retry-failed`` runs failed points again). The id is a digest of the point's complete
-scenario and model, so a changed base scenario or model never reuses an old result.
+(``--retry-failed`` runs the points whose status is ``failed`` again). The id is a digest
+of the point's complete scenario and model, so a changed base scenario or model never
+reuses an old result.
 
 ``DIR/results.parquet`` is the table (pyarrow): one row per point of the grid in grid
 order, one column per swept path (named by the path), the point's seed, ``status`` and
@@ -26,6 +27,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from hexapod_vibration.sweep.grid import Grid, PointSpec
+from hexapod_vibration.sweep.outcome import FAILED
 
 POINTS_DIR = "points"
 TABLE_NAME = "results.parquet"
@@ -64,7 +66,7 @@ def pending_points(grid: Grid, out_dir: Path, retry_failed: bool = False) -> lis
     pending = []
     for spec in grid.points:
         row = read_point(out_dir, spec.point_id)
-        if row is None or (retry_failed and row.get("status") != "ok"):
+        if row is None or (retry_failed and row.get("status") == FAILED):
             pending.append(spec)
     return pending
 

@@ -22,27 +22,36 @@ from typing import Any
 
 from hexapod_vibration.sweep import results
 from hexapod_vibration.sweep.grid import Grid, PointSpec
+from hexapod_vibration.sweep.outcome import FAILED, STATUSES
 from hexapod_vibration.sweep.point import failed_row, run_point
 
 CONNECT_TIMEOUT_S = 10.0
+PROGRESS_LOG_INTERVAL_S = 10.0
 
 
 @dataclass
 class SweepSummary:
-    """What a sweep did: points run now, skipped (already done), failed; outputs."""
+    """What a sweep did: points run now, skipped (already done), their statuses; outputs."""
 
     total: int
     computed: int
     skipped: int
-    failed: int
+    statuses: dict[str, int]
     wall_s: float
     table: Path | None = None
     figures: list[Path] = field(default_factory=list)
 
+    @property
+    def failed(self) -> int:
+        """Points that raised (status ``failed``)."""
+        return self.statuses.get(FAILED, 0)
+
     def line(self) -> str:
         """One line for the console."""
-        return (f"{self.total} points: {self.computed} run now, {self.skipped} already done, "
-                f"{self.failed} failed in all; {self.wall_s:.1f} s")
+        counts = ", ".join(f"{n} {status}" for status in STATUSES
+                           if (n := self.statuses.get(status, 0)))
+        return (f"{self.total} points: {self.computed} run now, {self.skipped} already done; "
+                f"{counts or 'none done'}; {self.wall_s:.1f} s")
 
 
 def usable_cores() -> int:
@@ -108,11 +117,32 @@ def run_on_dask(client: Any, points: list[PointSpec]
             future.cancel()
 
 
+class _Lines:
+    """A stream for tqdm that writes each refresh as a line (a log, not a terminal)."""
+
+    def __init__(self, stream: Any) -> None:
+        self._stream = stream
+
+    def write(self, text: str) -> None:
+        """One line per refresh; tqdm's carriage returns dropped."""
+        text = text.replace("\r", "").strip()
+        if text:
+            self._stream.write(text + "\n")
+
+    def flush(self) -> None:
+        """Flush the underlying stream."""
+        self._stream.flush()
+
+
 def _progress(total: int, enabled: bool) -> Any:
+    """A tqdm bar on stderr: redrawn in a terminal, a line every 10 s in a log."""
     from tqdm import tqdm
 
-    return tqdm(total=total, unit="point", desc="sweep", dynamic_ncols=True,
-                disable=None if enabled else True, file=sys.stderr)
+    terminal = sys.stderr.isatty()
+    return tqdm(total=total, unit="point", desc="sweep", disable=not enabled,
+                dynamic_ncols=terminal, ncols=None if terminal else 80,
+                file=sys.stderr if terminal else _Lines(sys.stderr),
+                mininterval=0.1 if terminal else PROGRESS_LOG_INTERVAL_S)
 
 
 def run_sweep(grid: Grid, out_dir: Path, client: Any = None, retry_failed: bool = False,
@@ -141,9 +171,11 @@ def run_sweep(grid: Grid, out_dir: Path, client: Any = None, retry_failed: bool 
     finally:
         bar.close()
     rows = results.collect_rows(grid, out_dir)
+    statuses: dict[str, int] = {}
+    for row in rows:
+        statuses[row["status"]] = statuses.get(row["status"], 0) + 1
     summary = SweepSummary(total=len(grid.points), computed=len(pending),
-                           skipped=len(grid.points) - len(pending),
-                           failed=sum(r["status"] != "ok" for r in rows),
+                           skipped=len(grid.points) - len(pending), statuses=statuses,
                            wall_s=time.perf_counter() - start)
     summary.table = results.write_table(rows, out_dir / results.TABLE_NAME)
     if plots:

@@ -23,12 +23,13 @@ import yaml
 
 from hexapod_vibration.sweep import runner
 from hexapod_vibration.sweep.grid import load_grid
+from hexapod_vibration.sweep.outcome import FAILED
 
 BENCH_SET = {
     "duration_s": 5.4, "identify_at_s": 0.2, "control_on_s": 4.4, "window_s": 1.0,
     "shaker.frequencies_hz": [40.0], "shaker.amplitudes_n": [80.0],
     "shaker.phases_rad": [0.0], "notch.tone_frequencies_hz": [40.0],
-    "report_tones_hz": [40.0],
+    "report_tones_hz": [40.0], "notch.settings.identification": "tones",
 }
 WORKER_COUNTS = (1, 2)
 
@@ -65,9 +66,9 @@ def sweep_throughput(quick: bool = False) -> dict[str, Any]:
                 walls[str(workers)] = time.perf_counter() - start
             finally:
                 runner.close_client(client)
-            if any(r["status"] != "ok" for r in rows):
+            if any(r["status"] == FAILED for r in rows):
                 raise RuntimeError("a throughput point failed: "
-                                   + next(r["error"] for r in rows if r["status"] != "ok"))
+                                   + next(r["error"] for r in rows if r["status"] == FAILED))
             rates[str(workers)] = points / walls[str(workers)]
             in_task[str(workers)] = sum(r["elapsed_s"] for r in rows) / points
     return {"sweep_throughput": {

@@ -8,9 +8,15 @@ sends them to an existing Dask cluster (``dask scheduler`` / ``dask worker``; th
 need this package installed). Points already in DIR are skipped, so an interrupted sweep
 resumes where it stopped. A point that fails is recorded with its error; the sweep goes on.
 
+A grid whose control-on or analysis windows fall inside the notch's identification is
+refused before anything runs (:mod:`hexapod_vibration.sweep.timeline`). Each point's
+``status`` says what control did (``ok``, ``clamped``, ``backed_off``, ``faded``,
+``refused``, or ``failed`` with its error); the summary line counts them. A progress bar
+runs on stderr while the points complete (one line every 10 s when stderr is a file).
+
 Exit status: 0 when the sweep ran (even if some points failed: see the summary and the
-``status`` column), 2 for a bad grid or argument (one line on stderr, nothing run), 130 on
-Ctrl-C (the finished points are kept).
+``status`` column), 2 for a bad grid or argument (one line on stderr, nothing run or
+written), 130 on Ctrl-C (the finished points are kept).
 """
 
 from __future__ import annotations

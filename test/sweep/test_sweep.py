@@ -7,13 +7,14 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 import yaml
 
 from hexapod_vibration.core.sim.scenario import Scenario, load_scenario
 from hexapod_vibration.paths import scenario_path, share_directory
 from hexapod_vibration.sweep import grid as grids
-from hexapod_vibration.sweep import results, runner
+from hexapod_vibration.sweep import maps, results, runner, timeline
 
 # A short Table 1 loop: identification 0.2 .. 3.4 s, 1 s windows (the controlled one 1 s
 # after control-on), about 0.8 s of CPU.
@@ -67,11 +68,16 @@ def test_serial_run_writes_a_row_per_point_with_the_report_metrics(serial_run):
     # against the same run without control (same noise): a few dB below the bound (1 s
     # after control-on, the loop still settling), a limit cycle or worse beyond it
     assert slow["max_rise_vs_off_db"] < 6.0 and fast["max_rise_vs_off_db"] > 20.0
-    assert slow["mu_bound_exact_lti"] < slow["mu_bound_eq18"]
-    assert slow["mu_bound_exact_lti"] < 0.05
+    # the loop's limit on the model (with the base's 10 Hz update low-pass) is far below
+    # the eq. 18 bound the tone identification enforces, and below 0.05
+    assert slow["mu_bound_model"] < slow["mu_bound_identified"]
+    assert slow["mu_bound_method"] == "eq. 18" and slow["mu_bound_model"] < 0.05
     assert slow["tones_hz"] == [40.0, 80.0] and slow["tones_controlled"] == [True, False]
     assert len(slow["band_centre_hz"]) == len(slow["band_controlled_db"]) > 10
-    assert slow["backed_off"] is None and slow["mu_limit_sensitivity"] is None
+    # both ran at the requested rate (guard off, below the identified bound)
+    assert [slow["status"], fast["status"]] == ["ok", "ok"]
+    assert slow["backed_off"] is False and slow["mu_limit_sensitivity"] is None
+    assert summary.statuses == {"ok": 4}
     assert summary.figures and summary.figures[0].stat().st_size > 10_000
 
 
@@ -137,6 +143,16 @@ def test_a_changed_base_is_not_taken_as_done(tmp_path):
     ({"axes": {}}, "nothing to sweep"),
     ({"plot": {"x": "seed", "y": "notch.mu"}}, "plot.x"),
     ({"base_scenario": "no_such_scenario"}, "unknown scenario"),
+    # the timeline against the identification the notch supervisor runs
+    ({"set": {**TINY_SET, "notch.settings": {"identification": "broadband"}}},
+     "control-on at 4.4 s falls inside the broadband identification (0.2-10.2 s); set "
+     "control_on_s >= 11.2 s"),
+    ({"set": {**TINY_SET, "window_s": 1.5}},
+     "the uncontrolled window (2.9-4.4 s) overlaps the tones identification (0.2-3.4 s)"),
+    ({"set": {**TINY_SET, "duration_s": 30.0, "control_on_s": 24.0, "window_s": 10.0},
+      "points": [{"identify_at_s": 0.2}, {"identify_at_s": 12.0}]},
+     "point 4 {identify_at_s: 12.0, notch.mu: 0.003, notch.adaptation: 'decentralized'}: "
+     "the uncontrolled window (14-24 s) overlaps the tones identification (12-15.2 s)"),
 ])
 def test_a_bad_grid_is_one_line_on_stderr_and_exit_2(tmp_path, change, message):
     path = write_grid(tmp_path, **change)
@@ -148,6 +164,25 @@ def test_a_bad_grid_is_one_line_on_stderr_and_exit_2(tmp_path, change, message):
     assert len(lines) == 1 and lines[0].startswith("sweep: error:"), proc.stderr
     assert message in lines[0]
     assert not out.exists()
+
+
+def test_the_identification_length_is_the_supervisors():
+    """Longer tone segments make a longer identification; broadband is its own length."""
+    base = load_scenario(scenario_path("single_tone_harmonic"))
+
+    def interval(**settings):
+        notch = dataclasses.replace(base.notch, tone_frequencies_hz=(40.0,),
+                                    settings=settings)
+        return timeline.identification_interval(dataclasses.replace(base, notch=notch),
+                                                1000.0)
+
+    tones, method = interval(identification="tones")
+    assert method == "tones" and (tones.start_s, tones.stop_s) == (1.0, 4.2)
+    slower, _ = interval(identification="tones", identification_measure_s=0.6)
+    assert slower.stop_s == pytest.approx(1.0 + 8 * 0.7)        # (C + 2) segments
+    broadband, method = interval(identification="broadband")
+    assert method == "broadband" and broadband.stop_s - broadband.start_s == 10.0
+    assert interval(identification="tones", auto_identify=False) is None
 
 
 def test_not_yaml_is_one_line_exit_2(tmp_path):
@@ -213,3 +248,42 @@ def test_shipped_grids_are_valid_and_installed():
     setup = (share_directory() / "setup.py")
     if setup.is_file():
         assert "config/sweeps/*.yaml" in setup.read_text()
+
+
+def test_a_point_that_did_not_run_as_asked_has_its_own_status(tmp_path):
+    """A clamped mu (at the identified bound), a fade after backing off, a refusal."""
+    refused = {"notch.settings": {"identification": "broadband"}, "duration_s": 13.4,
+               "control_on_s": 11.4,
+               "model_overrides.accelerometer.noise_density_g_per_sqrt_hz": 1e-3}
+    path = write_grid(tmp_path, axes={}, plot={}, points=[
+        {"notch.mu": 0.3},
+        {"notch.mu": 0.2, "notch.settings": {**TINY_SET["notch.settings"],
+                                             "divergence_guard": True}},
+        {"notch.mu": 0.003, **refused}])
+    summary = runner.run_sweep(grids.load_grid(path), tmp_path / "out", progress=False,
+                               plots=False)
+    clamped, faded, refused = results.read_table(tmp_path / "out" / results.TABLE_NAME)
+    assert summary.statuses == {"clamped": 1, "faded": 1, "refused": 1}
+    assert clamped["status"] == "clamped" and clamped["backed_off"] is False
+    assert clamped["mu_in_force"] == pytest.approx(0.5 * clamped["mu_bound_identified"])
+    assert f"mu 0.3 ran at {clamped['mu_in_force']:.4g}" in clamped["control_note"]
+    # the guard lowered mu (0.2 / 4), still worse than off: faded out
+    assert faded["status"] == "faded" and faded["backed_off"] is True
+    assert faded["mu_in_force"] == pytest.approx(0.05)
+    assert faded["control_note"].startswith("divergence guard:")
+    assert refused["status"] == "refused" and refused["backed_off"] is False
+    assert refused["control_note"].startswith("identification failed")
+    assert refused["mu_bound_identified"] is None and refused["error"] is None
+    assert "1 clamped, 1 faded, 1 refused" in summary.line()
+
+
+def test_the_maps_show_values_only_where_control_ran():
+    rows = [[{"status": "ok", "attenuation_db": 60.0},
+             {"status": "clamped", "attenuation_db": 50.0},
+             {"status": "backed_off", "attenuation_db": 40.0}],
+            [{"status": "faded", "attenuation_db": 0.0},
+             {"status": "refused", "attenuation_db": -1.0},
+             {"status": "failed", "attenuation_db": None}]]
+    values = maps._values(rows, "attenuation_db")
+    assert values[0].tolist() == [60.0, 50.0, 40.0]
+    assert np.isnan(values[1]).all()
