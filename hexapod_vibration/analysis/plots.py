@@ -3,21 +3,29 @@
 - ``spectra.png`` (paper Figs. 5-8): z-axis PSD without and with control in separate panels
   on the same scales, and a zoom around the notch tones with both curves; the spectra
   also as ``spectra.csv`` for other tools.
-- ``plant_response.png`` (paper Fig. 4): z-axis acceleration over a few periods and its
-  spectrum with each harmonic's level relative to the fundamental.
+- ``plant_response.png`` (paper Fig. 4, when the report has a harmonic-distortion analysis:
+  ``report_harmonics_of_hz``, the ``plant_response`` scenario): z-axis acceleration over a
+  few periods of the fundamental and its spectrum with each harmonic's level relative to
+  the fundamental. Elsewhere a "fundamental" fitted to a mix of tones means nothing.
 - ``convergence.png``: each tone's level over time (the one definition,
   :func:`hexapod_vibration.core.spectrum.tone_level_over_time`) with control-on, the
   identification and each convergence time marked; the notch weights per tone
   (mean over the six struts, and their range).
 - ``pointing.png``: tilts, twist and translations of the top plate from the eddy-current
-  sensors, each on its own axis.
-- ``frequencies.png`` (when frequency topics were recorded): the controller's estimate of
-  each tone (``/pph/notch_frequencies``) against the true frequency of every sounding tone
+  sensors: the pose's 0.1 s means (the pointing, y axes fitted to the run outside the
+  start-up and the identification, which are shaded) beside the vibration RMS within each
+  0.1 s (log scale), each group on its own axis.
+- ``frequencies.png`` (when a recorded frequency moves: a drifting or sweeping tone, a
+  tracking notch, a tachometer): the controller's estimate of each tone
+  (``/pph/notch_frequencies``) against the true frequency of every sounding tone
   (``/pph/disturbance_frequencies``) and the tachometer (``/pph/reference_frequency``) over
   time, and the estimation error of each controlled tone.
 - ``sensitivity.png`` (when ``/pph/notch_sensitivity`` was recorded, or with a twin): the
   predicted |S|, the measured ratio of the controlled to the uncontrolled z spectrum and,
-  with a twin (``analyze --twin``), the H1 estimate from the twin's z to the controlled z, in dB.
+  with a twin (``analyze --twin``), the H1 estimate from the twin's z to the controlled z, in
+  dB, over 0..fs/2 and around the notch tones; the dB axis spans what was measured down to
+  :data:`SENSITIVITY_DEPTH_DB` (:func:`sensitivity_limits_db`), the +1 dB of "never worse
+  than off" marked.
 """
 
 from __future__ import annotations
@@ -39,11 +47,11 @@ from hexapod_vibration.analysis.report import (  # noqa: E402
 )
 from hexapod_vibration.contract import (  # noqa: E402
     DISTURBANCE_FREQUENCIES_TOPIC,
+    NEVER_WORSE_DB,
     NOTCH_FREQUENCIES_TOPIC,
     REFERENCE_FREQUENCY_TOPIC,
 )
 from hexapod_vibration.core import spectrum  # noqa: E402
-from hexapod_vibration.core.model.config import ModelConfig  # noqa: E402
 
 G0 = spectrum.G0
 DPI = 150
@@ -53,21 +61,41 @@ plt.rcParams.update({"font.size": 9, "axes.titlesize": 10, "axes.labelsize": 9,
                      "legend.fontsize": 8, "figure.dpi": DPI})
 
 
-def write_all(out: Path, signals: BagSignals, result: Analysis, model: ModelConfig) -> list[Path]:
-    """Write every figure (and CSV) that the bag's content allows; return their paths."""
+MOVING_HZ = 0.01
+"""A recorded frequency whose range exceeds this (Hz) moves: frequencies.png is drawn."""
+
+
+def write_all(out: Path, signals: BagSignals, result: Analysis) -> list[Path]:
+    """Write every figure (and CSV) that means something for this bag; return their paths."""
     paths = [spectra_figure(out / "spectra.png", result),
              spectra_csv(out / "spectra.csv", result)]
-    paths.append(plant_response_figure(out / "plant_response.png", result))
+    if result.harmonics:
+        paths.append(plant_response_figure(out / "plant_response.png", result))
     if result.levels_over_time:
         paths.append(convergence_figure(out / "convergence.png", signals, result))
     eddy = signals.series.get("/pph/eddy")
     if eddy is not None and eddy.sample_index.size > 1:
-        paths.append(pointing_figure(out / "pointing.png", signals, model))
-    if signals.frequencies:
+        paths.append(pointing_figure(out / "pointing.png", signals, result))
+    if frequencies_move(signals.frequencies):
         paths.append(frequencies_figure(out / "frequencies.png", signals, result))
     if result.sensitivity_curves:
         paths.append(sensitivity_figure(out / "sensitivity.png", result))
     return paths
+
+
+def frequencies_move(tracks: dict[str, tuple[np.ndarray, np.ndarray]]) -> bool:
+    """Whether any recorded frequency (a tone's estimate or truth, the tachometer) moves.
+
+    ``tracks``: topic -> (sample indices (N,), frequencies (N, K) Hz); a column whose
+    range exceeds :data:`MOVING_HZ` moves (two fixed tones side by side do not).
+    """
+    for _, values in tracks.values():
+        columns = np.asarray(values, dtype=float).reshape(len(values), -1)
+        for column in columns.T:
+            finite = column[np.isfinite(column)]
+            if finite.size and float(finite.max() - finite.min()) > MOVING_HZ:
+                return True
+    return False
 
 
 # ---------------------------------------------------------------------------- spectra
@@ -191,12 +219,15 @@ def spectra_csv(path: Path, result: Analysis) -> Path:
 
 # ---------------------------------------------------------------------------- Fig. 4
 def plant_response_figure(path: Path, result: Analysis) -> Path:
-    """Time trace (5 periods) and spectrum of the uncontrolled z-axis acceleration."""
+    """Time trace (5 periods) and spectrum of the uncontrolled z-axis acceleration.
+
+    For a report with a harmonic-distortion analysis (``result.harmonics``): the
+    fundamental and its harmonics' levels relative to it.
+    """
     rows = result.windows["uncontrolled"]
     x = result.z[rows]
     hd = result.harmonics
-    f0 = hd["frequencies_hz"][0] if hd else (result.report["tones"] or [{"frequency_hz": 40}]
-                                             )[0]["frequency_hz"]
+    f0 = hd["frequencies_hz"][0]
     fig, (ax_t, ax_f) = plt.subplots(2, 1, figsize=(8.0, 6.5))
     n = int(round(5 * FS / f0))
     seg = (x[-n:] - x.mean()) / G0 * 1e3
@@ -210,13 +241,12 @@ def plant_response_figure(path: Path, result: Analysis) -> Path:
     ax_t.legend(loc="upper right")
     f, db = _psd_db(x)
     ax_f.plot(f, db, color="tab:blue", lw=0.7)
-    if hd:
-        for fk, rel in zip(hd["frequencies_hz"][1:], hd["relative_db"][1:], strict=True):
-            ax_f.annotate(f"{rel:.0f}", (fk, float(np.interp(fk, f, db))), xytext=(0, 4),
-                          textcoords="offset points", ha="center", fontsize=7)
-        ax_f.set_title(f"spectrum: harmonics in dB re the fundamental; THD "
-                       f"{hd['thd_percent']:.1f} % over {hd['harmonics']} harmonics "
-                       "below fs/2")
+    for fk, rel in zip(hd["frequencies_hz"][1:], hd["relative_db"][1:], strict=True):
+        ax_f.annotate(f"{rel:.0f}", (fk, float(np.interp(fk, f, db))), xytext=(0, 4),
+                      textcoords="offset points", ha="center", fontsize=7)
+    ax_f.set_title(f"spectrum: harmonics in dB re the fundamental; THD "
+                   f"{hd['thd_percent']:.1f} % over {hd['harmonics']} harmonics "
+                   "below fs/2")
     ax_f.set(xlabel="frequency (Hz)", ylabel="PSD (dB re 1 g$^2$/Hz)", xlim=(0, FS / 2))
     for ax in (ax_t, ax_f):
         ax.grid(alpha=0.3)
@@ -233,10 +263,15 @@ def _fundamental_fit(x: np.ndarray, f0: float) -> np.ndarray:
 
 
 # ---------------------------------------------------------------------------- convergence
+LEGEND_INSIDE_MAX = 6
+"""More entries than this go beside the levels' axis instead of over the curves."""
+
+
 def convergence_figure(path: Path, signals: BagSignals, result: Analysis) -> Path:
     """Tone levels over time with control-on, identification and convergence marked."""
     on = signals.control_on_sample / FS
-    fig, (ax_e, ax_w) = plt.subplots(2, 1, figsize=(8.0, 6.8), sharex=True,
+    wide = len(result.levels_over_time) + 2 > LEGEND_INSIDE_MAX
+    fig, (ax_e, ax_w) = plt.subplots(2, 1, figsize=(9.5 if wide else 8.0, 6.8), sharex=True,
                                      height_ratios=[1.4, 1])
     rows = {r["frequency_hz"]: r for r in result.report["tones"]}
     for k, (f, lev) in enumerate(result.levels_over_time.items()):
@@ -257,12 +292,19 @@ def convergence_figure(path: Path, signals: BagSignals, result: Analysis) -> Pat
     _shade_identification(ax_e, result, max(t_first - 1.0, 0.0))
     ax_e.axvline(on, color="k", lw=1.0, label=f"control on ({on:.2f} s)")
     windows = {round(v["level_window_s"], 3) for v in result.details["convergence"].values()}
+    moving = frequencies_move(signals.frequencies)
     ax_e.set(ylabel="tone level (dB re 1 g)",
              title="tone levels over time (Blackman-Harris window "
                    f"{', '.join(f'{w:g}' for w in sorted(windows))} s); "
-                   "\u25bc: within 3 dB of the final level")
+                   "\u25bc: within 3 dB of the final level"
+                   + ("\nat fixed frequencies: a tone that moves leaves them "
+                      "(frequencies.png)" if moving else ""))
     ax_e.set_xlim(max(t_first - 1.0, 0.0), result.index[-1] / FS)
-    ax_e.legend(loc="upper right", ncol=2)
+    entries = len(ax_e.get_legend_handles_labels()[0])
+    if entries > LEGEND_INSIDE_MAX:
+        ax_e.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=7)
+    else:
+        ax_e.legend(loc="upper right", ncol=2)
     _weights_panel(ax_w, signals, result, on)
     for ax in (ax_e, ax_w):
         ax.grid(alpha=0.3)
@@ -292,11 +334,11 @@ def _weights_panel(ax: plt.Axes, signals: BagSignals, result: Analysis, on: floa
         magnitude = np.hypot(signals.weights[keep, ..., 0], signals.weights[keep, ..., 1])
         tones = signals.notch_tones() or list(range(magnitude.shape[1]))
         for k in range(magnitude.shape[1]):
-            color = _tone_color(result, tones[k])
+            color = _tone_color(result, tones[k], f"C{k}")
             ax.fill_between(t_w, magnitude[:, k].min(axis=1), magnitude[:, k].max(axis=1),
                             color=color, alpha=0.25, lw=0)
             ax.plot(t_w, magnitude[:, k].mean(axis=1), color=color, lw=1.2,
-                    label=f"{tones[k]:g} Hz: mean of 6 struts (band: min-max)")
+                    label=f"{tones[k]:.5g} Hz: mean of 6 struts (band: min-max)")
         peaks = magnitude.max(axis=(0, 2))
         if peaks.size > 1 and peaks.min() > 0 and peaks.max() / peaks.min() > 10:
             ax.set_yscale("log")          # tones whose weights differ by decades
@@ -310,11 +352,12 @@ def _weights_panel(ax: plt.Axes, signals: BagSignals, result: Analysis, on: floa
            title="notch weights (amplitude of each strut's cancelling force)")
 
 
-def _tone_color(result: Analysis, f: float) -> str:
+def _tone_color(result: Analysis, f: float, other: str) -> str:
+    """The colour of tone ``f`` in the levels panel, else ``other`` (a tone that moved)."""
     for k, tone in enumerate(result.levels_over_time):
         if abs(tone - f) < 1e-6:
             return f"C{k}"
-    return "k"
+    return other
 
 
 # ---------------------------------------------------------------------------- pointing
@@ -326,37 +369,56 @@ POSE_GROUPS = (
 STARTUP_S = 2.0
 
 
-def pointing_figure(path: Path, signals: BagSignals, model: ModelConfig) -> Path:
+def pointing_figure(path: Path, signals: BagSignals, result: Analysis) -> Path:
     """Pose of the top plate from the eddy sensors: tilts, twist, translations.
 
-    Each line is the pose's mean over 0.1 s (the pointing), the band around it +-1 RMS
-    deviation within that 0.1 s (the vibration).
+    Left, the pose's mean over each 0.1 s (the pointing), its axis fitted to the run
+    outside the start-up and the identification (shaded; what they excite may leave the
+    axis); right, the RMS deviation within each 0.1 s (the vibration), log scale.
     """
     eddy = signals.series["/pph/eddy"]
     mean, rms = eddy.values[:, :6], eddy.values[:, 6:]
     t = (eddy.sample_index + 0.5 * POSE_BLOCK) / FS
-    steady = t >= min(STARTUP_S, t[-1] / 2)
-    fig, axes = plt.subplots(len(POSE_GROUPS), 1, figsize=(8.0, 7.0), sharex=True)
-    for ax, (ylabel, members, scale) in zip(axes, POSE_GROUPS, strict=True):
-        span = []
-        for k, name in members:
-            y, band = mean[:, k] * scale, rms[:, k] * scale
-            line, = ax.plot(t, y, lw=1.0, label=f"{name} (band: vibration RMS)")
-            ax.fill_between(t, y - band, y + band, color=line.get_color(), alpha=0.2, lw=0)
-            span.append(np.concatenate([(y - band)[steady], (y + band)[steady]]))
-        lo, hi = np.percentile(np.concatenate(span), [0.5, 99.5])
-        pad = max(0.15 * (hi - lo), 1e-3)
-        ax.set(ylabel=ylabel, ylim=(lo - pad, hi + pad))
-        ax.legend(loc="upper right", ncol=len(members))
-        ax.grid(alpha=0.3)
+    quiet = quiet_samples(t, [(a / FS, b / FS) for a, b in result.identification])
+    fig, axes = plt.subplots(len(POSE_GROUPS), 2, figsize=(11.0, 7.0), sharex=True,
+                             squeeze=False)
     on = signals.control_on_sample
-    if on is not None:
-        for ax in axes:
-            ax.axvline(on / FS, color="k", lw=0.8, ls="--")
-    axes[0].set_title(f"pointing: pose from the eddy-current sensors, 0.1 s means "
-                      f"(y axes fit t > {STARTUP_S:g} s)")
-    axes[-1].set_xlabel("sim time (s)" + ("; dashed: control on" if on is not None else ""))
+    for row, (ylabel, members, scale) in zip(axes, POSE_GROUPS, strict=True):
+        ax_mean, ax_rms = row
+        for k, name in members:
+            y = mean[:, k] * scale
+            line, = ax_mean.plot(t, y, lw=1.0, label=name)
+            ax_rms.plot(t, np.maximum(rms[:, k] * scale, 1e-30), lw=1.0,
+                        color=line.get_color(), label=name)
+        ax_mean.set(ylabel=f"{ylabel}, 0.1 s mean",
+                    ylim=pose_limits(mean[:, [k for k, _ in members]] * scale, quiet))
+        ax_rms.set(ylabel=f"{ylabel}, RMS in 0.1 s", yscale="log")
+        for ax in row:
+            _shade_identification(ax, result, 0.0)
+            if on is not None:
+                ax.axvline(on / FS, color="k", lw=0.8, ls="--")
+            ax.legend(loc="upper right", ncol=len(members))
+            ax.grid(alpha=0.3)
+    axes[0][0].set_title("pointing: pose, 0.1 s means (axes fit the quiet run)")
+    axes[0][1].set_title("vibration: RMS deviation within each 0.1 s")
+    for ax in axes[-1]:
+        ax.set_xlabel("sim time (s)" + ("; dashed: control on" if on is not None else ""))
     return _save(fig, path)
+
+
+def quiet_samples(t_s: np.ndarray, excited_s: list[tuple[float, float]]) -> np.ndarray:
+    """Rows of ``t_s`` after the start-up and outside the ``excited_s`` spans (bool)."""
+    quiet = t_s >= min(STARTUP_S, float(t_s[-1]) / 2)
+    for a, b in excited_s:
+        quiet &= ~((t_s >= a) & (t_s < b))
+    return quiet if np.any(quiet) else np.ones_like(quiet)
+
+
+def pose_limits(values: np.ndarray, rows: np.ndarray) -> tuple[float, float]:
+    """The y limits of pose means: their 0.5-99.5 % range over ``rows``, padded by 15 %."""
+    lo, hi = np.percentile(values[rows], [0.5, 99.5])
+    pad = max(0.15 * float(hi - lo), 1e-3)
+    return float(lo) - pad, float(hi) + pad
 
 
 # ---------------------------------------------------------------------------- frequencies
@@ -387,8 +449,7 @@ def frequencies_figure(path: Path, signals: BagSignals, result: Analysis) -> Pat
         ax.grid(alpha=0.3)
     top.set(ylabel="frequency (Hz)", title="tone frequencies: the controller's estimates "
             "and the true ones (dashed: control on)")
-    if top.get_legend_handles_labels()[0]:     # a run without tracks (plant_response)
-        top.legend(loc="best")
+    top.legend(loc="best")
     return _save(fig, path)
 
 
@@ -417,40 +478,73 @@ def _errors_panel(ax: plt.Axes, signals: BagSignals, result: Analysis) -> None:
 
 
 # ---------------------------------------------------------------------------- sensitivity
+SENSITIVITY_DEPTH_DB = 40.0
+"""The sensitivity axis goes at most this far below 0 dB: deeper notches leave the axis
+(their depth is the report's tone table); the +-5 dB that matter stay readable."""
+SENSITIVITY_TOP_DB = 20.0
+"""... and at most this far above it (a measured ratio that high is a broken loop)."""
+
+
+def sensitivity_limits_db(curves_db: list[np.ndarray]) -> tuple[float, float]:
+    """The dB axis of the sensitivity figure: what was measured, clipped to a useful range.
+
+    From the lowest value with signal (the measured ratios floor where the controlled
+    spectrum meets the noise; the predicted |S| is exactly zero at a tone) rounded down to
+    5 dB, no deeper than :data:`SENSITIVITY_DEPTH_DB`, to the highest (99.9 %) rounded up,
+    at least +5 dB (the never-worse line shows) and at most :data:`SENSITIVITY_TOP_DB`.
+    """
+    values = np.concatenate([np.asarray(c, dtype=float).ravel() for c in curves_db] or [[]])
+    values = values[np.isfinite(values)]
+    if not values.size:
+        return -SENSITIVITY_DEPTH_DB, 5.0
+    lo = max(5.0 * np.floor(float(values.min()) / 5.0), -SENSITIVITY_DEPTH_DB)
+    hi = 5.0 * np.ceil(float(np.percentile(values, 99.9)) / 5.0)
+    return float(min(lo, -5.0)), float(min(max(hi, 5.0), SENSITIVITY_TOP_DB))
+
+
 def sensitivity_figure(path: Path, result: Analysis) -> Path:
     """Predicted |S| against the measured controlled/uncontrolled spectrum ratio (dB).
 
     With a twin comparison, also the H1 estimate from the twin's z to the controlled z.
+    Over 0..fs/2 and around the notch tones, on the axis of :func:`sensitivity_limits_db`.
     """
     curves = result.sensitivity_curves
     view = result.report.get("sensitivity", {}).get("view", "")
     notch = [r["frequency_hz"] for r in result.report["tones"] if r["controlled"]]
-    fig, axes = plt.subplots(2, 1, figsize=(8.0, 6.0))
     spans = [(0.0, FS / 2.0)]
     if notch:
         spans.append((max(min(notch) - 8.0, 0.0), max(notch) + 8.0))
     drawn = [("measured_frequency_hz", "measured_db", dict(
-                  color="tab:red", lw=0.8, label="measured: controlled / uncontrolled spectrum")),
+                  color="tab:red", lw=0.7, label="measured: controlled / uncontrolled spectrum")),
              ("twin_frequency_hz", "twin_db", dict(
-                  color="tab:green", lw=0.9, label="measured: H1 from the twin (no control)")),
+                  color="tab:green", lw=0.8, label="measured: H1 from the twin (no control)")),
              ("frequency_hz", "predicted_db", dict(
-                  color="k", lw=1.2, label=f"predicted |S| ({view}) before control"))]
-    for ax, (lo, hi) in zip(axes, spans, strict=False):
-        for f_key, db_key, style in drawn:
-            if f_key not in curves:
-                continue
+                  color="k", lw=1.3, label=f"predicted |S| ({view}) before control"))]
+    shown = [(f, d, style) for f, d, style in drawn if f in curves]
+    limits = sensitivity_limits_db([curves[d] for f, d, _ in shown if f != "frequency_hz"]
+                                   or [curves[d] for _, d, _ in shown])
+    fig, axes = plt.subplots(len(spans), 1, figsize=(8.0, 3.2 * len(spans) + 0.4),
+                             squeeze=False)
+    for ax, (lo, hi) in zip(axes[:, 0], spans, strict=True):
+        for f_key, db_key, style in shown:
             sel = (curves[f_key] >= lo) & (curves[f_key] <= hi)
             ax.plot(curves[f_key][sel], curves[db_key][sel], **style)
         for f in notch:
             if lo <= f <= hi:
                 ax.axvline(f, color="0.5", lw=0.6, ls=":")
         ax.axhline(0.0, color="0.5", lw=0.6)
-        ax.set(xlim=(lo, hi), ylabel="dB", xlabel="frequency (Hz)")
+        ax.axhline(NEVER_WORSE_DB, color="tab:orange", lw=1.0, ls="--",
+                   label=f"+{NEVER_WORSE_DB:g} dB: never worse than off")
+        ax.set(xlim=(lo, hi), ylim=limits, xlabel="frequency (Hz)",
+               ylabel="|S| (dB, with / without control)")
         ax.grid(alpha=0.3)
-        ax.legend(loc="best")
-    axes[0].set_title("sensitivity: predicted vs measured (dotted: notch tones)")
-    if len(spans) == 1:
-        axes[1].set_visible(False)
+    axes[0, 0].legend(loc="lower right", fontsize=7)
+    deeper = any(np.nanmin(curves[d]) < limits[0] for _, d, _ in shown)
+    not_compared = result.report.get("sensitivity", {}).get("not_compared")
+    axes[0, 0].set_title("sensitivity: predicted vs measured (dotted: notch tones"
+                         + ("; deeper notches leave the axis)" if deeper else ")")
+                         + (f"\nnot comparable at the tones: {not_compared}"
+                            if not_compared else ""))
     return _save(fig, path)
 
 

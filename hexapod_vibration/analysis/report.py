@@ -925,7 +925,6 @@ def analyze_bag(bag_path: str | Path, out_dir: str | Path, model: ModelConfig,
     write_json(out / "report.json", result.report)
     if plots:
         from hexapod_vibration.analysis import plots as plotting
-        result.details["plots"] = [p.name for p in plotting.write_all(out, signals, result,
-                                                                      model)]
+        result.details["plots"] = [p.name for p in plotting.write_all(out, signals, result)]
     write_json(out / "details.json", result.details)
     return result

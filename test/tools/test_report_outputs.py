@@ -97,7 +97,7 @@ def test_figures_are_150_dpi_and_the_spectra_are_also_csv(tmp_path):
     result = analyze_bag(_table1_bag(tmp_path), out, MODEL, Request())
     details = json.loads((out / 'details.json').read_text())
     pngs = [name for name in details['plots'] if name.endswith('.png')]
-    assert {'spectra.png', 'convergence.png', 'plant_response.png'} <= set(pngs)
+    assert {'spectra.png', 'convergence.png'} <= set(pngs)
     for name in pngs:
         with Image.open(out / name) as image:
             assert min(image.info['dpi']) >= 149.9, name
