@@ -239,9 +239,10 @@ def _column_bound(line_cells: list[dict], column: str) -> float | None:
 
 
 def _bounds(ax: Any, cells: list[list[dict]], y: Axis) -> None:
-    """Each column's predicted bounds as a staircase over the map."""
+    """Each column's bounds as a staircase over the map."""
     top = len(y.values)
-    for column, (_, style, colour) in BOUND_STYLES.items():
+    for order, (column, (_, style, colour)) in enumerate(BOUND_STYLES.items()):
+        inset = 0.2 + 0.25 * order            # labels of bounds off the map, stacked
         xs, ys = [], []
         for i in range(len(cells[0])):
             bound = _column_bound([line[i] for line in cells], column)
@@ -253,7 +254,7 @@ def _bounds(ax: Any, cells: list[list[dict]], y: Axis) -> None:
             clipped = min(max(pos, 0.0), float(top))
             if clipped != pos:
                 arrow = "\u2191" if clipped == top else "\u2193"
-                ax.text(i + 0.5, clipped - 0.2 if clipped == top else clipped + 0.2,
+                ax.text(i + 0.5, clipped - inset if clipped == top else clipped + inset,
                         f"{arrow} {bound:.2g}", ha="center", va="center", fontsize=7,
                         color=colour, fontweight="bold", path_effects=OUTLINE)
             xs += [i, i + 1, np.nan]
