@@ -68,8 +68,8 @@ def test_serial_run_writes_a_row_per_point_with_the_report_metrics(serial_run):
     # against the same run without control (same noise): a few dB below the bound (1 s
     # after control-on, the loop still settling), a limit cycle or worse beyond it
     assert slow["max_rise_vs_off_db"] < 6.0 and fast["max_rise_vs_off_db"] > 20.0
-    # the loop's limit on the model (with the base's 10 Hz update low-pass) is far below
-    # the eq. 18 bound the tone identification enforces, and below 0.05
+    # the loop's limit on the model (the paper's update: TINY_SET's notch settings replace
+    # the base's, its update low-pass too) is far below the eq. 18 bound, and below 0.05
     assert slow["mu_bound_model"] < slow["mu_bound_identified"]
     assert slow["mu_bound_method"] == "eq. 18" and slow["mu_bound_model"] < 0.05
     assert slow["tones_hz"] == [40.0, 80.0] and slow["tones_controlled"] == [True, False]
@@ -251,19 +251,23 @@ def test_shipped_grids_are_valid_and_installed():
 
 
 def test_a_point_that_did_not_run_as_asked_has_its_own_status(tmp_path):
-    """A clamped mu (at the identified bound), a fade after backing off, a refusal."""
+    """Clamped, faded after backing off, refused, backed off with control kept."""
     refused = {"notch.settings": {"identification": "broadband"}, "duration_s": 13.4,
                "control_on_s": 11.4,
                "model_overrides.accelerometer.noise_density_g_per_sqrt_hz": 1e-3}
+    guarded = {**TINY_SET["notch.settings"], "divergence_guard": True}
     path = write_grid(tmp_path, axes={}, plot={}, points=[
         {"notch.mu": 0.3},
-        {"notch.mu": 0.2, "notch.settings": {**TINY_SET["notch.settings"],
-                                             "divergence_guard": True}},
-        {"notch.mu": 0.003, **refused}])
+        {"notch.mu": 0.2, "notch.settings": guarded},
+        {"notch.mu": 0.003, **refused},
+        {"notch.mu": 0.038, "duration_s": 8.4,         # the base's update low-pass and
+         "notch.settings": {"identification": "tones", "divergence_guard": True,
+                            "update_lowpass_hz": 10.0}}])     # anti-windup (40 N)
     summary = runner.run_sweep(grids.load_grid(path), tmp_path / "out", progress=False,
                                plots=False)
-    clamped, faded, refused = results.read_table(tmp_path / "out" / results.TABLE_NAME)
-    assert summary.statuses == {"clamped": 1, "faded": 1, "refused": 1}
+    clamped, faded, refused, backed_off = results.read_table(
+        tmp_path / "out" / results.TABLE_NAME)
+    assert summary.statuses == {"clamped": 1, "faded": 1, "refused": 1, "backed_off": 1}
     assert clamped["status"] == "clamped" and clamped["backed_off"] is False
     assert clamped["mu_in_force"] == pytest.approx(0.5 * clamped["mu_bound_identified"])
     assert f"mu 0.3 ran at {clamped['mu_in_force']:.4g}" in clamped["control_note"]
@@ -274,7 +278,12 @@ def test_a_point_that_did_not_run_as_asked_has_its_own_status(tmp_path):
     assert refused["status"] == "refused" and refused["backed_off"] is False
     assert refused["control_note"].startswith("identification failed")
     assert refused["mu_bound_identified"] is None and refused["error"] is None
-    assert "1 clamped, 1 faded, 1 refused" in summary.line()
+    # just above the loop's limit (0.033 on the model): lowered to 0.0095, control went on
+    assert backed_off["status"] == "backed_off" and backed_off["backed_off"] is True
+    assert backed_off["mu_in_force"] == pytest.approx(0.038 / 4)
+    assert backed_off["attenuation_db"] > 40.0 and not backed_off["diverged"]
+    assert "lower_mu" in backed_off["control_note"]
+    assert "1 clamped, 1 backed_off, 1 faded, 1 refused" in summary.line()
 
 
 def test_the_maps_show_values_only_where_control_ran():
