@@ -44,7 +44,7 @@ before control-on and the last ``window_s``):
 - ``peak_notch_command_n``, ``peak_actuator_force_n``: largest canceller command and
   applied force (N) after control-on; ``saturated_fraction`` of those samples with a
   command clipped at the dynamic rating.
-- predicted bounds of mu (:mod:`hexapod_vibration.sweep.bounds`).
+- the bounds of mu: identified, and on the linear model (:mod:`hexapod_vibration.sweep.bounds`).
 """
 
 from __future__ import annotations

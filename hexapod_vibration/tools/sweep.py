@@ -37,7 +37,7 @@ def _parser() -> argparse.ArgumentParser:
         prog=PROG,
         description="Run a grid of core closed-loop simulations on Dask and write a Parquet "
                     "table and heat maps of attenuation and of the largest rise, with the "
-                    "predicted bounds of mu overlaid.",
+                    "bounds of mu overlaid.",
         epilog=f"Shipped grids: {shipped}/*.yaml (a grid may also be given by name, e.g. "
                "'mu_bound').")
     parser.add_argument("grid", help="grid YAML file, or the name of a shipped grid")
