@@ -1,8 +1,8 @@
 """One declaration of every node parameter: type, default, unit, range, choices, read-only.
 
-Pure data and pure checks (standard library only, no rclpy, no numpy), in the spirit of
-generate_parameter_library: each node's parameters are declared once here, and everything
-else is derived from that declaration:
+Pure data and pure checks (the standard library and the loop's contract only: no rclpy,
+no numpy), in the spirit of generate_parameter_library: each node's parameters are declared
+once here, and everything else is derived from that declaration:
 
 - the ``ParameterDescriptor`` of each parameter (``ros/parameters.py``), whose range is
   the true one (an open bound is never shown as a closed one);
@@ -10,7 +10,10 @@ else is derived from that declaration:
   node's own checks that need its state, e.g. the identified stability bound of ``mu``);
 - ``config/pph.yaml`` and the README's parameter table (:func:`params_yaml`,
   :func:`markdown_table`; the tests compare both files with them);
-- the parameter list of every node executable's ``--help``.
+- the parameter list of every node executable's ``--help``;
+- the notch controller's settings in the core
+  (:class:`~hexapod_vibration.core.control.supervisor.config.NotchConfig`: its fields, their
+  defaults and the checks of each value).
 """
 
 from __future__ import annotations
@@ -21,8 +24,8 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
-SAMPLE_RATE_HZ = 1000.0
-"""Loop sample rate (Hz); tone frequencies must stay below half of it."""
+from hexapod_vibration.contract import SAMPLE_RATE_HZ
+
 MAX_SHAKER_TONES = 16
 MAX_NOTCH_TONES = 16
 MAX_ROTOR_ORDERS = 16
@@ -31,11 +34,11 @@ EXECUTORS = ("waitset", "single_threaded", "events")
 CLOCK_MODES = ("lockstep", "realtime")
 LOCKSTEP_STREAMS = ("notch", "pointing")
 ADAPTATION_MODES = ("centralized", "decentralized", "raw")
-"""Same as ``core.control.adaptation.COEFFICIENT_MODES`` (tested), kept here import-free."""
+"""The notch's adaptation coefficients P (``core.control.adaptation.normalized_coefficients``)."""
 MU_POLICIES = ("manual", "auto")
-"""Same as ``core.control.mu_policy.MU_POLICIES`` (tested)."""
+"""How the notch sets each tone's rate (``core.control.mu_policy.choose_tone_rates``)."""
 IDENTIFICATION_METHODS = ("tones", "broadband")
-"""Same as ``core.control.notch_supervisor.IDENTIFICATION_METHODS`` (tested)."""
+"""How the notch identifies the plant (test tones at the tones, or a multisine G(f))."""
 STORAGES = ("mcap", "sqlite3")
 TYPES = ("bool", "int", "double", "string", "int[]", "double[]", "string[]")
 
@@ -124,6 +127,8 @@ class ParameterSpec:
             return ""
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             return f"{label} must be a number, got {value!r}"
+        if kind == "int" and not (isinstance(value, int) or float(value).is_integer()):
+            return f"{label} must be an integer, got {value!r}"
         if kind == "double" and not math.isfinite(value):
             return f"{label} must be finite, got {value}"
         return self._check_bounds(label, value)

@@ -11,16 +11,13 @@ fades out within 0.5 s of each divergence, and the weights never exceed the actu
 import numpy as np
 import pytest
 
+from hexapod_vibration.contract import NotchState
 from hexapod_vibration.core.control.divergence_guard import (
     GUARD_OFF,
     DivergenceGuard,
 )
 from hexapod_vibration.core.control.notch import AdaptiveNotchCanceller
-from hexapod_vibration.core.control.notch_supervisor import (
-    NotchConfig,
-    NotchState,
-    NotchSupervisor,
-)
+from hexapod_vibration.core.control.notch_supervisor import NotchConfig, NotchSupervisor
 
 FS = 1000.0
 TONE = 40.0
@@ -146,13 +143,13 @@ def test_supervisor_backs_off_a_diverging_canceller_and_clamps_the_weights():
                                       identify_delay_s=0.5, mu=0.01, weight_limit_n=5.0))
     good = 0.1 * np.eye(6)
     _run(sup, lambda n: good, 500 + 3200 + 2000)    # identified, 2 s without control
-    assert sup.guard.reference_blocks >= 4 and sup.guard_state == "referencing"
+    assert sup.safety.guard.reference_blocks >= 4 and sup.guard_state == "referencing"
     sup.apply({"enabled": True})
     on = sup.last_sample + 1
     flipped = -good                               # the plant changed sign: P is wrong
     peak = _run(sup, lambda n: flipped, 4000, on)
     assert peak <= 5.0 + 1e-9                     # anti-windup: never above the rating
-    assert sup.weight_clamps > 0
+    assert sup.safety.weight_clamps > 0
     events = [e.message for e in sup.drain_events()]
     lowered = [m for m in events if "mu lowered" in m]
     assert lowered and sup.config.mu == pytest.approx(0.01 / 4)
@@ -170,7 +167,7 @@ def test_supervisor_does_not_act_while_control_works():
     _run(sup, lambda n: good, 500 + 3200 + 1500)
     sup.apply({"enabled": True})
     _run(sup, lambda n: good, 5000, sup.last_sample + 1)
-    assert sup.guard_state == "watching" and sup.guard_action == ""
+    assert sup.guard_state == "watching" and sup.safety.action == ""
     assert sup.state == NotchState.ADAPTING
 
 

@@ -9,6 +9,7 @@ takes the first 3.2 s (one tone set).
 import numpy as np
 import pytest
 
+from hexapod_vibration.contract import NotchState
 from hexapod_vibration.core.control import adaptation
 from hexapod_vibration.core.control.frequency_tracker import (
     FrequencyTracker,
@@ -18,13 +19,10 @@ from hexapod_vibration.core.control.frequency_tracker import (
     tracking_bounds_hz,
     weight_phase_error,
 )
-from hexapod_vibration.core.control.notch_supervisor import (
-    P_RETUNE_CHANGE,
-    NotchConfig,
-    NotchState,
-    NotchSupervisor,
-)
+from hexapod_vibration.core.control.notch_supervisor import NotchConfig, NotchSupervisor
 from hexapod_vibration.core.control.plant_identification import PlantFrequencyResponse
+from hexapod_vibration.core.control.supervisor import rate_policy
+from hexapod_vibration.core.control.supervisor.retuning import P_RETUNE_CHANGE
 
 FS = 1000.0
 GRAVITY = 9.80665
@@ -170,7 +168,7 @@ def test_frozen_weights_hold_the_frequency():
     sup = supervisor([40.0])
     run(sup, lambda n: [40.4], [0.05], start_s=3.3, samples=7000)
     sup.canceller.set_frozen(True)
-    held = sup._follow.tracker.estimates_hz        # the proportional correction ends
+    held = sup.follower.tracker.estimates_hz        # the proportional correction ends
     _, est = run(sup, lambda n: [40.9], [0.05], start_s=0.0, samples=1000, first=7000)
     assert np.all(est[8:] == held)
 
@@ -200,7 +198,7 @@ def test_the_oscillators_move_phase_continuously_and_keep_their_weights():
     ({"tone_frequencies_hz": [40.0, 80.0], "harmonics": 1}, "duplicate"),
     ({"reference_harmonics": [1.0]}, "one order per tone"),
     ({"reference_harmonics": [1.0, -2.0]}, "> 0"),
-    ({"harmonics": 16}, "0..15"),
+    ({"harmonics": 16}, r"harmonics must be in \[0, 15\]"),
     ({"tracking_range_hz": -1.0}, "tracking_range_hz"),
     ({"reference_timeout_s": 0.0}, "reference_timeout_s"),
 ])
@@ -386,8 +384,6 @@ def test_a_sweeping_tone_adapts_with_the_rate_integrator_only_while_it_sweeps(mo
     On while the reference sweeps (the paper's update lags by its time constant); steady
     tones have none.
     """
-    from hexapod_vibration.core.control import notch_supervisor
-
     def reduction(residual, speed):
         return 20 * np.log10(0.05 * (34.0 / 30.0) ** 2
                              / demodulated_rms(residual[:8900], speed[:8900], 6500))
@@ -396,14 +392,14 @@ def test_a_sweeping_tone_adapts_with_the_rate_integrator_only_while_it_sweeps(mo
     residual, speed, ratios = _sweep_run(supervisor([30.0], **settings))
     with_integral = reduction(residual, speed)
     assert not np.any(ratios[4900][0])                      # steady: the paper's update
-    ratio = notch_supervisor.MOVING_TONE_INTEGRAL_RATIO
+    ratio = rate_policy.MOVING_TONE_INTEGRAL_RATIO
     assert ratios[8000][0] == pytest.approx([ratio]) and np.any(ratios[8000][1])
     # the sweep stops at 9 s: the learnt rate goes with the reference's slope at once, the
     # update stays type 2 for 10 time constants (2 s), then it is the paper's again
     assert ratios[9050][0] == pytest.approx([ratio])
     assert np.abs(ratios[9050][1]).max() < 0.05 * np.abs(ratios[8000][1]).max()
     assert not np.any(ratios[11900][0]) and not np.any(ratios[11900][1])
-    monkeypatch.setattr(notch_supervisor, "MOVING_TONE_INTEGRAL_RATIO", 0.0)
+    monkeypatch.setattr(rate_policy, "MOVING_TONE_INTEGRAL_RATIO", 0.0)
     residual, speed, ratios = _sweep_run(supervisor([30.0], **settings))
     without = reduction(residual, speed)
     assert not np.any(ratios[8000][0])

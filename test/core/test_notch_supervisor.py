@@ -8,12 +8,10 @@ supervisor derives (G, the bound) follows from ``K`` by hand.
 import numpy as np
 import pytest
 
+from hexapod_vibration.contract import NotchState
 from hexapod_vibration.core.control import adaptation
-from hexapod_vibration.core.control.notch_supervisor import (
-    NotchConfig,
-    NotchState,
-    NotchSupervisor,
-)
+from hexapod_vibration.core.control.notch_supervisor import NotchConfig, NotchSupervisor
+from hexapod_vibration.core.control.supervisor import fader
 
 FS = 1000.0
 GRAVITY = 9.80665
@@ -143,7 +141,7 @@ def test_raw_adapts_from_the_first_sample_and_identifies_only_to_measure():
     sup = NotchSupervisor(config(adaptation="raw", enabled=True, mu=1e-4))
     assert sup.state == NotchState.ENABLED
     run(sup, coupled_gain(0.0), 100)
-    assert sup.identifier is None and np.any(sup.canceller.weights != 0)
+    assert not sup.identification.running and np.any(sup.canceller.weights != 0)
     run(sup, coupled_gain(0.0), 3200, 100)
     assert sup.status()["identification_start_sample"] == 100
     assert np.array_equal(sup.canceller.coefficients[0], np.eye(6))     # P = I stays
@@ -164,9 +162,9 @@ def test_new_tones_are_identified_and_known_tones_are_not():
 def test_bad_settings_are_refused_with_a_reason():
     sup = NotchSupervisor(config())
     for changes, words in (({"tone_frequencies_hz": [40.0, 40.0]}, "duplicate"),
-                           ({"tone_frequencies_hz": [600.0]}, "fs/2"),
+                           ({"tone_frequencies_hz": [600.0]}, r"in \(0, 500\) Hz"),
                            ({"tone_frequencies_hz": list(range(1, 18))}, "at most 16"),
-                           ({"adaptation": "fancy"}, "adaptation must be one of"),
+                           ({"adaptation": "fancy"}, "adaptation = 'fancy' is not one of"),
                            ({"mu": float("nan")}, "finite")):
         with pytest.raises(ValueError, match=words):
             sup.check(changes)
@@ -213,14 +211,12 @@ def test_a_line_offset_fade_lowers_mu_to_zero_before_the_weights_freeze():
     The fall is a raised cosine, then the output fades; the oscillators stay on their tones.
     Settings that let control try again give mu back, unless they bring a mu of their own.
     """
-    from hexapod_vibration.core.control import notch_supervisor as ns
-
     sup = NotchSupervisor(config(enabled=True))
     start = 100 + 3200 + 2000
     run(sup, coupled_gain(0.0), start)
     canceller, mu = sup.canceller, sup.canceller.mu
     assert sup.state == NotchState.ADAPTING and mu > 0.0
-    sup._fade_out("line off the notch: test", fade_s=0.5, mu_fall_s=1.0)
+    sup.fade_out("line off the notch: test", fade_s=0.5, mu_fall_s=1.0)
     assert sup.state == NotchState.REFUSED and sup.guard_state == "off"
     mus, gains, frozen, weights = [], [], [], []
     for n in range(start, start + 1600):
@@ -238,10 +234,10 @@ def test_a_line_offset_fade_lowers_mu_to_zero_before_the_weights_freeze():
     assert not np.array_equal(weights[100], weights[0])      # still adapting while mu falls
     assert np.array_equal(weights[-1], weights[fall])        # frozen after
     assert canceller.tone_frequencies_hz.tolist() == [TONE]
-    assert ns.MU_RAMP_STEP_SAMPLES > 1 and len(set(mus[:fall].tolist())) > 50   # a staircase
+    assert fader.MU_RAMP_STEP_SAMPLES > 1 and len(set(mus[:fall].tolist())) > 50   # a staircase
     sup.apply({"adaptation": "decentralized"})              # control tries again: mu back
     assert canceller.mu == mu and not canceller.frozen and canceller.enabled
-    sup._fade_out("line off the notch: test", fade_s=0.5, mu_fall_s=1.0)
+    sup.fade_out("line off the notch: test", fade_s=0.5, mu_fall_s=1.0)
     run(sup, coupled_gain(0.0), 300, start + 1600)
     sup.apply({"mu": mu / 4})                                 # ... with a mu of its own
     assert canceller.mu == mu / 4

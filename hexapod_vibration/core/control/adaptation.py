@@ -21,8 +21,8 @@ from collections.abc import Sequence
 import numpy as np
 
 from hexapod_vibration.core.control.notch import TWO_PI, validate_frequencies
+from hexapod_vibration.parameter_specs import ADAPTATION_MODES
 
-COEFFICIENT_MODES = ('centralized', 'decentralized', 'raw')
 MAX_CONDITION_NUMBER = 1e6
 
 
@@ -279,8 +279,8 @@ def normalized_coefficients(G: np.ndarray, mode: str,
         ValueError: unknown mode, non-finite G, ill-conditioned G_t or a zero diagonal.
     """
     g = _as_stack(G)
-    if mode not in COEFFICIENT_MODES:
-        raise ValueError(f'mode must be one of {COEFFICIENT_MODES}, got {mode!r}')
+    if mode not in ADAPTATION_MODES:
+        raise ValueError(f'mode must be one of {ADAPTATION_MODES}, got {mode!r}')
     if not np.all(np.isfinite(g)):
         raise ValueError('G must be finite')
     c = g.shape[1]

@@ -35,9 +35,10 @@ import numpy as np
 
 from hexapod_vibration.core.control import sensitivity
 from hexapod_vibration.core.control.notch import validate_frequencies
+from hexapod_vibration.parameter_specs import MU_POLICIES, NOTCH_CONTROLLER
 
-DEFAULT_MAX_RISE_DB = 3.0
-MU_POLICIES = ('manual', 'auto')
+DEFAULT_MAX_RISE_DB = NOTCH_CONTROLLER['max_rise_db'].default
+"""The notch's default ``max_rise_db`` (dB)."""
 RELATIVE_TOLERANCE = 0.02
 SMALLEST_SCALE = 1e-3
 FLOOR_MARGIN_DB = 0.1

@@ -20,8 +20,7 @@ import yaml
 from hexapod_vibration.core.control.notch_supervisor import NotchConfig, NotchSupervisor
 from hexapod_vibration.core.model.rotor import Rotor, rotor_or_none
 from hexapod_vibration.core.model.shaker import ShakerTone, tones_from_arrays
-
-ADAPTATION_MODES = ("centralized", "decentralized", "raw")
+from hexapod_vibration.parameter_specs import ADAPTATION_MODES
 
 
 @dataclass(frozen=True)

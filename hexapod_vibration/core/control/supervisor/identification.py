@@ -1,0 +1,264 @@
+"""The plant's identification, from its first sample to control in force (or refused).
+
+The normalised adaptation modes (``decentralized``, ``centralized``) wait for an
+identification of the plant at their tones; ``raw`` (P = I) adapts from the first sample
+and its identification only measures G and the bound. The canceller is frozen meanwhile
+and its output stays as it was.
+
+- ``identification: tones``: test tones at the tones
+  (:class:`~hexapod_vibration.core.control.adaptation.ToneResponseIdentifier`), G at each,
+  the bound of eq. 18; its confidence is how far the disturbance moved between its two
+  baselines (refused above :data:`MAX_BASELINE_CHANGE`);
+- ``identification: broadband``: a 10 s multisine over 0..fs/2
+  (:class:`~hexapod_vibration.core.control.plant_identification.BroadbandIdentifier`,
+  off-grid disturbance lines fitted and removed): G(f), the Nyquist bound on it, the mu
+  policy and the predicted sensitivity; refused above
+  :data:`MAX_IDENTIFICATION_UNCERTAINTY` at the tones.
+
+The analysis of a finished identification runs one piece per sample
+(:meth:`PlantIdentification.step`): with G(f) each Nyquist test takes ~0.1 s, and the
+lockstep driver waits at most ``lockstep_timeout_s`` for a sample's command.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Generator, Iterator
+from dataclasses import dataclass
+
+import numpy as np
+
+from hexapod_vibration.core.control import adaptation
+from hexapod_vibration.core.control.notch import AdaptiveNotchCanceller
+from hexapod_vibration.core.control.plant_identification import BroadbandIdentifier
+from hexapod_vibration.core.control.supervisor.config import Settings
+from hexapod_vibration.core.control.supervisor.events import EventLog
+from hexapod_vibration.core.control.supervisor.gate import ControlGate
+from hexapod_vibration.core.control.supervisor.planning import Plan
+from hexapod_vibration.core.control.supervisor.plant_knowledge import PlantKnowledge
+from hexapod_vibration.core.control.supervisor.rate_policy import RatePolicy
+from hexapod_vibration.core.control.supervisor.safety import SafetyMonitor
+from hexapod_vibration.core.control.supervisor.sample_clock import SampleClock
+from hexapod_vibration.core.control.supervisor.tone_follower import ToneFollower
+
+MAX_IDENTIFICATION_UNCERTAINTY = 0.1
+"""An identification whose relative uncertainty at a tone exceeds this is refused (10 %:
+a gain within 10 % and a phase within ~6 degrees)."""
+MAX_BASELINE_CHANGE = 0.25
+"""The tone identification is refused when the disturbance at a tone moved by more than
+this fraction of the response between its two baselines (0.4 Hz off the tone: 48 %; a plant
+still settling 0.2 s after start-up: 12 %, whose G is still within 3 %)."""
+
+
+@dataclass(frozen=True)
+class _Measurement:
+    """A finished identification's G at its tones and how far it can be trusted."""
+
+    response: np.ndarray
+    uncertainty: float
+    limit: float
+    what: str
+
+
+class PlantIdentification:
+    """Runs one identification at a time and puts its result in force.
+
+    Args:
+        settings: the settings in force.
+        canceller: the canceller (frozen while identifying; its P set after).
+        clock: the samples taken (the span of the identification).
+        plant: where what was found goes.
+        rates: the bound, the clamp, the mu policy.
+        gate: refuses control, or lets it run again.
+        safety: its reference waits for the excitation's decay; restarts after.
+        follower: the tones acquired on the lines found.
+        events: where the identification is reported.
+    """
+
+    def __init__(self, settings: Settings, canceller: AdaptiveNotchCanceller,
+                 clock: SampleClock, plant: PlantKnowledge, rates: RatePolicy,
+                 gate: ControlGate, safety: SafetyMonitor, follower: ToneFollower,
+                 events: EventLog) -> None:
+        """None running."""
+        self._settings, self._canceller, self._clock = settings, canceller, clock
+        self._plant, self._rates, self._gate = plant, rates, gate
+        self._safety, self._follower, self._events = safety, follower, events
+        self.identifier: adaptation.ToneResponseIdentifier | BroadbandIdentifier | None = None
+        """The identification injecting its excitation, None: none."""
+        self.tones: list[float] = []
+        """The tones (Hz) the last identification measured at."""
+        self.start_sample = -1
+        self.end_sample = -1
+        self._analysis: Iterator[None] | None = None
+
+    @property
+    def running(self) -> bool:
+        """True while the excitation is injected."""
+        return self.identifier is not None
+
+    @property
+    def busy(self) -> bool:
+        """True while running or analysing (state ``identifying``)."""
+        return self.identifier is not None or self._analysis is not None
+
+    def start(self, tones: list[float] | None, first_sample: int) -> str:
+        """Start an identification whose first sample is ``first_sample``; freeze the weights.
+
+        Args:
+            tones: tones to identify (Hz); None: the canceller's tones.
+            first_sample: its first sample.
+
+        Returns:
+            A one-line description of the run (also reported).
+
+        Raises:
+            ValueError: there are no tones to identify.
+        """
+        tones = [float(f) for f in (tones if tones is not None
+                                    else self._canceller.tone_frequencies_hz)]
+        if not tones:
+            raise ValueError("no tones to identify")
+        cfg, settings = self._settings.config, self._settings
+        if cfg.identification == "broadband":
+            self.identifier = BroadbandIdentifier(settings.channels, settings.fs)
+            what = "over 0..fs/2 (multisine)"
+        else:
+            self.identifier = adaptation.ToneResponseIdentifier(
+                settings.channels, tones, settings.fs, cfg.identification_amplitude_n,
+                cfg.identification_settle_s, cfg.identification_measure_s)
+            what = f"at {tones} Hz"
+        self.tones = tones
+        self._canceller.set_frozen(True)
+        self.start_sample = first_sample
+        self.end_sample = -1
+        text = f"identifying the plant {what} ({self.identifier.duration_s:.1f} s of samples)"
+        self._events.add("info", text)
+        return text
+
+    def restart(self, first_sample: int) -> None:
+        """Start the running identification again from ``first_sample``."""
+        self.start(list(self.tones), first_sample)
+
+    def retarget(self, plan: Plan, mode_changed: bool) -> None:
+        """New tones or mode: identify what they need; stop an identification they do not.
+
+        Known tones (or ``raw``, or no tones) need none: a running one stops, bumplessly.
+        Otherwise a new mode freezes the weights (a normalised mode must not adapt with
+        another mode's P) and, with ``auto_identify``, the new tones are identified from the
+        next sample (unless they are being identified already).
+        """
+        if plan.response is not None or plan.mode == "raw" or not plan.tones:
+            if self.identifier is not None:
+                self._events.add("info", "identification no longer needed: stopped")
+                self.identifier = None
+                self._gate.resume()
+            return
+        if mode_changed:
+            self._canceller.set_frozen(True)
+        running = self.identifier is not None and np.array_equal(self.tones, plan.tones)
+        if self._settings.config.auto_identify and self._clock.first >= 0 and not running:
+            self.start(plan.tones, self._clock.last + 1)
+
+    def step(self, error: np.ndarray, command: np.ndarray) -> None:
+        """Add the excitation to ``command`` (C,) (N); analyse once the record is complete.
+
+        ``error``: the sample's DC-blocked accelerations (C,) (m/s^2).
+        """
+        if self.identifier is not None:
+            command += self.identifier.step(error)
+            if self.identifier.done:
+                self._analysis = self._analyse()
+                self._advance()
+        elif self._analysis is not None:
+            self._advance()
+
+    def _advance(self) -> None:
+        """One piece of the running analysis."""
+        try:
+            next(self._analysis)
+        except StopIteration:
+            self._analysis = None
+
+    def _measure(self) -> _Measurement:
+        """G at the tones from the finished identifier, into the plant's knowledge."""
+        tones, identifier = self.tones, self.identifier
+        if isinstance(identifier, BroadbandIdentifier):
+            pfr = identifier.result()
+            self._plant.learn_broadband(pfr, identifier.disturbance())
+            return _Measurement(pfr.at(tones), float(np.max(pfr.uncertainty_at(tones))),
+                                MAX_IDENTIFICATION_UNCERTAINTY,
+                                "relative uncertainty of G(f) at the tones")
+        response = identifier.result()
+        change = identifier.baseline_change()
+        self._plant.learn_tones(tones, response)
+        return _Measurement(response, float(np.max(change)), MAX_BASELINE_CHANGE,
+                            "change of the disturbance at the tones during the identification")
+
+    def _analyse(self) -> Iterator[None]:
+        """The analysis of a finished identification, one piece per sample (a generator).
+
+        G, its confidence, the coefficients, the bound, the policy and the prediction. The
+        canceller stays frozen and off meanwhile (state ``identifying``).
+        """
+        measured = self._measure()
+        identifier, self.identifier = self.identifier, None
+        last = self._clock.last
+        self.end_sample = last
+        self._safety.quiet_after(last)
+        self._plant.confidence = float(max(0.0, 1.0 - measured.uncertainty))
+        self._rates.forget_choice()
+        broadband = isinstance(identifier, BroadbandIdentifier)
+        if broadband:
+            yield                          # the tone identification's analysis is quick
+        if measured.uncertainty > measured.limit:
+            self._plant.put_in_force(None, [])
+            self._gate.refuse(f"identification failed: {measured.what} "
+                              f"{100 * measured.uncertainty:.0f} % > "
+                              f"{100 * measured.limit:.0f} % (a disturbance next to a "
+                              "tone?); control stays off")
+            return
+        lines = identifier.disturbance_lines() if broadband else []    # an FFT of the record
+        self._plant.lines_hz = np.array([line.frequency_hz for line in lines])
+        if broadband and self._follower.acquires:
+            self._follower.acquire(lines)
+        yield from self._put_in_force(measured.response, broadband)
+
+    def _put_in_force(self, response: np.ndarray, broadband: bool
+                      ) -> Generator[None, None, None]:
+        """Coefficients and bound at the oscillators; control on, or refused with why."""
+        canceller, rates = self._canceller, self._rates
+        tones = [float(f) for f in canceller.tone_frequencies_hz]
+        mode = self._settings.config.adaptation
+        current = response if tones == self.tones else self._plant.known_response(tones)
+        try:
+            if current is None:
+                raise ValueError(f"no identified response at {tones} Hz")
+            if broadband:
+                coefficients = adaptation.normalized_coefficients(current, mode)
+            else:
+                coefficients, bound = rates.coefficients_for(tones, current, mode)
+        except ValueError as exc:
+            self._gate.refuse(f"identification unusable for {mode}: {exc}; not adapting")
+            return
+        if broadband:
+            bound = yield from rates.limit_steps(tones, coefficients)
+        self._plant.put_in_force(current, tones)
+        rates.bound = rates.mu_limit = bound
+        canceller.set_coefficients(coefficients)
+        gains = np.abs(np.diagonal(current, axis1=1, axis2=2)).mean(axis=1)
+        source = "Nyquist on G(f)" if broadband else "eq. 18"
+        self._events.add("info", f"identified: |G_ii| {np.round(gains, 4)} (m/s^2)/N, "
+                                 f"confidence {self._plant.confidence:.3f}, mu bound "
+                                 f"{bound:.4g} ({source})")
+        if bound <= 0.0:
+            rates.clamp(0.0)
+            self._gate.refuse(f"identified mu bound is 0 ({mode} adaptation at {tones} Hz): "
+                              "no stable rate, control stays off")
+            return
+        self._gate.release()
+        rates.clamp(bound)
+        if broadband:
+            yield
+            rates.choose(tones, coefficients)
+        self._safety.restart()
+        self._gate.resume()
+        self._gate.started(self._clock.last + 1)

@@ -1,0 +1,225 @@
+"""The rate the canceller adapts at: coefficients P, the bound on mu, its clamp, the policy.
+
+- P for the adaptation mode from the identified G at the oscillators
+  (:func:`~hexapod_vibration.core.control.adaptation.normalized_coefficients`);
+- the bound on ``mu``: eq. 18 with the loop delay, the smallest over the tones, after a tone
+  identification; after a broadband one the largest common rate the Nyquist test finds
+  stable on G(f) (eq. 18 is 15-50x optimistic on the PPH), one test per sample
+  (:meth:`RatePolicy.limit_steps`); without G, the normalised modes' bound;
+- a ``mu`` at or above the identified bound is lowered to half of it at once, and the
+  divergence guard lowers it too: both are settings the supervisor changes itself
+  (:meth:`RatePolicy.set_mu`, mirrored into the node's parameter);
+- with G(f), ``mu_policy`` folds its per-tone rates into P and the predicted sensitivity
+  |S(f)| is kept (:attr:`RatePolicy.sensitivity`);
+- moving tones (tracking, a reference) sweep with a type-2 update
+  (:data:`MOVING_TONE_INTEGRAL_RATIO`), in the bound too (:mod:`.sweep_gate` gates it).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Generator
+from typing import Any
+
+import numpy as np
+
+from hexapod_vibration.core.control import adaptation, mu_policy, sensitivity
+from hexapod_vibration.core.control.notch import AdaptiveNotchCanceller
+from hexapod_vibration.core.control.supervisor.config import NotchConfig, Settings
+from hexapod_vibration.core.control.supervisor.events import EventLog
+from hexapod_vibration.core.control.supervisor.plant_knowledge import PlantKnowledge
+
+MOVING_TONE_DAMPING = 0.7
+"""Damping ratio of the type-2 weight update that moving tones (tracking or a reference)
+adapt with (:meth:`AdaptiveNotchCanceller.set_integral_ratio`, ratio ``1 / (4 zeta^2)``).
+
+A tone sweeping at a steady rate changes the disturbance it cancels (its path's response at
+the tone's frequency, an amplitude growing with speed^2): the first-order update lags that
+by its time constant, ``1/mu`` samples, and leaves the change over one time constant as the
+residual. ``spin_up`` (core loop, tachometer, mu 0.006): the residual equals
+``tau dD/dt`` (correlation 0.98-1.00); order 2 through the disturbance path's zero near 90
+Hz changes by 24 %/s (z axis: a deeper minimum) and kept only 21 dB, order 3 at 93 Hz
+18 dB (the identified G(f) is within 0.1 % of the model's there and -P G / 2 = I: neither
+P nor the rate is the cause). The rate integrator removes the steady part of the change:
+ramp (17-36 s) minimum 21 -> 41 dB on order 2 and 20 -> 33 dB on order 3 with the
+tachometer, 21 -> 36 and 19 -> 30 dB tracked; 0.7 beat 1.0 and 1.5 on the averaged loop
+driven by the recorded disturbance (order 3: 44, 35, 26 dB)."""
+MOVING_TONE_INTEGRAL_RATIO = 1.0 / (4.0 * MOVING_TONE_DAMPING ** 2)
+
+
+def moving_tone_integral_ratio(config: NotchConfig) -> float:
+    """The type-2 ratio for sweeping tones (:data:`MOVING_TONE_INTEGRAL_RATIO`), or 0.
+
+    Non-zero when the tones may move (tracking or a reference); 0: the paper's update.
+    """
+    moving = bool(config.tone_frequencies_hz) and (config.frequency_tracking
+                                                   or bool(config.reference_harmonics))
+    return MOVING_TONE_INTEGRAL_RATIO if moving else 0.0
+
+
+def coefficients_and_bound(response: np.ndarray, mode: str,
+                           delay_samples: float) -> tuple[np.ndarray, float]:
+    """Adaptation coefficients P (T, C, C) for ``mode`` and the bound on ``mu``.
+
+    The bound is eq. 18 with the loop delay (:func:`adaptation.mu_bound`) at every tone,
+    the smallest over the tones: the rate must be stable at all of them.
+
+    Args:
+        response: identified plant response G (T, C, C), (m/s^2)/N.
+        mode: one of :data:`~hexapod_vibration.parameter_specs.ADAPTATION_MODES`.
+        delay_samples: loop delay beyond the one-sample command hold (samples).
+
+    Raises:
+        ValueError: G unusable for ``mode`` (ill-conditioned, zero diagonal, not finite).
+    """
+    coefficients = adaptation.normalized_coefficients(response, mode)
+    bound = min(adaptation.mu_bound(g, c, delay_samples)
+                for g, c in zip(response, coefficients, strict=True))
+    return coefficients, float(bound)
+
+
+class RatePolicy:
+    """P and the bound on mu from the identified plant; the mu policy and its prediction.
+
+    Args:
+        settings: the settings in force.
+        canceller: the canceller whose mu and P are set.
+        plant: what the identifications found.
+        events: where the changes of ``mu`` are reported.
+        output_weights: c (C,): the output whose rise ``mu_policy`` bounds and the
+            prediction reports (``c^T e``); None: the 6x6 loop's largest singular value.
+    """
+
+    def __init__(self, settings: Settings, canceller: AdaptiveNotchCanceller,
+                 plant: PlantKnowledge, events: EventLog,
+                 output_weights: np.ndarray | None) -> None:
+        """The normalised modes' bound until something is identified."""
+        self._settings = settings
+        self._canceller = canceller
+        self._plant = plant
+        self._events = events
+        self._output_weights = output_weights
+        self.bound = self.normalised_bound()
+        """The bound on mu in force (``mu_bound`` on /diagnostics)."""
+        self.mu_limit = float("nan")
+        """The bound the last accepted identification gave."""
+        self.choice: mu_policy.MuChoice | None = None
+        """The mu policy's per-tone rates after a broadband identification, else None."""
+        self.sensitivity: sensitivity.SensitivityPrediction | None = None
+        """The predicted |S(f)| with those rates, else None."""
+
+    def normalised_bound(self) -> float:
+        """The bound of a normalised mode (M = I) with the loop delay."""
+        return adaptation.delayed_mode_mu_bound(1.0, self._settings.config.loop_delay_samples)
+
+    def coefficients_for(self, tones: list[float], response: np.ndarray | None,
+                         mode: str) -> tuple[np.ndarray | None, float]:
+        """Coefficients for the canceller (None: new tones wait) and the mu bound."""
+        if response is not None and self._plant.frequency_response is not None:
+            coefficients = adaptation.normalized_coefficients(response, mode)
+            return coefficients, self._nyquist_limit(tones, coefficients)
+        if response is not None:
+            return coefficients_and_bound(response, mode,
+                                          self._settings.config.loop_delay_samples)
+        if mode == "raw":
+            channels = self._settings.channels
+            identity = np.broadcast_to(np.eye(channels, dtype=complex),
+                                       (len(tones), channels, channels))
+            return (identity.copy() if tones else None), np.inf
+        return None, self.normalised_bound()
+
+    def _nyquist_limit(self, tones: list[float], coefficients: np.ndarray) -> float:
+        """Largest common rate the Nyquist test finds stable on the identified G(f)."""
+        return sensitivity.stable_mu_limit(
+            self._plant.frequency_response.at, tones, self._settings.fs, coefficients,
+            update_lowpass_hz=self._settings.config.update_lowpass_hz)
+
+    def limit_steps(self, tones: list[float], coefficients: np.ndarray
+                    ) -> Generator[None, None, float]:
+        """The Nyquist limit on G(f), one stability test per ``yield`` (a generator).
+
+        As :func:`~hexapod_vibration.core.control.sensitivity.stable_mu_limit` (the
+        largest stable common rate), found by doubling from 1e-5 and bisecting to 2 %;
+        moving tones with the type-2 update they sweep with
+        (:func:`~.sweep_gate.moving_tone_integral_ratio`).
+        """
+        settings = self._settings
+        cfg = settings.config
+
+        def stable(mu: float) -> bool:
+            return sensitivity.closed_loop_is_stable(
+                self._plant.frequency_response.at, tones, settings.fs, coefficients, mu,
+                integral_ratio=moving_tone_integral_ratio(settings.config),
+                update_lowpass_hz=cfg.update_lowpass_hz)
+
+        lo = 1e-5
+        if not stable(lo):
+            return 0.0
+        hi = lo
+        while True:
+            yield
+            hi = min(2.0 * hi, 1.0)
+            if not stable(hi):
+                break
+            lo = hi
+            if hi >= 1.0:
+                return 1.0
+        while hi > lo * 1.02:
+            yield
+            mid = float(np.sqrt(lo * hi))
+            lo, hi = (mid, hi) if stable(mid) else (lo, mid)
+        return lo
+
+    def forget_choice(self) -> None:
+        """A new identification: no policy result and no prediction until it is analysed."""
+        self.sensitivity = self.choice = None
+
+    def choose(self, tones: list[float], coefficients: np.ndarray) -> None:
+        """Per-tone rates of ``mu_policy`` folded into P; the predicted sensitivity."""
+        cfg, mu = self._settings.config, self._canceller.mu
+        fs = self._settings.fs
+        pfr, phi = self._plant.frequency_response, self._plant.disturbance
+        choice = mu_policy.choose_tone_rates(pfr.at, tones, fs, coefficients, mu,
+                                             policy=cfg.mu_policy,
+                                             max_rise_db=cfg.max_rise_db,
+                                             output_weights=self._output_weights,
+                                             disturbance_csd=phi.at,
+                                             update_lowpass_hz=cfg.update_lowpass_hz)
+        self.choice = choice
+        folded = sensitivity.per_tone_coefficients(coefficients, mu, choice.tone_mu)
+        self._canceller.set_coefficients(folded)
+        self.sensitivity = sensitivity.predict_sensitivity(
+            pfr.at, tones, fs, folded, mu, output_weights=self._output_weights,
+            disturbance_csd=phi.at, check_stability=False,
+            update_lowpass_hz=cfg.update_lowpass_hz)
+        self._events.add("warn" if choice.warning else "info",
+                         choice.warning or f"mu_policy {choice.policy}: tone rates "
+                         f"{np.round(choice.tone_mu, 6).tolist()}, predicted rise "
+                         f"{choice.predicted_rise_db:.2f} dB at {choice.rise_at_hz:.2f} Hz")
+
+    def clamp(self, bound: float) -> None:
+        """Lower ``mu`` to half the bound (0 for a bound of 0) if it is not below it."""
+        mu = self._canceller.mu
+        if mu < bound or mu == 0.0:
+            return
+        clamped = 0.5 * bound
+        self.set_mu(clamped, f"mu={mu:g} is outside the identified stability bound "
+                             f"{bound:.4g}: clamped to {clamped:.4g}")
+
+    def set_mu(self, mu: float, reason: str) -> None:
+        """The supervisor sets ``mu`` itself: in force, in the settings, reported (warn).
+
+        The event carries the new value for the node to mirror into its parameter.
+        """
+        self._canceller.set_mu(mu)
+        self._settings.set_mu(mu)
+        self._events.add("warn", reason, ("mu", mu))
+
+    def status(self) -> dict[str, Any]:
+        """The bound found, the policy and its rates, the predicted rise (for /diagnostics)."""
+        choice = self.choice
+        rise, at_hz = ((choice.predicted_rise_db, choice.rise_at_hz) if choice is not None
+                       else (float("nan"), float("nan")))
+        return {"mu_limit": self.mu_limit, "mu_policy": self._settings.config.mu_policy,
+                "tone_mu": ([] if choice is None else np.round(choice.tone_mu, 8).tolist()),
+                "predicted_rise_db": round(float(rise), 3),
+                "predicted_rise_at_hz": round(float(at_hz), 3)}

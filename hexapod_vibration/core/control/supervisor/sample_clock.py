@@ -1,0 +1,43 @@
+"""Which loop sample the supervisor is at, and the samples it did not get.
+
+The supervisor counts what it sees of the sample indices: ``gaps`` (how many times samples
+were missing) and ``missed_samples`` (how many), and ``duplicates`` (samples at or before
+the last one, not used). For the notch node these counts are the ones on ``/diagnostics``:
+the supervisor acts on the gaps (the oscillators' phases, a running identification), in the
+node and in the core loop alike.
+"""
+
+from __future__ import annotations
+
+
+class SampleClock:
+    """The first and last sample taken, and the counts of missing and repeated ones."""
+
+    def __init__(self) -> None:
+        """No sample yet (``first`` and ``last`` are -1)."""
+        self.first = -1
+        self.last = -1
+        self.counters = {"gaps": 0, "missed_samples": 0, "duplicates": 0}
+
+    def take(self, index: int) -> int | None:
+        """Take sample ``index``: the number of samples missing before it, or None.
+
+        None: the sample is not after the last one taken (a duplicate or out of order),
+        counted and not to be used.
+        """
+        if index <= self.last:
+            self.counters["duplicates"] += 1
+            return None
+        gap = 0
+        if self.first < 0:
+            self.first = index
+        elif index > self.last + 1:
+            gap = index - self.last - 1
+            self.counters["gaps"] += 1
+            self.counters["missed_samples"] += gap
+        self.last = index
+        return gap
+
+    def restart_at(self, first_index: int) -> None:
+        """A new run of the loop: the next sample is ``first_index`` (no gap counted)."""
+        self.last = int(first_index) - 1
