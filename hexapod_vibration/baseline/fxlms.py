@@ -38,7 +38,8 @@ import numpy as np
 
 from hexapod_vibration.core.control.adaptation import SampledRun
 from hexapod_vibration.core.control.filters import DCBlocker
-from hexapod_vibration.core.control.notch import TWO_PI, validate_frequencies, validate_mu
+from hexapod_vibration.core.control.notch import TWO_PI, validate_frequencies
+from hexapod_vibration.core.control.notch_weights import validate_mu
 from hexapod_vibration.core.control.phasor import PhasorBank
 from hexapod_vibration.core.model.config import ModelConfig
 from hexapod_vibration.core.sim.closed_loop import STRUTS, CoreLoop, LoopRecord

@@ -1,26 +1,18 @@
 """``notch_controller``: six decentralized Adaptive Notch Cancellers (the paper's algorithm).
 
 A thin rclpy shell over :class:`~hexapod_vibration.core.control.notch_supervisor.NotchSupervisor`,
-which holds everything numerical and every decision: DC blocker, canceller, identification
-of the plant at the tones, adaptation coefficients, the stability bound on ``mu`` and the
-enable/identify sequencing. The node subscribes to ``/pph/accel`` (raw, gravity included),
-passes each sample to the supervisor and publishes ``/pph/notch_command`` with the same
-sample index; parameters are checked by the supervisor in the on-set callback and applied
-in the post-set callback. Weights go out at 100 Hz on ``/pph/notch_weights``, status on
-``/diagnostics`` (every simulated second, every second of wall time and whenever the
-supervisor reports a change).
-
-Frequencies: a tachometer on ``/pph/reference_frequency`` (one value, Hz, with its sample
-index; a loop subscription served before ``/pph/accel``) goes to
-``supervisor.set_reference_frequency``; the frequency of each configured tone
-now (``supervisor.tone_estimates_hz``) goes out on ``/pph/notch_frequencies`` every
-``FREQUENCIES_EVERY_SAMPLES``; after each identification the predicted sensitivity
-(``supervisor.sensitivity``) goes out once on ``/pph/notch_sensitivity`` (transient local).
+which holds everything numerical and every decision. Each ``/pph/accel`` sample (raw,
+gravity included) goes to the supervisor and its command out on ``/pph/notch_command`` with
+the same sample index; parameters are checked by the supervisor in the on-set callback and
+applied in the post-set callback. Out: the weights at 100 Hz (``/pph/notch_weights``), each
+tone's frequency now (``/pph/notch_frequencies``), the predicted sensitivity once after
+each identification (``/pph/notch_sensitivity``, transient local), the status on
+``/diagnostics`` (every simulated second, every second of wall time and on each change).
+A tachometer on ``/pph/reference_frequency`` (one value, Hz, with its sample index; a loop
+subscription served before ``/pph/accel``) goes to ``set_reference_frequency``.
 """
 
 from __future__ import annotations
-
-import inspect
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
@@ -56,11 +48,7 @@ from hexapod_vibration.ros.messages import (
 )
 from hexapod_vibration.ros.node_runner import run_node
 from hexapod_vibration.ros.parameters import NodeParameters
-from hexapod_vibration.ros.qos import (
-    DIAGNOSTICS_QOS,
-    LATCHED_QOS,
-    LOOP_PUBLISHER_QOS,
-)
+from hexapod_vibration.ros.qos import DIAGNOSTICS_QOS, LATCHED_QOS, LOOP_PUBLISHER_QOS
 from hexapod_vibration.ros.rclpy_internals import UnsupportedCdr, decode_strut_cdr
 
 WEIGHTS_EVERY_SAMPLES = 10
@@ -80,11 +68,8 @@ class NotchControllerNode(Node):
         values = self.params.values()
         model = load_model_config(config_path("pph_model.yaml"))
         config = NotchConfig().replaced({k: v for k, v in values.items() if k in SETTINGS})
-        if "output_weights" in inspect.signature(NotchSupervisor).parameters:   # guard branch
-            z_row = np.linalg.inv(model.geometry.top_jacobian)[2]   # the z axis, as CoreLoop
-            self.supervisor = NotchSupervisor(config, self.fs, output_weights=z_row)
-        else:
-            self.supervisor = NotchSupervisor(config, self.fs)
+        z_row = np.linalg.inv(model.geometry.top_jacobian)[2]       # the z axis, as CoreLoop
+        self.supervisor = NotchSupervisor(config, self.fs, output_weights=z_row)
         accel_range = SignalRanges.from_model(model).accel_m_s2      # the accelerometers' +-2 g
         self.readers = MatchedReaders(self.publish_diagnostics)
         arrays = {topic: self.readers.publisher(self, Float64MultiArray, topic, LOOP_PUBLISHER_QOS)
@@ -148,8 +133,8 @@ class NotchControllerNode(Node):
         if index % WEIGHTS_EVERY_SAMPLES == 0:
             self._publish_weights(index)
         if index % FREQUENCIES_EVERY_SAMPLES == 0:
-            self._pub_frequencies.publish(make_vector_array(self._tone_frequencies_hz(), index,
-                                                            sample.run))
+            self._pub_frequencies.publish(make_vector_array(self.supervisor.tone_estimates_hz,
+                                                            index, sample.run))
         if index % int(self.fs) == 0:
             self.publish_diagnostics()
         self._report()
@@ -169,29 +154,16 @@ class NotchControllerNode(Node):
                                    f"(must be in [0, {self.fs / 2.0:g}) Hz)",
                                    throttle_duration_sec=1.0)
         elif reference.run is None or run is None or reference.run == run:
-            follow = getattr(self.supervisor, "set_reference_frequency", None)  # tracking branch
-            if follow is not None:
-                follow(frequency_hz, reference.index)
-
-    def _tone_frequencies_hz(self) -> np.ndarray:
-        """The frequency (Hz) of each configured tone now (the supervisor's estimates)."""
-        estimates = getattr(self.supervisor, "tone_estimates_hz", None)    # tracking branch
-        return self.supervisor.canceller.tone_frequencies_hz if estimates is None else estimates
+            self.supervisor.set_reference_frequency(frequency_hz, reference.index)
 
     def _publish_sensitivity(self) -> None:
         """The prediction of the last identification, once (``/pph/notch_sensitivity``)."""
-        prediction = getattr(self.supervisor, "sensitivity", None)         # guard branch
+        prediction = self.supervisor.sensitivity
         if prediction is None or prediction is self._published_sensitivity:
             return
         self._published_sensitivity = prediction
-        rows = {"frequency_hz": prediction.frequencies_hz,
-                "sigma_max_db": prediction.db("sigma_max")}
-        strut_db = 20.0 * np.log10(np.maximum(prediction.strut, 1e-300))
-        rows.update({f"strut{k + 1}_db": strut_db[:, k] for k in range(strut_db.shape[1])})
-        if prediction.output is not None:
-            rows["output_db"] = prediction.db("output")
-        self._pub_sensitivity.publish(make_table_array(rows, max(self.supervisor.last_sample,
-                                                                 0)))
+        self._pub_sensitivity.publish(make_table_array(prediction.table_db(),
+                                                       max(self.supervisor.last_sample, 0)))
 
     def _report(self) -> None:
         """Log what the supervisor did, mirror a setting it changed, publish the change."""
@@ -226,9 +198,14 @@ class NotchControllerNode(Node):
         self._pub_w.publish(msg)
 
     def publish_diagnostics(self) -> None:
-        """Controller state on /diagnostics: the supervisor's and the loop port's counters."""
-        status = {**self.supervisor.status(), **self.port.diagnostics(),
-                  **self.readers.values()}
+        """Controller state on /diagnostics: the supervisor's and the loop port's counters.
+
+        ``missed_samples`` is the supervisor's (it acts on the gaps); the port's own count
+        of them is left out.
+        """
+        port = self.port.diagnostics()
+        del port["missed_samples"]
+        status = {**self.supervisor.status(), **port, **self.readers.values()}
         self._pub_diag.publish(diagnostic_array(NOTCH_STATUS, bool(status["invalid"]),
                                                 status["state"], status,
                                                 self.supervisor.last_sample))

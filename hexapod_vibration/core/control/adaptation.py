@@ -491,11 +491,6 @@ class ToneResponseIdentifier(SampledRun):
 
 
     @property
-    def excitation_phasors(self) -> np.ndarray:
-        """Complex excitation phasors X_t (N) applied to the excited channel."""
-        return self._x.copy()
-
-    @property
     def tone_frequencies_hz(self) -> np.ndarray:
         """Tones (Hz), a copy."""
         return self._freqs.copy()

@@ -264,11 +264,6 @@ class DivergenceGuard:
         """True once at least one reference block was taken."""
         return self.reference_blocks > 0
 
-    def reference_db(self) -> np.ndarray:
-        """Reference level of each band (dB re 1 (m/s^2)^2, summed over channels)."""
-        return 10.0 * np.log10(np.maximum(self._ref_sum / max(self.reference_blocks, 1),
-                                          1e-300))
-
     def scatter_db(self, ref_db: np.ndarray | None = None) -> np.ndarray:
         """Block-to-block scatter of each band's reference level (dB).
 

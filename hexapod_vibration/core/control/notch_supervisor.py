@@ -37,7 +37,8 @@ from hexapod_vibration.contract import SAMPLE_RATE_HZ, STRUT_COUNT, NotchState
 from hexapod_vibration.core.control import mu_policy, sensitivity
 from hexapod_vibration.core.control.divergence_guard import FADE_S
 from hexapod_vibration.core.control.filters import DCBlocker
-from hexapod_vibration.core.control.notch import AdaptiveNotchCanceller, validate_mu
+from hexapod_vibration.core.control.notch import AdaptiveNotchCanceller
+from hexapod_vibration.core.control.notch_weights import validate_mu
 from hexapod_vibration.core.control.plant_identification import (
     DisturbanceSpectrum,
     PlantFrequencyResponse,

@@ -55,7 +55,6 @@ DEFAULT_LINE_FACTOR = 10.0
 STRONG_LINE_FACTOR = 100.0
 """A spectral peak this many times the median power is a disturbance line, removed."""
 MAX_REMOVED_LINES = 6
-ZERO_PADDING = 8
 OFF_GRID_GAIN = 0.1
 """A line counts as off the grid only if the off-grid fit leaves less than this fraction of
 the residual the on-grid one leaves (a leaking line: most of its power is leakage)."""

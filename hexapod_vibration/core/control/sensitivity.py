@@ -37,7 +37,8 @@ from functools import cached_property
 
 import numpy as np
 
-from hexapod_vibration.core.control.notch import update_lowpass_response, validate_frequencies
+from hexapod_vibration.core.control.notch import validate_frequencies
+from hexapod_vibration.core.control.notch_weights import update_lowpass_response
 
 DEFAULT_GRID_STEP_HZ = 0.1
 REFERENCE_MU = 0.002
@@ -261,13 +262,18 @@ class SensitivityPrediction:
         return np.interp(np.asarray(frequencies_hz, dtype=float), self.frequencies_hz,
                          self.db(metric))
 
-    def rise_near(self, tone_hz: float, half_width_hz: float = NEAR_TONE_SPAN_HZ,
-                  metric: str = 'sigma_max') -> float:
-        """Largest ``20 log10 |S|`` (dB) within ``half_width_hz`` of ``tone_hz``."""
-        sel = np.abs(self.frequencies_hz - tone_hz) <= half_width_hz
-        if not np.any(sel):
-            raise ValueError(f'no grid point within {half_width_hz} Hz of {tone_hz} Hz')
-        return float(np.max(self.db(metric)[sel]))
+    def table_db(self) -> dict[str, np.ndarray]:
+        """The prediction as named columns (F,): ``frequency_hz``, then dB of |S|.
+
+        ``sigma_max_db``, ``strut<k>_db`` (k = 1..C) and, when there is one, ``output_db``
+        (the rows of ``/pph/notch_sensitivity``).
+        """
+        rows = {'frequency_hz': self.frequencies_hz, 'sigma_max_db': self.db('sigma_max')}
+        strut_db = 20.0 * np.log10(np.maximum(self.strut, 1e-300))
+        rows.update({f'strut{k + 1}_db': strut_db[:, k] for k in range(strut_db.shape[1])})
+        if self.output is not None:
+            rows['output_db'] = self.db('output')
+        return rows
 
 
 def _plant_at(plant: PlantResponse | np.ndarray, frequencies_hz: np.ndarray) -> np.ndarray:
