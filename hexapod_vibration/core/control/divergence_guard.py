@@ -20,7 +20,7 @@ scatter (dB). While control is on each block is judged against it:
 
 - fast: one block above ``reference + margin + max(3 sigma, FAST_EXTRA_MIN_DB)`` (a
   runaway: unstable rate, wound-up weights) is a divergence, seen at the end of the block
-  in which it happens (<= 0.25 s, well within the 0.5 s the issue allows);
+  in which it happens (<= 0.25 s, well within the 0.5 s allowed);
 - slow: the exponential mean over ``SLOW_BLOCKS`` blocks (2 s) above ``reference + margin
   + 3 sigma / sqrt(SLOW_BLOCKS)`` (a steady excess of a few dB: a canceller that is
   stable but wrong, e.g. tuned 0.4 Hz off the line) is a divergence too.
