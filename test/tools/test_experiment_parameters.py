@@ -89,7 +89,8 @@ def test_notch_settings_the_controller_refuses_are_refused_with_the_scenario():
     scenario = scenario_from_dict({**BASE, "notch": notch})
     assert node_parameters(scenario, "lockstep")["notch_controller"]["ros__parameters"][
         "update_lowpass_hz"] == 10.0
-    with pytest.raises(ValueError, match="notch: update_lowpass_hz must be"):
+    with pytest.raises(ValueError, match="notch: update_lowpass_hz = 600 Hz is above the "
+                                         "maximum: update_lowpass_hz must be"):
         scenario_from_dict({**BASE, "notch": {**notch, "update_lowpass_hz": 600.0}})
     with pytest.raises(ValueError, match="notch: .*reference_harmonics needs one order"):
         scenario_from_dict({**BASE, "notch": {**notch, "reference_harmonics": [1.0, 2.0]}})

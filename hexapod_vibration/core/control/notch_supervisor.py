@@ -153,7 +153,8 @@ class NotchSupervisor:
         """Apply a set of changes that :meth:`check` accepted.
 
         Raises:
-            ValueError: the set is refused (nothing changed), as :meth:`check` would say.
+            KeyError, ValueError: the set is refused (nothing changed), as :meth:`check`
+                would say.
         """
         plan = self._plan(changes)
         canceller, settings = self.canceller, self._settings

@@ -101,7 +101,10 @@ class NotchSettings:
         if timeline:
             raise ValueError(f"notch: {', '.join(sorted(timeline))} is set by the timeline "
                              "(identify_at_s, control_on_s)")
-        NotchConfig().replaced(values)
+        try:
+            NotchConfig().replaced(values)
+        except ValueError as exc:
+            raise ValueError(f"notch: {exc}") from None
         return cls(**own, settings=values)
 
 
