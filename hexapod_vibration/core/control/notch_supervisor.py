@@ -241,20 +241,24 @@ class NotchSupervisor:
             return None
         if gap:
             self._missed(index, gap)
-        self._identify_when_due(index)
+        cfg = self._settings.config
+        if index - clock.first == int(round(cfg.identify_delay_s * self.fs)):
+            self._identify_when_due(index)
         error = self.dc_blocker.step(accel_m_s2)
         canceller, identification = self.canceller, self.identification
         clamped = canceller.clamped_samples
         command = canceller.step(error, out=self._command)
         if canceller.clamped_samples != clamped:
             self.safety.weights_clamped(index)
-        if self._settings.config.divergence_guard:
-            self.safety.step(index, clock.first, error, identification.running,
-                             self.follower.active)
-        self._fader.step()
+        running = identification.identifier is not None
+        if cfg.divergence_guard:
+            self.safety.step(index, clock.first, error, running, self.follower.active)
+        if self._fader.falling:
+            self._fader.step()
         if self.follower.active:
-            self.follower.step(index, error, identification.running)
-        identification.step(error, command)
+            self.follower.step(index, error, running)
+        if running or identification.analysis is not None:
+            identification.step(error, command)
         return command
 
     def _missed(self, index: int, gap: int) -> None:
@@ -266,11 +270,10 @@ class NotchSupervisor:
             self.identification.restart(index)
 
     def _identify_when_due(self, index: int) -> None:
-        """The start-up identification, ``identify_delay_s`` after the first sample."""
-        cfg = self._settings.config
-        if (index - self._clock.first == int(round(cfg.identify_delay_s * self.fs))
-                and self._plant.response is None and not self.identification.running
-                and cfg.auto_identify and self.canceller.tone_frequencies_hz.size):
+        """The start-up identification, unless the plant is known or one runs (or no tones)."""
+        if (self._plant.response is None and not self.identification.running
+                and self._settings.config.auto_identify
+                and self.canceller.tone_frequencies_hz.size):
             self.identification.start(None, index)
 
     # ------------------------------------------------------------------ moving tones

@@ -49,6 +49,8 @@ class OutputFader:
         self._canceller = canceller
         self._fs = float(sample_rate_hz)
         self._fall: _MuFall | None = None
+        self.falling = False
+        """True while mu falls (:meth:`step` has work to do)."""
 
     def fade_out(self, fade_s: float, mu_fall_s: float = 0.0) -> None:
         """Freeze the weights and fade the output to 0 over ``fade_s`` (s).
@@ -62,6 +64,7 @@ class OutputFader:
                 and canceller.mu > 0.0):
             self._fall = _MuFall(canceller.mu, max(int(round(mu_fall_s * self._fs)), 1),
                                  fade, last_mu=canceller.mu)
+            self.falling = True
         else:
             canceller.set_frozen(True)
             canceller.set_enabled(False, fade)
@@ -78,11 +81,13 @@ class OutputFader:
         fall.last_mu = fall.mu * 0.5 * (1.0 + float(np.cos(np.pi * x)))
         self._canceller.set_mu(fall.last_mu)
         if fall.done >= fall.samples:
+            self.falling = False
             self._canceller.set_frozen(True)
             self._canceller.set_enabled(False, fall.fade_samples)
 
     def end(self) -> None:
         """Forget a mu fall; give mu back unless someone else set one since."""
         fall, self._fall = self._fall, None
+        self.falling = False
         if fall is not None and self._canceller.mu == fall.last_mu:
             self._canceller.set_mu(fall.mu)

@@ -88,7 +88,8 @@ class PlantIdentification:
         """The tones (Hz) the last identification measured at."""
         self.start_sample = -1
         self.end_sample = -1
-        self._analysis: Iterator[None] | None = None
+        self.analysis: Iterator[None] | None = None
+        """The analysis of the finished identification, one piece per sample; None: none."""
 
     @property
     def running(self) -> bool:
@@ -98,7 +99,7 @@ class PlantIdentification:
     @property
     def busy(self) -> bool:
         """True while running or analysing (state ``identifying``)."""
-        return self.identifier is not None or self._analysis is not None
+        return self.identifier is not None or self.analysis is not None
 
     def start(self, tones: list[float] | None, first_sample: int) -> str:
         """Start an identification whose first sample is ``first_sample``; freeze the weights.
@@ -166,17 +167,17 @@ class PlantIdentification:
         if self.identifier is not None:
             command += self.identifier.step(error)
             if self.identifier.done:
-                self._analysis = self._analyse()
+                self.analysis = self._analyse()
                 self._advance()
-        elif self._analysis is not None:
+        elif self.analysis is not None:
             self._advance()
 
     def _advance(self) -> None:
         """One piece of the running analysis."""
         try:
-            next(self._analysis)
+            next(self.analysis)
         except StopIteration:
-            self._analysis = None
+            self.analysis = None
 
     def _measure(self) -> _Measurement:
         """G at the tones from the finished identifier, into the plant's knowledge."""
