@@ -201,6 +201,10 @@ def test_the_oscillators_move_phase_continuously_and_keep_their_weights():
     ({"harmonics": 16}, r"harmonics must be in \[0, 15\]"),
     ({"tracking_range_hz": -1.0}, "tracking_range_hz"),
     ({"reference_timeout_s": 0.0}, "reference_timeout_s"),
+    # the ranges are the parameter declarations' (parameter_specs), in the core too
+    ({"tracking_range_hz": 0.0}, r"tracking_range_hz must be in \(0, 50\] Hz"),
+    ({"tracking_range_hz": 60.0}, r"tracking_range_hz must be in \(0, 50\] Hz"),
+    ({"reference_timeout_s": 0.001}, r"reference_timeout_s must be in \[0.002, 10\] s"),
 ])
 def test_bad_moving_tone_settings_are_refused_and_change_nothing(changes, reason):
     sup = supervisor([40.0, 80.0])
