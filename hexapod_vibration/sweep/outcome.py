@@ -55,7 +55,7 @@ def control_outcome(supervisor: NotchSupervisor | None, record: LoopRecord,
     status = supervisor.status()
     guard = status["guard"]
     lowered = guard == GUARD_BACKED_OFF or (guard == GUARD_OFF
-                                            and supervisor.guard.action_count > 1)
+                                            and supervisor.safety.guard.action_count > 1)
     rates = [float(r) for r in status["tone_mu"]] or [float(status["mu"])]
     out: dict[str, Any] = {"backed_off": bool(lowered), "mu_in_force": float(status["mu"]),
                            "tone_mu": rates, "control_note": None,

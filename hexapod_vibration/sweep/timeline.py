@@ -49,7 +49,7 @@ def identification_interval(scenario: Scenario, sample_rate_hz: float
         return None
     supervisor.start_identification()
     start = scenario.identify_at_s
-    return (Interval(start, start + supervisor.identifier.duration_s),
+    return (Interval(start, start + supervisor.identification.identifier.duration_s),
             supervisor.config.identification)
 
 
