@@ -18,7 +18,7 @@ import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.node import Node
 from rclpy.parameter import Parameter
-from std_msgs.msg import Float64MultiArray, MultiArrayDimension
+from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import Trigger
 
 from hexapod_vibration.contract import (
@@ -28,9 +28,7 @@ from hexapod_vibration.contract import (
     NOTCH_STATUS,
     REFERENCE_FREQUENCY_TOPIC,
     SAMPLE_RATE_HZ,
-    STRUT_COUNT,
     InvalidStrutMessage,
-    sample_label,
 )
 from hexapod_vibration.core.control.notch_supervisor import NotchConfig, NotchSupervisor
 from hexapod_vibration.core.loop.signal_ranges import SignalRanges
@@ -38,6 +36,7 @@ from hexapod_vibration.core.model.config import load_model_config
 from hexapod_vibration.parameter_specs import NOTCH_CONTROLLER
 from hexapod_vibration.paths import config_path
 from hexapod_vibration.ros.diagnostics import diagnostic_array, publish_status_periodically
+from hexapod_vibration.ros.executors import loop_meter
 from hexapod_vibration.ros.matching import MatchedReaders
 from hexapod_vibration.ros.messages import (
     ControllerLoopPort,
@@ -45,6 +44,7 @@ from hexapod_vibration.ros.messages import (
     create_loop_subscription,
     make_table_array,
     make_vector_array,
+    make_weights_array,
 )
 from hexapod_vibration.ros.node_runner import run_node
 from hexapod_vibration.ros.parameters import NodeParameters
@@ -76,7 +76,7 @@ class NotchControllerNode(Node):
                   for topic in ("/pph/notch_command", "/pph/notch_weights",
                                 NOTCH_FREQUENCIES_TOPIC)}
         self.port = ControllerLoopPort("/pph/accel", accel_range, StrutArrayPublisher(
-            arrays["/pph/notch_command"]), self.get_logger())
+            arrays["/pph/notch_command"]), self.get_logger(), counts_gaps=False)
         self._pub_w = arrays["/pph/notch_weights"]
         self._pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", DIAGNOSTICS_QOS)
         publish_status_periodically(self, self.publish_diagnostics)
@@ -89,6 +89,11 @@ class NotchControllerNode(Node):
         self.loop_subscriptions = [
             create_loop_subscription(self, REFERENCE_FREQUENCY_TOPIC, self._on_reference),
             create_loop_subscription(self, "/pph/accel", self._on_accel)]
+        self.latest_only_subscriptions = self.loop_subscriptions    # stale samples: skipped
+        self.meter = loop_meter()
+        self._count = self.meter.counter("notch_controller")
+        self._stage = {name: self.meter.stage(f"notch {name}")
+                       for name in ("decode", "control", "publish", "report")}
         self.create_service(Trigger, "~/identify", self._on_identify)
         self.params.serve(check=self._check_parameters, apply=self._apply_parameters)
         config = self.supervisor.config
@@ -120,24 +125,30 @@ class NotchControllerNode(Node):
 
     # ------------------------------------------------------------------ loop
     def _on_accel(self, msg: Float64MultiArray | bytes) -> None:
+        meter, stage = self.meter, self._stage
         sample = self.port.receive(msg)       # decoded, in range, in sequence, or None
+        meter.lap(stage["decode"])
         if sample is None:
             return
         if sample.new_run:
             self.supervisor.reset_run(sample.index)
         command = self.supervisor.step(sample.index, sample.values)
+        meter.lap(stage["control"])
         if command is None:
             return
         self.port.answer(command, sample)
+        meter.lap(stage["publish"])
+        self._count()
         index = sample.index
         if index % WEIGHTS_EVERY_SAMPLES == 0:
-            self._publish_weights(index)
+            self._pub_w.publish(make_weights_array(self.supervisor.canceller.weights, index))
         if index % FREQUENCIES_EVERY_SAMPLES == 0:
             self._pub_frequencies.publish(make_vector_array(self.supervisor.tone_estimates_hz,
                                                             index, sample.run))
         if index % int(self.fs) == 0:
             self.publish_diagnostics()
         self._report()
+        meter.lap(stage["report"])
 
     def _on_reference(self, msg: bytes) -> None:
         """A tachometer value (Hz) for a loop sample: to the supervisor, or refused (logged)."""
@@ -184,28 +195,10 @@ class NotchControllerNode(Node):
                 self.set_parameters([Parameter(event.parameter[0], value=event.parameter[1])])
         self.publish_diagnostics()
 
-    def _publish_weights(self, index: int) -> None:
-        w = self.supervisor.canceller.weights
-        tones = w.shape[0]
-        msg = Float64MultiArray()
-        msg.layout.dim = [MultiArrayDimension(label="tone", size=tones,
-                                              stride=tones * 2 * STRUT_COUNT),
-                          MultiArrayDimension(label="strut", size=STRUT_COUNT,
-                                              stride=2 * STRUT_COUNT),
-                          MultiArrayDimension(label="a_b", size=2, stride=2),
-                          MultiArrayDimension(label=sample_label(index), size=1, stride=1)]
-        msg.data = np.stack([w.real, -w.imag], axis=-1).ravel().tolist()
-        self._pub_w.publish(msg)
-
     def publish_diagnostics(self) -> None:
-        """Controller state on /diagnostics: the supervisor's and the loop port's counters.
-
-        ``missed_samples`` is the supervisor's (it acts on the gaps); the port's own count
-        of them is left out.
-        """
-        port = self.port.diagnostics()
-        del port["missed_samples"]
-        status = {**self.supervisor.status(), **port, **self.readers.values()}
+        """State, counters (gaps: the supervisor's) and CPU budget on /diagnostics."""
+        status = {**self.supervisor.status(), **self.port.diagnostics(),
+                  **self.readers.values(), **self.meter.report()}
         self._pub_diag.publish(diagnostic_array(NOTCH_STATUS, bool(status["invalid"]),
                                                 status["state"], status,
                                                 self.supervisor.last_sample))

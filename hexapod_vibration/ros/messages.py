@@ -69,6 +69,7 @@ __all__ = [
     'make_strut_array',
     'make_table_array',
     'make_vector_array',
+    'make_weights_array',
     'parse_vector_sample',
     'parse_strut_array',
     'parse_strut_sample',
@@ -252,9 +253,15 @@ class ControllerLoopPort:
     """
 
     def __init__(self, topic: str, limit_abs: float, publisher: StrutArrayPublisher,
-                 logger: Any, sequence: SampleSequence | None = None) -> None:
-        """Receive on ``topic``, answer through ``publisher``, log through ``logger``."""
+                 logger: Any, sequence: SampleSequence | None = None,
+                 counts_gaps: bool = True) -> None:
+        """Receive on ``topic``, answer through ``publisher``, log through ``logger``.
+
+        ``counts_gaps`` False: the controller's core counts the samples missing between
+        those acted on (``missed_samples``), not the port.
+        """
         self.topic = topic
+        self.counts_gaps = counts_gaps
         self.limit_abs = limit_abs
         self.publisher = publisher
         self.logger = logger
@@ -292,7 +299,8 @@ class ControllerLoopPort:
         if new_run:
             self.counters['new_runs'] += 1
             self.logger.info(f'{self.topic}: new run {sample.run} from sample {verdict.index}')
-        self.counters['missed_samples'] += verdict.gap
+        if self.counts_gaps:
+            self.counters['missed_samples'] += verdict.gap
         return LoopSample(sample.values, verdict.index, sample.run, verdict.gap, new_run)
 
     def _not_acted(self, admission: Admission, index: int, run: int | None) -> None:
@@ -316,7 +324,7 @@ class ControllerLoopPort:
     def diagnostics(self) -> dict[str, int]:
         """Counters for ``/diagnostics``: ``invalid`` and one per reason."""
         keys = ('malformed', 'out_of_range', 'unconfirmed', 'late', 'repeats', 'new_runs',
-                'missed_samples')
+                *(('missed_samples',) if self.counts_gaps else ()))
         return {'invalid': self.invalid, **{k: self.counters[k] for k in keys}}
 
 
@@ -338,6 +346,22 @@ def make_vector_array(values: np.ndarray | Sequence[float], sample_index: int | 
     msg = Float64MultiArray()
     msg.layout.dim = dims
     msg.data = array.array('d', flat.tobytes())
+    return msg
+
+
+def make_weights_array(weights: np.ndarray, sample_index: int) -> Float64MultiArray:
+    """``/pph/notch_weights`` of sample n: the canceller's (T, C) complex weights W = a - j b.
+
+    Layout ``("tone", T), ("strut", C), ("a_b", 2), ("sample:<n>", 1)``; data (a, b) per tone
+    and strut (N).
+    """
+    tones, struts = weights.shape
+    msg = Float64MultiArray()
+    msg.layout.dim = [MultiArrayDimension(label='tone', size=tones, stride=tones * 2 * struts),
+                      MultiArrayDimension(label='strut', size=struts, stride=2 * struts),
+                      MultiArrayDimension(label='a_b', size=2, stride=2),
+                      MultiArrayDimension(label=sample_label(sample_index), size=1, stride=1)]
+    msg.data = np.stack([weights.real, -weights.imag], axis=-1).ravel().tolist()
     return msg
 
 

@@ -126,15 +126,42 @@ def test_duplicates_and_out_of_order_samples_are_counted_and_not_used():
     assert sup.counters["duplicates"] == 2 and sup.last_sample == 9
 
 
-def test_a_gap_advances_the_phases_and_restarts_a_running_identification():
+def test_a_gap_advances_the_phases_and_is_left_out_of_a_running_identification():
     sup = NotchSupervisor(config())
     run(sup, coupled_gain(0.0), 600, skip=frozenset(range(300, 305)))
     assert sup.counters == {"gaps": 1, "missed_samples": 5, "duplicates": 0}
     assert sup.state == NotchState.IDENTIFYING
-    assert sup.status()["identification_start_sample"] == 305
+    assert sup.status()["identification_start_sample"] == 100       # not started again
     events = [e.message for e in sup.drain_events()]
     assert any("5 samples missing before 305" in m for m in events)
-    assert any("restarting" in m for m in events)
+    assert not any("restarting" in m for m in events)
+    run(sup, coupled_gain(0.0), 3000, 600)
+    whole = NotchSupervisor(config())
+    run(whole, coupled_gain(0.0), 3600)
+    assert sup.status()["identified_tones_hz"] == [TONE] and "refusal" not in sup.status()
+    assert sup.bound == pytest.approx(whole.bound, rel=0.01)
+    error = np.linalg.norm(sup.plant_response - whole.plant_response)
+    assert error < 0.01 * np.linalg.norm(whole.plant_response)  # the 5 held commands' share
+
+
+def test_an_identification_missing_more_than_five_percent_of_its_samples_is_refused():
+    sup = NotchSupervisor(config(enabled=True))
+    run(sup, coupled_gain(0.0), 3600, skip=frozenset(range(105, 3300, 10)))
+    assert sup.state == NotchState.REFUSED and not sup.canceller.enabled
+    refusal = sup.status()["refusal"]
+    assert refusal.startswith("identification refused: 240 of its 2400 measured samples "
+                              "(10.0 %) missing (> 5 %); control stays off"), refusal
+    assert sup.counters["gaps"] == 320                        # every one counted
+
+
+def test_gaps_are_reported_at_most_once_a_second_of_samples():
+    sup = NotchSupervisor(config(tone_frequencies_hz=()))
+    skip = frozenset([*range(300, 900, 50), 1500])
+    run(sup, coupled_gain(0.0), 1600, skip=skip)
+    messages = [e.message for e in sup.drain_events() if "missing" in e.message]
+    assert messages == ["/pph/accel: 1 samples missing before 301",
+                        "/pph/accel: 12 samples missing in 12 gaps, the last before 1501"]
+    assert sup.counters["missed_samples"] == 13
 
 
 def test_raw_adapts_from_the_first_sample_and_identifies_only_to_measure():

@@ -140,10 +140,12 @@ def test_nodes_exchange_contract_topics_and_cancel_the_tone(ros_context, node_pr
         assert len(msg.data) == 6 and msg.layout.dim[1].label.startswith('sample:'), name
         assert topic.unindexed == 0, name
         assert len(topic.by_index) > 1000, (name, len(topic.by_index))
-    # /clock is the sim time of the samples: n ms.
+    # /clock is the sim time of the samples: n ms, within the run. BEST_EFFORT (as rclcpp's
+    # ClockQoS): a listener starved on a loaded machine loses some, so which of the last
+    # ones arrived is not judged.
     assert len(clock.times_ns) > 100
     assert all(t % 1_000_000 == 0 for t in clock.times_ns)
-    assert max(clock.times_ns) >= 1_000_000 * (end - 1000)
+    assert 1_000_000 * MATCHED_BY_SAMPLE <= max(clock.times_ns) <= 1_000_000 * (end + 100)
     # /diagnostics from every node.
     for name in (DRIVER_STATUS, NOTCH_STATUS, 'pointing_controller'):
         assert name in diagnostics.latest, (name, sorted(diagnostics.latest))

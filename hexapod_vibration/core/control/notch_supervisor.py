@@ -56,7 +56,7 @@ from hexapod_vibration.core.control.supervisor.planning import (
 from hexapod_vibration.core.control.supervisor.plant_knowledge import PlantKnowledge
 from hexapod_vibration.core.control.supervisor.rate_policy import RatePolicy
 from hexapod_vibration.core.control.supervisor.safety import SafetyMonitor
-from hexapod_vibration.core.control.supervisor.sample_clock import SampleClock
+from hexapod_vibration.core.control.supervisor.sample_clock import GapReport, SampleClock
 from hexapod_vibration.core.control.supervisor.tone_follower import FOLLOW_SETTINGS, ToneFollower
 
 __all__ = ["NotchConfig", "NotchSupervisor", "SupervisorEvent"]
@@ -108,6 +108,7 @@ class NotchSupervisor:
         self.dc_blocker = DCBlocker(self.channels, self.fs, config.dc_cutoff_hz)
         self._command = np.zeros(self.channels)
         self._clock = SampleClock()
+        self._gaps = GapReport(int(round(sample_rate_hz)))
         self._plant = PlantKnowledge()
         self._gate = ControlGate(settings, canceller, events)
         self._rates = RatePolicy(settings, canceller, self._plant, events, self.output_weights)
@@ -242,7 +243,8 @@ class NotchSupervisor:
         if gap:
             self._missed(index, gap)
         cfg = self._settings.config
-        if index - clock.first == int(round(cfg.identify_delay_s * self.fs)):
+        due = clock.first + int(round(cfg.identify_delay_s * self.fs))
+        if index - gap <= due <= index:          # reached now (a gap may have skipped it)
             self._identify_when_due(index)
         error = self.dc_blocker.step(accel_m_s2)
         canceller, identification = self.canceller, self.identification
@@ -262,12 +264,15 @@ class NotchSupervisor:
         return command
 
     def _missed(self, index: int, gap: int) -> None:
-        """``gap`` samples before ``index`` never came: the phases move on over them."""
+        """``gap`` samples before ``index`` never came: left out, the phases move on.
+
+        A running identification leaves them out of its record (it is refused only if too
+        many are missing). Reported at most once per second of samples, with the count
+        since the last report (``missed_samples`` on /diagnostics counts every one).
+        """
         self.canceller.advance(gap)
-        self._events.add("warn", f"/pph/accel: {gap} samples missing before {index}")
-        if self.identification.running:
-            self._events.add("warn", "samples missed during identification: restarting it")
-            self.identification.restart(index)
+        self.identification.skip(gap)
+        self._gaps.add(index, gap, self._events)
 
     def _identify_when_due(self, index: int) -> None:
         """The start-up identification, unless the plant is known or one runs (or no tones)."""

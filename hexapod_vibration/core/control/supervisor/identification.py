@@ -135,6 +135,11 @@ class PlantIdentification:
         self._events.add("info", text)
         return text
 
+    def skip(self, samples: int) -> None:
+        """``samples`` samples never came: the running identification leaves them out."""
+        if self.identifier is not None:
+            self.identifier.skip(samples)        # finished by it: analysed at the next step
+
     def restart(self, first_sample: int) -> None:
         """Start the running identification again from ``first_sample``."""
         self.start(list(self.tones), first_sample)
@@ -200,6 +205,14 @@ class PlantIdentification:
         G, its confidence, the coefficients, the bound, the policy and the prediction. The
         canceller stays frozen and off meanwhile (state ``identifying``).
         """
+        missing = self.identifier.missing_refusal()
+        if missing:
+            self.identifier = None
+            self.end_sample = self._clock.last
+            self._plant.put_in_force(None, [])
+            self._gate.refuse(f"identification refused: {missing}; control stays off "
+                              "(~/identify to measure again)")
+            return
         measured = self._measure()
         identifier, self.identifier = self.identifier, None
         last = self._clock.last

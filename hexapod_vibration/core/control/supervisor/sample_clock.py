@@ -41,3 +41,31 @@ class SampleClock:
     def restart_at(self, first_index: int) -> None:
         """A new run of the loop: the next sample is ``first_index`` (no gap counted)."""
         self.last = int(first_index) - 1
+
+
+class GapReport:
+    """The missing samples as events: at most one per ``period_samples`` samples.
+
+    The first gap is reported at once; gaps within a period of the last report are summed
+    into the next one (a controller falling behind would otherwise log a line per gap,
+    costing the time it lacks).
+    """
+
+    def __init__(self, period_samples: int) -> None:
+        """Nothing missing yet."""
+        self.period_samples = int(period_samples)
+        self._reported_at: int | None = None
+        self._samples = 0
+        self._gaps = 0
+
+    def add(self, index: int, gap: int, events) -> None:
+        """``gap`` samples missing before ``index``; report them (and those held) if due."""
+        self._samples += gap
+        self._gaps += 1
+        if self._reported_at is not None and index - self._reported_at < self.period_samples:
+            return
+        text = (f"/pph/accel: {gap} samples missing before {index}" if self._gaps == 1 else
+                f"/pph/accel: {self._samples} samples missing in {self._gaps} gaps, the last "
+                f"before {index}")
+        events.add("warn", text)
+        self._reported_at, self._samples, self._gaps = index, 0, 0
