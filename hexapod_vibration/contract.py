@@ -22,7 +22,8 @@ if TYPE_CHECKING:
     import numpy as np
 
 SAMPLE_RATE_HZ = 1000.0
-"""Rate of the loop (Hz): one sample of every ``/pph/*`` topic per millisecond of sim time."""
+"""Rate of the loop (Hz): one sample of every ``/pph/*`` topic per millisecond of sim time;
+sample n is at n / SAMPLE_RATE_HZ s of sim time."""
 
 STRUT_COUNT = 6
 """Number of struts, hence of values in every ``/pph/*`` message."""
@@ -30,9 +31,6 @@ STRUT_COUNT = 6
 NEVER_WORSE_DB = 1.0
 """Never worse than off: a band more than this above its level without control is worse
 (dB; the twin comparison's ``never_worse`` and the sweep maps' rise scale)."""
-
-SAMPLE_RATE_HZ = 1000.0
-"""Loop rate (Hz): sample n is at n / SAMPLE_RATE_HZ s of sim time."""
 
 STRUT_LABEL = 'strut'
 """Label of ``layout.dim[0]``."""
