@@ -26,9 +26,10 @@ from rclpy.serialization import deserialize_message
 from rosgraph_msgs.msg import Clock
 from std_msgs.msg import Float64MultiArray
 
+from hexapod_vibration.cdr import decode_strut_cdr
 from hexapod_vibration.contract import SAMPLE_RATE_HZ, InvalidStrutMessage
 from hexapod_vibration.ros.qos import DIAGNOSTICS_QOS
-from hexapod_vibration.ros.rclpy_internals import decode_strut_cdr, take_serialized_batch
+from hexapod_vibration.ros.rclpy_internals import take_serialized_batch
 
 HANG_GUARD_S = 180.0
 """Longest wait for anything (s): a guard against hangs, never a timing requirement (90 s

@@ -32,6 +32,11 @@ from rosbags.typesys import Stores, get_typestore
 from rosbags.typesys.store import Typestore
 
 from hexapod_vibration.analysis import recovery
+from hexapod_vibration.cdr import (
+    LITTLE_ENDIAN_CDR,
+    MAX_BAG_SAMPLE_INDEX,
+    decode_float64_array,
+)
 from hexapod_vibration.contract import (
     DISTURBANCE_FREQUENCIES_TOPIC,
     NOTCH_FREQUENCIES_TOPIC,
@@ -306,8 +311,6 @@ class Keep:
 
 KEEP_ALL = Keep()
 
-MAX_SAMPLE_INDEX = 2**40
-"""In-band sample indices at or above this (35 years at 1 kHz) are invalid."""
 _BLOCK = 4096
 
 
@@ -494,8 +497,6 @@ def _index_from_timestamps(timestamps: np.ndarray, t0_ns: int, sample_rate_hz: f
 
 # --------------------------------------------------------------------------- CDR decoding
 
-_U32 = struct.Struct('<I')
-_LE_CDR = (b'\x00\x01', b'\x00\x03')
 _DECODE_ERRORS = (struct.error, ValueError, IndexError, UnicodeDecodeError, SerdeError,
                   AssertionError, KeyError, TypeError, OverflowError, MemoryError)
 
@@ -521,62 +522,9 @@ def decode_strut_message(data: bytes | memoryview) -> tuple[np.ndarray, int | No
     if len(labels) < 2:
         return values, None
     index = parse_sample_label(labels[1])
-    if index >= MAX_SAMPLE_INDEX:
+    if index >= MAX_BAG_SAMPLE_INDEX:
         raise InvalidStrutMessage(f'sample index {index} out of range')
     return values, index
-
-
-def sample_index_of_cdr(data: bytes | memoryview) -> int | None:
-    """The ``sample:<n>`` index of any serialized Float64MultiArray (little-endian CDR).
-
-    Looks at the layout's labels only (any dimension), so it serves the strut topics and
-    ``/pph/notch_weights`` alike; None when there is none or the bytes are not that.
-    """
-    raw = bytes(data[:512])
-    if raw[:2] not in _LE_CDR:
-        return None
-    try:
-        pos = 4
-        (ndims,) = _U32.unpack_from(raw, pos)
-        pos += 4
-        for _ in range(min(ndims, 16)):
-            (length,) = _U32.unpack_from(raw, pos)
-            pos += 4
-            label = raw[pos:pos + length - 1]
-            if label.startswith(b'sample:'):
-                index = parse_sample_label(label.decode('ascii'))
-                return index if index < MAX_SAMPLE_INDEX else None
-            pos += length
-            pos += (-(pos - 4)) % 4 + 8
-    except (struct.error, UnicodeDecodeError, InvalidStrutMessage):
-        return None
-    return None
-
-
-def _decode_le(raw: bytes) -> tuple[np.ndarray, list[str]]:
-    """Float64MultiArray from little-endian CDR bytes (alignment relative to byte 4)."""
-    pos = 4
-    (ndims,) = _U32.unpack_from(raw, pos)
-    if ndims > 16:
-        raise ValueError(f'{ndims} layout dimensions')
-    pos += 4
-    labels = []
-    for _ in range(ndims):
-        (length,) = _U32.unpack_from(raw, pos)
-        pos += 4
-        if length == 0 or pos + length > len(raw) or raw[pos + length - 1] != 0:
-            raise ValueError('bad string')
-        labels.append(raw[pos:pos + length - 1].decode('utf-8'))
-        pos += length
-        pos += (-(pos - 4)) % 4
-        pos += 8                                   # size, stride
-    pos += 4                                       # data_offset
-    (count,) = _U32.unpack_from(raw, pos)
-    pos += 4
-    pos += (-(pos - 4)) % 8
-    if count > 64 or pos + 8 * count > len(raw):
-        raise ValueError(f'{count} values in {len(raw)} bytes')
-    return np.frombuffer(raw, '<f8', count, pos).astype(np.float64), labels
 
 
 # --------------------------------------------------------------------------- one pass
@@ -708,8 +656,8 @@ def _decode_array(data: bytes | memoryview) -> tuple[np.ndarray, list[str]]:
     Little-endian CDR is decoded directly; other encapsulations go through rosbags.
     """
     raw = bytes(data)
-    if raw[:2] in _LE_CDR:
-        return _decode_le(raw)
+    if raw[:2] in LITTLE_ENDIAN_CDR:
+        return decode_float64_array(raw)
     msg = typestore().deserialize_cdr(raw, STRUT_MSGTYPE)
     return np.asarray(msg.data, dtype=np.float64), [d.label for d in msg.layout.dim]
 

@@ -17,8 +17,9 @@ from rosbags.interfaces import Connection
 from rosbags.rosbag2 import StoragePlugin
 from rosbags.rosbag2.errors import WriterError
 
-from hexapod_vibration.analysis.bag_io import sample_index_of_cdr, typestore
+from hexapod_vibration.analysis.bag_io import typestore
 from hexapod_vibration.analysis.bag_writer import JazzyWriter, stamp_of_cdr
+from hexapod_vibration.cdr import sample_index_of_cdr
 from hexapod_vibration.core.loop.sample_set import SampleSet
 
 FLUSH_PERIOD_S = 0.25

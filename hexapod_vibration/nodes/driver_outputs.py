@@ -13,12 +13,13 @@ from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
 from std_msgs.msg import Float64MultiArray
 
+from hexapod_vibration.cdr import clock_cdr
 from hexapod_vibration.contract import DISTURBANCE_FREQUENCIES_TOPIC, REFERENCE_FREQUENCY_TOPIC
 from hexapod_vibration.core.model.plant import PlantSample
 from hexapod_vibration.ros.matching import MatchedReaders
 from hexapod_vibration.ros.messages import StrutArrayPublisher, make_vector_array
 from hexapod_vibration.ros.qos import CLOCK_QOS, LOOP_PUBLISHER_QOS
-from hexapod_vibration.ros.rclpy_internals import clock_cdr, serialized_publish
+from hexapod_vibration.ros.rclpy_internals import serialized_publish
 
 LOOP_TOPICS = ("/pph/accel", "/pph/eddy", "/pph/actuator_force", REFERENCE_FREQUENCY_TOPIC,
                DISTURBANCE_FREQUENCIES_TOPIC)

@@ -21,6 +21,7 @@ from rclpy.parameter import Parameter
 from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import Trigger
 
+from hexapod_vibration.cdr import UnsupportedCdr, decode_strut_cdr
 from hexapod_vibration.contract import (
     FREQUENCIES_EVERY_SAMPLES,
     NOTCH_FREQUENCIES_TOPIC,
@@ -49,7 +50,6 @@ from hexapod_vibration.ros.messages import (
 from hexapod_vibration.ros.node_runner import run_node
 from hexapod_vibration.ros.parameters import NodeParameters
 from hexapod_vibration.ros.qos import DIAGNOSTICS_QOS, LATCHED_QOS, LOOP_PUBLISHER_QOS
-from hexapod_vibration.ros.rclpy_internals import UnsupportedCdr, decode_strut_cdr
 
 WEIGHTS_EVERY_SAMPLES = 10
 """Samples between two /pph/notch_weights messages (100 Hz)."""

@@ -37,6 +37,7 @@ from rclpy.qos import QoSProfile
 from rclpy.subscription import Subscription
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
+from hexapod_vibration.cdr import UnsupportedCdr, decode_strut_cdr, encode_strut_cdr
 from hexapod_vibration.contract import (
     FREQUENCY_LABEL,
     SENSITIVITY_ROWS_PREFIX,
@@ -51,12 +52,7 @@ from hexapod_vibration.contract import (
 from hexapod_vibration.core.loop.sample_sequence import Admission, SampleSequence
 from hexapod_vibration.core.loop.signal_ranges import out_of_range
 from hexapod_vibration.ros.qos import LOOP_QOS
-from hexapod_vibration.ros.rclpy_internals import (
-    UnsupportedCdr,
-    decode_strut_cdr,
-    encode_strut_cdr,
-    serialized_publish,
-)
+from hexapod_vibration.ros.rclpy_internals import serialized_publish
 
 __all__ = [
     'ControllerLoopPort',

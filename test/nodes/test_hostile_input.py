@@ -21,6 +21,7 @@ from node_graph import Diagnostics, ParameterClient, StrutTopic, wait_until
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from std_msgs.msg import Float64MultiArray
 
+from hexapod_vibration.cdr import encode_strut_cdr
 from hexapod_vibration.contract import DRIVER_STATUS, NOTCH_STATUS, POINTING_STATUS
 from hexapod_vibration.core.control.pointing import PointingGains
 from hexapod_vibration.core.model.config import load_model_config
@@ -28,7 +29,6 @@ from hexapod_vibration.core.model.plant import saturate_commands
 from hexapod_vibration.core.model.sensors import EddySensorArray
 from hexapod_vibration.core.sim.closed_loop import make_pointing_controller
 from hexapod_vibration.paths import config_path
-from hexapod_vibration.ros.rclpy_internals import encode_strut_cdr
 
 MODEL = load_model_config(config_path('pph_model.yaml'))
 FIRST_HOLD = 1000

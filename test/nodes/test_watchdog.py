@@ -13,12 +13,12 @@ from node_graph import HANG_GUARD_S, Diagnostics, StrutTopic, wait_until
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
+from hexapod_vibration.cdr import decode_strut_cdr, encode_strut_cdr
 from hexapod_vibration.core.model.config import load_model_config
 from hexapod_vibration.core.model.plant import saturate_commands
 from hexapod_vibration.paths import config_path
 from hexapod_vibration.ros.messages import make_strut_array
 from hexapod_vibration.ros.qos import LOOP_QOS
-from hexapod_vibration.ros.rclpy_internals import decode_strut_cdr, encode_strut_cdr
 
 TIMEOUT_SAMPLES = 5          # the driver's command_timeout_samples default (documented)
 DRIVER = 'pph_driver: loop'

@@ -7,8 +7,8 @@ import pytest
 from rclpy.serialization import deserialize_message
 from rosgraph_msgs.msg import Clock
 
+from hexapod_vibration.cdr import clock_cdr
 from hexapod_vibration.ros.diagnostics import sample_time
-from hexapod_vibration.ros.rclpy_internals import clock_cdr
 
 
 @pytest.mark.parametrize('sample, rate, sec, nanosec', [

@@ -11,12 +11,12 @@ import numpy as np
 import pytest
 from std_msgs.msg import Float64MultiArray
 
+from hexapod_vibration.cdr import decode_strut_cdr, encode_strut_cdr
 from hexapod_vibration.core.loop.signal_ranges import SignalRanges
 from hexapod_vibration.core.model.config import load_model_config
 from hexapod_vibration.paths import config_path
 from hexapod_vibration.ros.messages import ControllerLoopPort, StrutArrayPublisher
 from hexapod_vibration.ros.qos import LOOP_PUBLISHER_QOS, LOOP_QOS
-from hexapod_vibration.ros.rclpy_internals import decode_strut_cdr, encode_strut_cdr
 
 RANGES = SignalRanges.from_model(load_model_config(config_path('pph_model.yaml')))
 GRAVITY = np.full(6, 9.80665 / np.sqrt(3.0))
