@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 from rosbags.rosbag2 import StoragePlugin, Writer
 
-from hexapod_vibration.analysis.bag_io import (
+from hexapod_vibration.analysis.bag_format import (
     BAG_VERSION,
     DIAGNOSTICS_MSGTYPE,
     RUN_RECORD_KEY,

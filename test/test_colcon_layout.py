@@ -158,7 +158,7 @@ def run_node(words, env, cwd, expected, log: Path):
 
 
 def test_readme_ros2_run_commands_work_from_another_folder(install, colcon_env, tmp_path):
-    from hexapod_vibration.analysis.bag_io import write_strut_bag
+    from hexapod_vibration.analysis.bag_writer import write_strut_bag
 
     work = tmp_path / 'elsewhere'
     work.mkdir()

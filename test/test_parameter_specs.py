@@ -25,7 +25,7 @@ def test_params_yaml_is_generated_from_the_specs():
 
 
 def test_spec_constants_are_the_cores():
-    from hexapod_vibration.analysis.report import DEFAULT_WINDOW_S
+    from hexapod_vibration.analysis.report_windows import DEFAULT_WINDOW_S
     from hexapod_vibration.core.control import adaptation, mu_policy
     from hexapod_vibration.core.control.notch_supervisor import NotchConfig
     from hexapod_vibration.tools import analyze

@@ -302,7 +302,7 @@ def test_readme_tuning_with_hexapod_param(node_processes, ros_env, tmp_path):
 
 
 def test_readme_experiment_and_analyze_commands(ros_env, tmp_path):
-    from hexapod_vibration.analysis.bag_io import write_strut_bag
+    from hexapod_vibration.analysis.bag_writer import write_strut_bag
 
     ran = set()
     for command in readme_commands():

@@ -17,7 +17,7 @@ from rosbags.interfaces import Connection
 from rosbags.rosbag2 import StoragePlugin
 from rosbags.rosbag2.errors import WriterError
 
-from hexapod_vibration.analysis.bag_io import typestore
+from hexapod_vibration.analysis.bag_format import typestore
 from hexapod_vibration.analysis.bag_writer import JazzyWriter, stamp_of_cdr
 from hexapod_vibration.cdr import sample_index_of_cdr
 from hexapod_vibration.core.loop.sample_set import SampleSet

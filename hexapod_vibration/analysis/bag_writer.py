@@ -1,6 +1,8 @@
-"""A rosbag2 writer whose bags look like ROS 2 Jazzy's and survive a kill (no ROS import).
+"""Writing rosbag2 bags without ROS: the recorder's writer, and strut topics on the sample grid.
 
-:class:`JazzyWriter` is rosbags' ``Writer`` with what rosbag2 Jazzy does differently:
+:func:`write_strut_bag` writes strut topics stamped on the sample grid (tests and tools).
+:class:`JazzyWriter` (the recorder's) is rosbags' ``Writer`` with what rosbag2 Jazzy does
+differently:
 
 - files named ``<bag>_0.mcap`` / ``<bag>_0.db3`` (rosbags names them ``<bag>.mcap``);
 - ``ros_distro: jazzy`` in ``metadata.yaml`` (and in the serialized metadata stored in the
@@ -20,9 +22,11 @@ import os
 import sqlite3
 import struct
 import time
+from collections.abc import Iterable, Mapping
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
+import numpy as np
 import yaml
 from rosbags.interfaces import (
     Qos,
@@ -33,16 +37,22 @@ from rosbags.interfaces import (
     QosTime,
 )
 from rosbags.rosbag2 import StoragePlugin, Writer
+from rosbags.rosbag2.errors import WriterError
 from rosbags.rosbag2.storage_mcap import McapWriter
 from rosbags.rosbag2.storage_sqlite3 import Sqlite3Writer
 
-from hexapod_vibration.analysis.bag_io import (
+from hexapod_vibration.analysis.bag_files import BagError
+from hexapod_vibration.analysis.bag_format import (
     BAG_VERSION,
     CLOCK_TOPIC,
     DIAGNOSTICS_TOPIC,
     RECORDING_KEY,
     RECORDING_OPEN,
+    STORAGE_PLUGINS,
+    STRUT_MSGTYPE,
+    typestore,
 )
+from hexapod_vibration.contract import SAMPLE_RATE_HZ, STRUT_COUNT, STRUT_LABEL, sample_label
 
 ROS_DISTRO = 'jazzy'
 _TIME = struct.Struct('<iI')
@@ -207,3 +217,74 @@ def stamp_of_cdr(topic: str, data: bytes) -> int:
         return 0
     sec, nanosec = _TIME.unpack_from(data, 4)
     return max(sec, 0) * 1_000_000_000 + nanosec
+
+
+def _strut_message(values: np.ndarray, index: int | None) -> Any:
+    """A rosbags Float64MultiArray with the contract layout (index in band when given)."""
+    store = typestore()
+    dim_type = store.types['std_msgs/msg/MultiArrayDimension']
+    dims = [dim_type(label=STRUT_LABEL, size=STRUT_COUNT, stride=STRUT_COUNT)]
+    if index is not None:
+        dims.append(dim_type(label=sample_label(index), size=1, stride=1))
+    layout = store.types['std_msgs/msg/MultiArrayLayout'](dim=dims, data_offset=0)
+    return store.types[STRUT_MSGTYPE](layout=layout, data=np.asarray(values, np.float64))
+
+
+def _timeline(
+    series: Mapping[str, tuple[Iterable[int], np.ndarray]],
+    sample_rate_hz: float,
+    start_time_ns: int,
+) -> list[tuple[int, str, int, np.ndarray]]:
+    """``(timestamp_ns, topic, sample, values)`` of every message, in time order."""
+    rows = []
+    for topic, (indices, values) in series.items():
+        index = np.asarray(list(indices), dtype=np.int64)
+        array = np.asarray(values, dtype=np.float64).reshape(index.size, STRUT_COUNT)
+        stamps = start_time_ns + np.rint(index * (1e9 / sample_rate_hz)).astype(np.int64)
+        rows.extend(zip(stamps.tolist(), [topic] * index.size, index.tolist(), array, strict=True))
+    rows.sort(key=lambda row: row[0])
+    return rows
+
+
+def write_strut_bag(
+    path: str | Path,
+    series: Mapping[str, tuple[Iterable[int], np.ndarray]],
+    storage: Literal['mcap', 'sqlite3'] = 'mcap',
+    sample_rate_hz: float = SAMPLE_RATE_HZ,
+    in_band_index: bool = True,
+    start_time_ns: int = 0,
+) -> Path:
+    """Write strut topics to a new rosbag2 bag, stamped on the sample grid.
+
+    Message ``n`` of a topic is stamped ``start_time_ns + n / fs``; with ``in_band_index``
+    it also carries ``sample:<n>`` in ``layout.dim[1]``, as the driver and controllers do.
+
+    Args:
+        path: Bag directory to create (must not exist).
+        series: ``{topic: (sample indices (N,), values (N, 6))}``; indices may have gaps
+            or repeats (to test the reader).
+        storage: ``"mcap"`` or ``"sqlite3"``.
+        sample_rate_hz: Loop rate (Hz) for the timestamps.
+        in_band_index: Put the sample index in band.
+        start_time_ns: Timestamp (ns) of sample 0.
+
+    Returns:
+        The bag directory.
+
+    Raises:
+        BagError: ``path`` exists already or cannot be written.
+    """
+    plugin = STORAGE_PLUGINS[storage]
+    store = typestore()
+    try:
+        with Writer(path, version=BAG_VERSION, storage_plugin=plugin) as writer:
+            conns = {
+                topic: writer.add_connection(topic, STRUT_MSGTYPE, typestore=store)
+                for topic in series
+            }
+            for stamp, topic, index, values in _timeline(series, sample_rate_hz, start_time_ns):
+                msg = _strut_message(values, index if in_band_index else None)
+                writer.write(conns[topic], stamp, store.serialize_cdr(msg, STRUT_MSGTYPE))
+    except (WriterError, OSError) as err:
+        raise BagError(f'cannot write bag {path}: {err}') from err
+    return Path(path)

@@ -7,7 +7,7 @@ frequency track f(t): with the analytic signal ``x_a`` (scipy.signal.hilbert),
     y(t) = Re{ x_a(t) exp(-j 2 pi integral_0^t (f(s) - f_ref) ds) },
 
 the tone becomes a steady line at ``f_ref`` (the track's mean over the window) and the
-report's one level function (:func:`hexapod_vibration.analysis.report.tone_levels`) measures
+report's one level function (:func:`hexapod_vibration.analysis.levels.tone_levels`) measures
 it there: its main-lobe band follows the tone. For a steady track ``y`` is ``x`` itself
 (the real part of the analytic signal), so a stationary tone keeps its fixed-band level.
 

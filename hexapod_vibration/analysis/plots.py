@@ -39,12 +39,8 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from hexapod_vibration.analysis.report import (  # noqa: E402
-    FS,
-    POSE_BLOCK,
-    Analysis,
-    BagSignals,
-)
+from hexapod_vibration.analysis.bag_signals import FS, POSE_BLOCK, BagSignals  # noqa: E402
+from hexapod_vibration.analysis.report import Analysis  # noqa: E402
 from hexapod_vibration.contract import (  # noqa: E402
     DISTURBANCE_FREQUENCIES_TOPIC,
     NEVER_WORSE_DB,

@@ -12,10 +12,11 @@ what was written survives a SIGKILL:
   messages, so a killed recording loses at most the last uncommitted transaction;
   :class:`_SqlitePrefix` reads what was committed (main file plus the log).
 
-Both give the interface of rosbags' ``Reader`` that :mod:`bag_io` uses (``path``,
-``topics``, ``connections``, ``messages()``, ``close()``) and say in ``recovered`` what
-they read. No ROS import, no third-party MCAP library (the tests check this reader
-against the independent ``mcap`` package).
+Both give the interface of rosbags' ``Reader`` that
+:mod:`~hexapod_vibration.analysis.bag_files` uses (``path``, ``topics``, ``connections``,
+``messages()``, ``close()``) and say in ``recovered`` what they read. No ROS import, no
+third-party MCAP library (the tests check this reader against the independent ``mcap``
+package).
 """
 
 from __future__ import annotations

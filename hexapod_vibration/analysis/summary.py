@@ -12,7 +12,7 @@ import os
 from pathlib import Path
 from typing import Any
 
-from hexapod_vibration.analysis.report import level_text, reduction_text
+from hexapod_vibration.analysis.report_tables import level_text, reduction_text
 
 
 def tone_table(result: Any) -> list[str]:

@@ -9,7 +9,7 @@ control: a moving tone, a drift or the noise floor is compared at the same time.
 - The check (:func:`check_twin`): the same run length, no control-on in the twin, and the
   top plate's z acceleration identical (to ``IDENTICAL_M_S2``) on every sample before
   control-on; otherwise :class:`NotATwin`.
-- ``tones``: each report tone's level (:func:`~hexapod_vibration.analysis.report.tone_levels`)
+- ``tones``: each report tone's level (:func:`~hexapod_vibration.analysis.levels.tone_levels`)
   in the controlled window and in the twin's same samples; a tone whose recorded track
   moved over the window is measured in a band following it (both signals dechirped along
   the same track of the run, :func:`~hexapod_vibration.analysis.moving_tones.dechirp`).
@@ -24,7 +24,7 @@ control: a moving tone, a drift or the noise floor is compared at the same time.
 - ``sensitivity``: the measured |S(f)|, H1 from twin z to controlled z
   (:func:`~hexapod_vibration.analysis.moving_tones.transfer_function_db`), against the
   recorded prediction near the tones
-  (:func:`~hexapod_vibration.analysis.report.prediction_difference`).
+  (:func:`~hexapod_vibration.analysis.sensitivity_check.prediction_difference`).
 """
 
 from __future__ import annotations
@@ -35,18 +35,15 @@ from typing import Any
 import numpy as np
 
 from hexapod_vibration.analysis import moving_tones
-from hexapod_vibration.analysis.report import (
-    FS,
-    SNAP_HZ,
-    Analysis,
-    BagSignals,
-    level_text,
+from hexapod_vibration.analysis.bag_signals import FS, BagSignals
+from hexapod_vibration.analysis.following import SNAP_HZ, tone_tracks
+from hexapod_vibration.analysis.levels import tone_levels
+from hexapod_vibration.analysis.report import Analysis
+from hexapod_vibration.analysis.report_tables import level_text, reduction_text
+from hexapod_vibration.analysis.sensitivity_check import (
     oscillators_moved_hz,
     prediction_difference,
     recorded_prediction,
-    reduction_text,
-    tone_levels,
-    tone_tracks,
 )
 from hexapod_vibration.contract import DISTURBANCE_FREQUENCIES_TOPIC, NEVER_WORSE_DB
 from hexapod_vibration.core import spectrum
@@ -368,7 +365,7 @@ def _sensitivity(signals: BagSignals, result: Analysis, z_ctl: np.ndarray,
     """H1 (twin z -> controlled z) against the recorded prediction; adds the curve.
 
     ``moved_hz``: how far an oscillator ran from its configured tone over the window (Hz); see
-    :func:`~hexapod_vibration.analysis.report.prediction_difference`.
+    :func:`~hexapod_vibration.analysis.sensitivity_check.prediction_difference`.
     """
     f, measured, coherence = moving_tones.transfer_function_db(z_twin, z_ctl, FS)
     result.sensitivity_curves["twin_frequency_hz"] = f

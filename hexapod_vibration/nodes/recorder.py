@@ -38,7 +38,7 @@ from rclpy.signals import SignalHandlerOptions
 from rclpy.subscription import Subscription
 
 from hexapod_vibration import cli
-from hexapod_vibration.analysis.bag_io import ACCEL_TOPIC, RUN_RECORD_KEY, STORAGE_PLUGINS
+from hexapod_vibration.analysis.bag_format import ACCEL_TOPIC, RUN_RECORD_KEY, STORAGE_PLUGINS
 from hexapod_vibration.analysis.bag_recording import FLUSH_PERIOD_S, BagRecording, RecordingError
 from hexapod_vibration.analysis.bag_writer import qos_from_rclpy
 from hexapod_vibration.parameter_specs import PPH_RECORDER

@@ -10,7 +10,7 @@ from rclpy.qos import QoSProfile
 from rosgraph_msgs.msg import Clock
 from std_msgs.msg import Float64MultiArray
 
-from hexapod_vibration.analysis.bag_io import (
+from hexapod_vibration.analysis.bag_format import (
     FREQUENCY_TOPICS,
     SENSITIVITY_TOPIC,
     STRUT_TOPICS,

@@ -62,15 +62,15 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     """Entry point; returns the exit code (2 on bad input, with the reason on stderr)."""
     args = build_parser().parse_args(argv)
-    from hexapod_vibration.analysis.bag_io import BagError
-    from hexapod_vibration.analysis.report import (
-        Request,
-        WindowTooShort,
-        analyze_bag,
+    from hexapod_vibration.analysis.bag_analysis import analyze_bag
+    from hexapod_vibration.analysis.bag_files import BagError
+    from hexapod_vibration.analysis.report import Request
+    from hexapod_vibration.analysis.report_tables import (
         format_following,
         format_harmonics,
         format_table,
     )
+    from hexapod_vibration.analysis.report_windows import WindowTooShort
     from hexapod_vibration.core.model.config import load_model_config
 
     try:

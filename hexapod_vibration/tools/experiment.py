@@ -58,7 +58,7 @@ from hexapod_vibration.tools import outputs
 from hexapod_vibration.tools.processes import Child, spawn_module, stop_all
 
 if TYPE_CHECKING:       # imported where used: ``experiment --help`` stays cheap
-    from hexapod_vibration.analysis.report import RunRecord
+    from hexapod_vibration.analysis.run_record import RunRecord
     from hexapod_vibration.core.sim.scenario import Scenario
 
 PAPER_REDUCTION_DB = {
@@ -205,7 +205,7 @@ def params_file_text(scenario: Scenario, mode: str, model_file: str = "") -> str
 
 def run_record(scenario: Scenario, mode: str) -> RunRecord:
     """What the bag must say about this run so that ``analyze`` reports it as planned."""
-    from hexapod_vibration.analysis.report import RunRecord
+    from hexapod_vibration.analysis.run_record import RunRecord
     from hexapod_vibration.core.control.adaptation import ToneResponseIdentifier
 
     notch = [float(f) for f in scenario.notch.tone_frequencies_hz]
@@ -512,7 +512,7 @@ class ExperimentRun:
 
     def loop_topics(self) -> list[str]:
         """The per-sample topics the bag must hold every sample of."""
-        from hexapod_vibration.analysis.bag_io import STRUT_TOPICS
+        from hexapod_vibration.analysis.bag_format import STRUT_TOPICS
 
         return [t for t in STRUT_TOPICS if t != "/pph/notch_command" or self.has_notch]
 
@@ -635,7 +635,7 @@ def run_scenario(options: RunOptions, plots: bool = True) -> Any:
 def analyze_run(out: Path, model_file: Path | None, twin_bag: Path | None = None,
                 plots: bool = True) -> Any:
     """``analyze OUT/bag [--twin TWIN_BAG] --out OUT`` with the run's model (None: packaged)."""
-    from hexapod_vibration.analysis.report import analyze_bag
+    from hexapod_vibration.analysis.bag_analysis import analyze_bag
     from hexapod_vibration.core.model.config import load_model_config
 
     model = load_model_config(model_file or config_path("pph_model.yaml"))
@@ -744,8 +744,8 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _run_all(args: argparse.Namespace, scenarios: list[Scenario]) -> int:
-    from hexapod_vibration.analysis.bag_io import BagError
-    from hexapod_vibration.analysis.report import WindowTooShort
+    from hexapod_vibration.analysis.bag_files import BagError
+    from hexapod_vibration.analysis.report_windows import WindowTooShort
     from hexapod_vibration.analysis.summary import write_summary
 
     tables, results = [], []
@@ -794,7 +794,7 @@ def _run_all(args: argparse.Namespace, scenarios: list[Scenario]) -> int:
 
 def scenario_table(result: Any) -> str:
     """The printed table of one scenario: tones (with the paper's column) or harmonics."""
-    from hexapod_vibration.analysis.report import (
+    from hexapod_vibration.analysis.report_tables import (
         format_following,
         format_harmonics,
         format_table,

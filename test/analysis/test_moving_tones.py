@@ -17,7 +17,8 @@ from bag_factory import (
 )
 
 from hexapod_vibration.analysis import moving_tones
-from hexapod_vibration.analysis.report import RunRecord, tone_levels
+from hexapod_vibration.analysis.levels import tone_levels
+from hexapod_vibration.analysis.run_record import RunRecord
 from hexapod_vibration.core.spectrum import G0
 from hexapod_vibration.tools import analyze
 
@@ -156,7 +157,7 @@ def test_report_compares_the_recorded_prediction_and_plots_both(tmp_path):
 
 def test_a_tracked_notch_tone_is_its_reported_tone_and_keeps_its_nominal_label(tmp_path):
     """The diagnostics' tones_hz of a tracking notch end a few mHz off the reported tone."""
-    from hexapod_vibration.analysis.report import snap_to_tones
+    from hexapod_vibration.analysis.following import snap_to_tones
 
     assert snap_to_tones([40.398966, 80.0, 55.0], [40.4, 80.02, 60.0]) == [40.4, 80.02, 55.0]
     bag = _drift_bag(tmp_path, sensitivity=False, notch_tones=(39.9831,))

@@ -7,7 +7,8 @@ import pytest
 from bag_factory import G0, frequencies_cdr, notch_status, struts_from_z, tone, write_bag
 
 from hexapod_vibration.analysis import plots
-from hexapod_vibration.analysis.report import RunRecord, analyze_bag
+from hexapod_vibration.analysis.bag_analysis import analyze_bag
+from hexapod_vibration.analysis.run_record import RunRecord
 from hexapod_vibration.core.model.config import load_model_config
 from hexapod_vibration.paths import config_path
 

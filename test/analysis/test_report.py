@@ -15,7 +15,7 @@ from bag_factory import (
     write_bag,
 )
 
-from hexapod_vibration.analysis.report import RunRecord
+from hexapod_vibration.analysis.run_record import RunRecord
 from hexapod_vibration.bench import core_bench
 from hexapod_vibration.core import spectrum
 from hexapod_vibration.core.spectrum import G0
@@ -210,9 +210,10 @@ def test_memory_does_not_grow_with_the_messages_of_a_long_bag(tmp_path):
 
     from rosbags.rosbag2 import StoragePlugin, Writer
 
-    from hexapod_vibration.analysis.bag_io import BAG_VERSION, STRUT_MSGTYPE, STRUT_TOPICS
-    from hexapod_vibration.analysis.bag_io import typestore as store
-    from hexapod_vibration.analysis.report import Request, analyze_signals, load_signals
+    from hexapod_vibration.analysis.bag_format import BAG_VERSION, STRUT_MSGTYPE, STRUT_TOPICS
+    from hexapod_vibration.analysis.bag_format import typestore as store
+    from hexapod_vibration.analysis.bag_signals import load_signals
+    from hexapod_vibration.analysis.report import Request, analyze_signals
     from hexapod_vibration.core.model.config import load_model_config
     from hexapod_vibration.paths import config_path
 
@@ -239,7 +240,7 @@ def test_memory_does_not_grow_with_the_messages_of_a_long_bag(tmp_path):
 
 def test_the_following_table_lists_a_tone_that_moved_between_the_windows():
     """A spin-up: 30 Hz before control, held at 50 Hz at the end; a mismatch held at 40.4."""
-    from hexapod_vibration.analysis.report import format_following
+    from hexapod_vibration.analysis.report_tables import format_following
 
     def row(f, before, after):
         return {"frequency_hz": f, "uncontrolled_db": -30.0, "controlled_db": -90.0,

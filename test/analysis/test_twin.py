@@ -23,7 +23,7 @@ from bag_factory import (
 from scipy import signal
 
 from hexapod_vibration.analysis import moving_tones, twin
-from hexapod_vibration.analysis.report import RunRecord
+from hexapod_vibration.analysis.run_record import RunRecord
 from hexapod_vibration.core.spectrum import G0
 from hexapod_vibration.tools import analyze
 

@@ -6,7 +6,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from hexapod_vibration.analysis.report import FS, tone_levels
+from hexapod_vibration.analysis.bag_signals import FS
+from hexapod_vibration.analysis.levels import tone_levels
 from hexapod_vibration.core.model.config import load_model_config
 from hexapod_vibration.core.sim.closed_loop import CoreLoop, LoopRecord
 from hexapod_vibration.core.sim.scenario import load_scenario

@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from hexapod_vibration.analysis.report import tone_levels
+from hexapod_vibration.analysis.levels import tone_levels
 from hexapod_vibration.core.model.config import load_model_config
 from hexapod_vibration.core.sim.closed_loop import CoreLoop
 from hexapod_vibration.core.sim.scenario import load_scenario

@@ -11,7 +11,7 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 from std_msgs.msg import Float64MultiArray
 
-from hexapod_vibration.analysis.bag_io import read_clock, read_strut_topics
+from hexapod_vibration.analysis.bag_reading import read_clock, read_strut_topics
 from hexapod_vibration.ros.messages import make_strut_array
 from hexapod_vibration.ros.qos import DIAGNOSTICS_QOS
 
@@ -258,7 +258,7 @@ def test_a_killed_recorder_leaves_a_bag_the_analysis_reads(
     """SIGKILL: every message flushed before the kill is read back, with the run record."""
     import signal as signals
 
-    from hexapod_vibration.analysis.bag_io import read_bag
+    from hexapod_vibration.analysis.bag_reading import read_bag
 
     bag = tmp_path / 'bag'
     values = np.random.default_rng(6).normal(size=(1000, 6))   # within the publisher's depth

@@ -6,7 +6,7 @@ import shutil
 import numpy as np
 import pytest
 
-from hexapod_vibration.analysis.bag_io import write_strut_bag
+from hexapod_vibration.analysis.bag_writer import write_strut_bag
 from hexapod_vibration.core.model.geometry import CubicHexapodGeometry
 from hexapod_vibration.core.spectrum import G0
 from hexapod_vibration.tools import analyze

@@ -11,7 +11,7 @@ import pytest
 import yaml
 from node_graph import run_experiment
 
-from hexapod_vibration.analysis.bag_io import read_strut_topics
+from hexapod_vibration.analysis.bag_reading import read_strut_topics
 
 SCENARIO = {
     "name": "short_single_tone",

@@ -21,7 +21,7 @@ import pytest
 import yaml
 from node_graph import run_experiment
 
-from hexapod_vibration.analysis.bag_io import read_bag
+from hexapod_vibration.analysis.bag_reading import read_bag
 from hexapod_vibration.core.control.notch_supervisor import NotchSupervisor
 from hexapod_vibration.paths import scenario_path
 

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from hexapod_vibration.analysis.bag_io import write_strut_bag
+from hexapod_vibration.analysis.bag_writer import write_strut_bag
 from hexapod_vibration.tools import outputs
 
 HANG_GUARD_S = 120.0

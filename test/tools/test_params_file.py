@@ -14,7 +14,7 @@ import numpy as np
 import yaml
 from node_graph import HANG_GUARD_S, ParameterClient, StrutTopic, run_experiment, wait_until
 
-from hexapod_vibration.analysis.bag_io import read_strut_topics
+from hexapod_vibration.analysis.bag_reading import read_strut_topics
 
 SCENARIO = {
     'name': 'params_reuse', 'seed': 7, 'duration_s': 6.5, 'identify_at_s': 0.2,

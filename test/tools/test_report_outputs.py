@@ -10,7 +10,9 @@ import numpy as np
 from bag_factory import notch_status, struts_from_z, tone, write_bag
 from PIL import Image
 
-from hexapod_vibration.analysis.report import Request, RunRecord, analyze_bag
+from hexapod_vibration.analysis.bag_analysis import analyze_bag
+from hexapod_vibration.analysis.report import Request
+from hexapod_vibration.analysis.run_record import RunRecord
 from hexapod_vibration.analysis.summary import write_summary
 from hexapod_vibration.core.model.config import load_model_config
 from hexapod_vibration.core.spectrum import G0

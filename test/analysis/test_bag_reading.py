@@ -1,4 +1,4 @@
-"""bag_io: bags written independently (rosbags Writer) read back exactly, damage is reported."""
+"""Bags written independently (rosbags Writer) read back exactly; damage is reported."""
 
 from __future__ import annotations
 
@@ -9,19 +9,16 @@ import numpy as np
 import pytest
 from rosbags.rosbag2 import StoragePlugin, Writer
 
-from hexapod_vibration.analysis.bag_io import (
-    BAG_VERSION,
-    STRUT_MSGTYPE,
-    BagError,
+from hexapod_vibration.analysis.bag_files import BagError
+from hexapod_vibration.analysis.bag_format import BAG_VERSION, STRUT_MSGTYPE, typestore
+from hexapod_vibration.analysis.bag_reading import (
     read_clock,
     read_parameter_events,
     read_strut_topics,
-    typestore,
-    write_strut_bag,
 )
+from hexapod_vibration.analysis.bag_writer import write_strut_bag
 
 STORAGES = ['mcap', 'sqlite3']
-DATA_SUFFIX = {'mcap': '.mcap', 'sqlite3': '.db3'}
 PLUGINS = {'mcap': StoragePlugin.MCAP, 'sqlite3': StoragePlugin.SQLITE3}
 WALL_CLOCK_NS = 1_763_000_000_123_456_789  # a bag recorded at wall-clock time
 
