@@ -36,7 +36,8 @@ from hexapod_vibration.bench.node_budget import (
 from hexapod_vibration.contract import SAMPLE_RATE_HZ
 from hexapod_vibration.core.sim.scenario import load_scenario
 from hexapod_vibration.paths import scenario_path
-from hexapod_vibration.tools.experiment import ExperimentError, Supervisor, node_parameters
+from hexapod_vibration.tools.experiment_setup import node_parameters
+from hexapod_vibration.tools.graph_monitor import ExperimentError, GraphMonitor
 from hexapod_vibration.tools.processes import Child, spawn_module, stop_all
 
 STALL_S = 20.0
@@ -77,7 +78,7 @@ def _run(out: Path, mode: str, executor: str, wall_s: float, composed: bool
          ) -> dict[str, Any]:
     """One run; returns the driver's last diagnostics (floats) or a stall note."""
     children = _start_graph(out, mode, executor, composed)
-    sup = Supervisor(watch_clock=False)
+    sup = GraphMonitor(watch_clock=False)
     try:
         start = time.monotonic()
         while sup.sim_time_s < 0.0:           # handshake / discovery
@@ -216,7 +217,7 @@ def measure_budget(out: Path, quick: bool) -> dict[str, Any]:
     budget = {}
     for setup in BUDGET_SETUPS:
         print(f"CPU budget: {setup.key}, {warmup_s:g} + {measure_s:g} s ...", flush=True)
-        watch = Supervisor(watch_clock=False)
+        watch = GraphMonitor(watch_clock=False)
         try:
             params = _write_params(out, setup.mode, "waitset", setup.priority)
             budget[setup.key] = measure(out, params, setup, warmup_s, measure_s, watch)

@@ -41,6 +41,8 @@ from typing import Any
 from hexapod_vibration import cli
 from hexapod_vibration.paths import scenario_path
 from hexapod_vibration.tools import outputs
+from hexapod_vibration.tools.experiment_setup import params_file_text
+from hexapod_vibration.tools.graph_monitor import GraphMonitor
 from hexapod_vibration.tools.processes import Child, spawn_module, stop_all
 
 DEFAULT_SCENARIO = "soak_drift"
@@ -174,7 +176,6 @@ def warnings_in_logs(children: list[Child]) -> dict[str, list[str]]:
 def run(args: argparse.Namespace) -> int:
     """The soak itself; returns the exit code."""
     from hexapod_vibration.core.sim.scenario import load_scenario
-    from hexapod_vibration.tools.experiment import Supervisor, params_file_text
 
     path = Path(args.scenario) if args.scenario.endswith((".yaml", ".yml")) \
         else scenario_path(args.scenario)
@@ -185,22 +186,22 @@ def run(args: argparse.Namespace) -> int:
     has_notch = bool(scenario.notch.tone_frequencies_hz)
     samples = Samples()
     children: list[Child] = []
-    sup = None
+    graph = None
     start_wall = time.monotonic()
     result: dict[str, Any] = {"scenario": scenario.name, "duration_s": args.duration,
                               "layout": "pph_graph" if args.composed else "processes"}
     try:
         children = start_graph(params_file, args.out, args.composed, has_notch)
-        sup = Supervisor(watch_clock=False)
-        AccelLevel(sup.node, samples)
-        result.update(_drive(sup, children, samples, scenario, args, has_notch))
+        graph = GraphMonitor(watch_clock=False)
+        AccelLevel(graph.node, samples)
+        result.update(_drive(graph, children, samples, scenario, args, has_notch))
     except KeyboardInterrupt:
         result["interrupted"] = True
     finally:
         with cli.deferred():
             stop_all(children)
-            if sup is not None:
-                sup.close()
+            if graph is not None:
+                graph.close()
     result["wall_s"] = time.monotonic() - start_wall
     result["warnings"] = warnings_in_logs(children)
     result.update(_summarise(samples, result))
@@ -211,7 +212,7 @@ def run(args: argparse.Namespace) -> int:
     return 0 if result["criteria"]["all_met"] else 1
 
 
-def _drive(sup: Any, children: list[Child], samples: Samples, scenario: Any,
+def _drive(graph: GraphMonitor, children: list[Child], samples: Samples, scenario: Any,
            args: argparse.Namespace, has_notch: bool) -> dict[str, Any]:
     """Run until ``duration`` sim seconds; sample RSS; switch control on."""
     control_on = scenario.control_on_s if has_notch else None
@@ -223,8 +224,8 @@ def _drive(sup: Any, children: list[Child], samples: Samples, scenario: Any,
             if not child.alive():
                 return {"died": f"{child.name} exited {child.process.returncode}: "
                                 f"{child.tail(5)}"}
-        sup.spin(0.2)
-        sim = max(sup.sim_time_s, 0.0)
+        graph.spin(0.2)
+        sim = max(graph.sim_time_s, 0.0)
         now = time.monotonic()
         if now >= next_rss:
             next_rss = now + args.rss_every
@@ -235,14 +236,14 @@ def _drive(sup: Any, children: list[Child], samples: Samples, scenario: Any,
                     samples.rss.setdefault(proc.name if proc else "soak", []).append(
                         (now, sim, mb))
         if control_on is not None and sim >= control_on:
-            sup.set_parameter("notch_controller", "enabled", True)
+            graph.set_parameter("notch_controller", "enabled", True)
             control_on = None
         if now - last_print > 30.0:
             last_print = now
-            print(f"  soak: sim {sim:7.1f} / {end_s:g} s, loop {sup.driver.get('rate_hz', '?')} "
-                  f"samples/s, notch {sup.notch.get('state', '-')}", flush=True)
+            print(f"  soak: sim {sim:7.1f} / {end_s:g} s, loop {graph.driver.get('rate_hz', '?')} "
+                  f"samples/s, notch {graph.notch.get('state', '-')}", flush=True)
         if sim >= end_s:
-            return {"driver": dict(sup.driver), "notch": dict(sup.notch)}
+            return {"driver": dict(graph.driver), "notch": dict(graph.notch)}
 
 
 def _summarise(samples: Samples, result: dict[str, Any]) -> dict[str, Any]:

@@ -2,7 +2,7 @@
 
 from hexapod_vibration.core.sim.scenario import scenario_from_dict
 from hexapod_vibration.parameter_specs import PPH_DRIVER, rotor_arrays
-from hexapod_vibration.tools.experiment import node_parameters
+from hexapod_vibration.tools.experiment_setup import node_parameters
 
 BASE = {"name": "spin", "duration_s": 4.0, "control_on_s": 2.0, "window_s": 1.0}
 ROTOR = {"orders": [1.0, 2.0, 3.0], "amplitudes_n": [20.0, 5.0, 2.0],
@@ -34,7 +34,7 @@ def test_model_overrides_reach_the_nodes_as_a_model_file(tmp_path):
     from hexapod_vibration.core.model.config import load_model_config
     from hexapod_vibration.core.sim.scenario import load_scenario
     from hexapod_vibration.paths import config_path, scenario_path
-    from hexapod_vibration.tools.experiment import model_file_text
+    from hexapod_vibration.tools.experiment_setup import model_file_text
 
     scenario = load_scenario(scenario_path("harmonic_rise"))
     path = tmp_path / "model.yaml"
@@ -72,7 +72,8 @@ def test_twin_is_refused_with_demo_realtime_or_an_existing_twin_bag(tmp_path):
 
 
 def test_the_twin_scenario_never_switches_control_on():
-    from hexapod_vibration.tools.experiment import run_record, twin_scenario
+    from hexapod_vibration.tools.experiment_run import twin_scenario
+    from hexapod_vibration.tools.experiment_setup import run_record
 
     scenario = scenario_from_dict({**BASE, "notch": {"tone_frequencies_hz": [40.0]}})
     twin = twin_scenario(scenario)

@@ -18,7 +18,7 @@ from hexapod_vibration.core.model.config import load_model_config
 from hexapod_vibration.core.spectrum import G0
 from hexapod_vibration.paths import config_path
 from hexapod_vibration.tools import experiment
-from hexapod_vibration.tools.experiment import Progress
+from hexapod_vibration.tools.progress import Progress
 
 MODEL = load_model_config(config_path('pph_model.yaml'))
 ON, END = 16000, 34000

@@ -1,0 +1,133 @@
+"""The experiment runner's own rclpy node: what the graph says, and the parameters it sets.
+
+It follows ``/clock`` (or the driver's sample on ``/diagnostics``) and every node's status,
+tells when the graph is discovered and matched and when the recorder has written every
+sample, and sets parameters through the nodes' parameter services. rclpy is imported when
+one is made (``experiment --help`` stays cheap).
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+from hexapod_vibration.contract import DRIVER_STATUS, NOTCH_STATUS, POINTING_STATUS
+
+
+class ExperimentError(RuntimeError):
+    """The experiment could not run (a process died, the graph never came up, ...)."""
+
+
+class GraphMonitor:
+    """The runner's in-process rclpy node: watches /clock and /diagnostics, sets parameters."""
+
+    def __init__(self, watch_clock: bool = True) -> None:
+        """Create the node on the caller's domain.
+
+        ``watch_clock=False``: no ``/clock`` subscription (a benchmark that must not add a
+        1 kHz subscriber to the loop it measures); ``sim_time_s`` then follows the
+        driver's ``sample`` on /diagnostics (once per simulated second).
+        """
+        import rclpy
+        from diagnostic_msgs.msg import DiagnosticArray
+        from rclpy.parameter_client import AsyncParameterClient
+        from rclpy.signals import SignalHandlerOptions
+        from rosgraph_msgs.msg import Clock
+
+        from hexapod_vibration.ros.qos import CLOCK_QOS, DIAGNOSTICS_QOS
+
+        self._rclpy = rclpy
+        # No rclpy signal handlers: they would shut this context down from another thread
+        # in the middle of a call (tracebacks); cli.StopSignal unwinds instead.
+        rclpy.init(args=[], signal_handler_options=SignalHandlerOptions.NO)
+        self.node = rclpy.create_node("experiment")
+        self.sim_time_s = -1.0
+        self.driver: dict[str, str] = {}
+        self.notch: dict[str, str] = {}
+        self.pointing: dict[str, str] = {}
+        self.recorder: dict[str, str] = {}
+        self._watch_clock = watch_clock
+        if watch_clock:
+            self.node.create_subscription(Clock, "/clock", self._on_clock, CLOCK_QOS)
+        self.node.create_subscription(DiagnosticArray, "/diagnostics", self._on_diag,
+                                      DIAGNOSTICS_QOS)
+        self.clients = {name: AsyncParameterClient(self.node, name)
+                        for name in ("pph_driver", "notch_controller", "pointing_controller")}
+
+    def _on_clock(self, msg: Any) -> None:
+        self.sim_time_s = msg.clock.sec + msg.clock.nanosec * 1e-9
+
+    def _on_diag(self, msg: Any) -> None:
+        for status in msg.status:
+            values = {kv.key: kv.value for kv in status.values}
+            if status.name == DRIVER_STATUS:
+                self.driver = values
+                if not self._watch_clock:
+                    self.sim_time_s = max(self.sim_time_s, int(values.get("sample", 0)) / 1e3)
+            elif status.name == NOTCH_STATUS:
+                self.notch = values
+            elif status.name == POINTING_STATUS:
+                self.pointing = values
+            elif status.name.startswith("pph_recorder"):
+                self.recorder = values
+
+    def spin(self, seconds: float) -> None:
+        """Process callbacks for ``seconds`` of wall time."""
+        end = time.monotonic() + seconds
+        while time.monotonic() < end:
+            self._rclpy.spin_once(self.node, timeout_sec=max(0.0, min(0.05, end -
+                                                                      time.monotonic())))
+
+    def graph_ready(self, with_notch: bool) -> bool:
+        """Recorder, controllers and driver are all discovered on the loop topics."""
+        n = self.node
+        needed = [n.count_subscribers("/pph/accel") >= (2 if with_notch else 1),
+                  n.count_subscribers("/pph/eddy") >= 2,
+                  n.count_publishers("/pph/accel") >= 1,
+                  n.count_publishers("/pph/pointing_command") >= 1]
+        if with_notch:
+            needed.append(n.count_publishers("/pph/notch_command") >= 1)
+        return all(needed)
+
+    def recorder_behind(self, topics: list[str], samples: int) -> list[str]:
+        """Topics of which the recorder reports fewer than ``samples`` messages written."""
+        return [t for t in topics if int(self.recorder.get(f"{t} messages", "0")) < samples]
+
+    def recorder_unmatched(self, topics: list[str]) -> list[str]:
+        """Topics on which the recorder itself reports no matched publisher yet."""
+        return [t for t in topics if int(self.recorder.get(f"{t} publishers", "0")) < 1]
+
+    def writers_unmatched(self, topics: list[str]) -> list[str]:
+        """Topics whose publisher has not matched every subscription the graph shows yet.
+
+        The publishers' side (:mod:`hexapod_vibration.ros.matching`): a subscription that
+        matched its publisher may not be matched by it yet, and loses what it sends.
+        """
+        from hexapod_vibration.ros.matching import unmatched_topics
+
+        return unmatched_topics((self.driver, self.notch, self.pointing), topics,
+                                self.node.count_subscribers)
+
+    def set_parameter(self, node: str, name: str, value: Any, timeout_s: float = 10.0) -> None:
+        """Set a parameter through the node's parameter service; raise if rejected."""
+        from rclpy.parameter import Parameter
+
+        client = self.clients[node]
+        if not client.wait_for_services(timeout_sec=timeout_s):
+            raise ExperimentError(f"/{node} parameter services not available")
+        future = client.set_parameters([Parameter(name, value=value)])
+        self._rclpy.spin_until_future_complete(self.node, future, timeout_sec=timeout_s)
+        if not future.done():
+            raise ExperimentError(f"/{node}: no answer setting {name}")
+        result = future.result().results[0]
+        if not result.successful:
+            raise ExperimentError(f"/{node} rejected {name}={value!r}: {result.reason}")
+
+    def held_at(self, sample: int) -> bool:
+        """True once the driver reported being held before ``sample``."""
+        return self.driver.get("held") == "true" and int(self.driver.get("sample", -1)) == sample
+
+    def close(self) -> None:
+        """Destroy the node and shut rclpy down."""
+        self.node.destroy_node()
+        self._rclpy.try_shutdown()
