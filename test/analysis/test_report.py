@@ -16,7 +16,7 @@ from bag_factory import (
 )
 
 from hexapod_vibration.analysis.run_record import RunRecord
-from hexapod_vibration.bench import core_bench
+from hexapod_vibration.bench import table1
 from hexapod_vibration.core import spectrum
 from hexapod_vibration.core.spectrum import G0
 from hexapod_vibration.tools import analyze
@@ -86,7 +86,7 @@ def test_convergence_is_not_fooled_by_gravity_and_matches_the_known_decay(tmp_pa
 def test_the_benchmark_uses_the_same_convergence_definition():
     z = close_tones_z()
     ours = spectrum.tone_convergence(z, FS, 40.0, ON, other_hz=CLOSE)
-    bench = core_bench.tone_convergence_s(z, FS, 40.0, ON / FS, CLOSE)
+    bench = table1.tone_convergence_s(z, FS, 40.0, ON / FS, CLOSE)
     assert bench['convergence_s'] == ours['convergence_s']
     assert bench['final_level_db'] == ours['final_level_db']
 

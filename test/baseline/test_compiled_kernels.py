@@ -8,8 +8,10 @@ import numpy as np
 import pytest
 
 from hexapod_vibration.baseline.compiled_kernels import CompiledFxlms, CompiledNotch
-from hexapod_vibration.bench import core_bench as bench
-from hexapod_vibration.bench.core_bench import make_fxlms, make_notch, tone_frequencies
+from hexapod_vibration.bench.compiled_costs import measure_compiled_costs
+from hexapod_vibration.bench.controllers import make_fxlms, make_notch, tone_frequencies
+from hexapod_vibration.bench.summary import _summary_compiled
+from hexapod_vibration.bench.timing import QUICK_TIMING
 from hexapod_vibration.core.control.phasor import RESYNC_SAMPLES
 
 # more than one phasor re-synchronisation, and the FxLMS warm-up (L + N - 1 samples)
@@ -105,7 +107,7 @@ def test_compiled_fxlms_refuses_a_used_or_frozen_controller():
 
 def test_bench_skips_the_compiled_comparison_without_numba(monkeypatch):
     monkeypatch.setitem(sys.modules, 'numba', None)
-    result = bench.measure_compiled_costs(bench.QUICK_TIMING)
+    result = measure_compiled_costs(QUICK_TIMING)
     assert result == {'compiled': {'skipped': 'numba is not installed'}}
-    lines = bench._summary_compiled(result)
+    lines = _summary_compiled(result)
     assert 'not measured (numba is not installed)' in lines[0]

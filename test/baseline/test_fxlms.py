@@ -20,7 +20,7 @@ from hexapod_vibration.baseline.fxlms import (
     fir_frequency_response,
     multiply_adds_per_sample,
 )
-from hexapod_vibration.bench import core_bench as bench
+from hexapod_vibration.bench import cli, costs, table1
 from hexapod_vibration.core.control.adaptation import ToneResponseIdentifier
 from hexapod_vibration.core.model.config import load_model_config
 from hexapod_vibration.paths import config_path
@@ -267,7 +267,7 @@ def test_vectorized_step_matches_explicit_loops_across_history_wraps():
 
 
 def test_core_loop_rejects_identification_overlapping_the_uncontrolled_window():
-    sc = bench.table1_scenario(quick=True)
+    sc = table1.table1_scenario(quick=True)
     config = load_model_config(config_path('pph_model.yaml'), sc.model_overrides)
     with pytest.raises(ValueError, match='overlap'):
         FxlmsCoreLoop(config, dataclasses.replace(sc, control_on_s=6.5, window_s=2.0))
@@ -282,16 +282,16 @@ def _report(*tones):
 
 def test_equal_attenuation_counts_floor_limited_tones_as_equal():
     notch = _report((80.0, True), (50.0, True))
-    assert bench.equal_attenuation(notch, _report((70.0, True), (45.0, True)), ['40', '80'])
-    assert bench.equal_attenuation(notch, _report((78.0, False), (49.0, False)), ['40', '80'])
-    assert not bench.equal_attenuation(notch, _report((76.0, False), (50.0, True)),
+    assert table1.equal_attenuation(notch, _report((70.0, True), (45.0, True)), ['40', '80'])
+    assert table1.equal_attenuation(notch, _report((78.0, False), (49.0, False)), ['40', '80'])
+    assert not table1.equal_attenuation(notch, _report((76.0, False), (50.0, True)),
                                        ['40', '80'])
-    assert not bench.equal_attenuation(notch, _report((90.0, True), (20.0, False)),
+    assert not table1.equal_attenuation(notch, _report((90.0, True), (20.0, False)),
                                        ['40', '80'])
 
 
 def test_linear_fit_exact_line():
-    fit = bench.linear_fit([1, 2, 4, 8], [3.0, 5.0, 9.0, 17.0])
+    fit = costs.linear_fit([1, 2, 4, 8], [3.0, 5.0, 9.0, 17.0])
     assert fit['slope'] == pytest.approx(2.0)
     assert fit['intercept'] == pytest.approx(1.0)
     assert fit['r2'] == pytest.approx(1.0)
@@ -303,7 +303,7 @@ def _positive_finite(x):
 
 def test_bench_quick_writes_positive_finite_numbers(tmp_path, capsys):
     # --skip-sweep: the sweep's Dask cluster (~15 s here) is exercised by test/sweep
-    assert bench.main(['--out', str(tmp_path), '--quick', '--skip-ros', '--skip-sweep']) == 0
+    assert cli.main(['--out', str(tmp_path), '--quick', '--skip-ros', '--skip-sweep']) == 0
     results = json.loads((tmp_path / 'results.json').read_text())
     assert 'sweep_throughput' not in results
     summary = (tmp_path / 'summary.md').read_text()

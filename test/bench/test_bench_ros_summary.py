@@ -8,12 +8,12 @@ from __future__ import annotations
 
 import math
 
-from hexapod_vibration.bench.core_bench import _summary_ros
 from hexapod_vibration.bench.ros_bench import (
     CONFIGURATIONS,
     _realtime_block,
     ros_summary_markdown,
 )
+from hexapod_vibration.bench.summary import _summary_ros
 
 
 def _diagnostics(samples: float, late: float) -> dict:
