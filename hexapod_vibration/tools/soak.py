@@ -39,6 +39,7 @@ from pathlib import Path
 from typing import Any
 
 from hexapod_vibration import cli
+from hexapod_vibration.contract import InvalidStrutMessage
 from hexapod_vibration.paths import scenario_path
 from hexapod_vibration.tools import outputs
 from hexapod_vibration.tools.experiment_setup import params_file_text
@@ -129,11 +130,11 @@ class AccelLevel:
                                  raw=True)
 
     def _on_accel(self, data: bytes) -> None:
-        from hexapod_vibration.ros import messages
+        from hexapod_vibration.cdr import decode_strut_cdr
 
         try:
-            values, index = messages.decode_strut_cdr(data)
-        except (messages.InvalidStrutMessage, messages.UnsupportedCdr, ValueError):
+            values, index, _ = decode_strut_cdr(data)
+        except InvalidStrutMessage:
             return
         if index is None:
             return
