@@ -1,7 +1,7 @@
 """The loop's hand-written CDR (hexapod_vibration.cdr) against rclpy's own serializer.
 
-And hostile bytes: each case once crashed or fooled a receiving path that fell back on
-rclpy's deserializer.
+And hostile bytes, refused without an exception: rclpy's deserializer raises ``RMWError``
+on some of them and decodes others into garbage.
 """
 
 import math
@@ -210,7 +210,7 @@ HOSTILE = _hostile_bytes()
 
 @pytest.mark.parametrize('name', sorted(HOSTILE))
 def test_hostile_bytes_are_refused_without_an_exception(name):
-    """Old code: rclpy's fallback raised RMWError (crashing the node) or decoded garbage."""
+    """Where rclpy's deserializer would raise RMWError (crashing the node) or decode garbage."""
     logger = _Logger()
     assert receive_strut_sample(HOSTILE[name], logger, '/pph/accel') is None
     assert receive_strut_array(HOSTILE[name], logger, '/pph/accel') is None

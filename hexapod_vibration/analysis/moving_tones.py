@@ -1,4 +1,4 @@
-"""Tones that move: a band that follows each one, and the measured sensitivity (issues 11, 12).
+"""Tones that move: a band that follows each one, and the measured sensitivity.
 
 A fixed-frequency level means nothing for a tone that drifts or spins up: its energy
 spreads over the band it sweeps. Here the signal is *dechirped* along the tone's recorded

@@ -123,8 +123,8 @@ class ExperimentRun:
         self.children.append(start_child("pph_recorder", "hexapod_vibration.nodes.recorder", [
             *common, "-p", f"bag_path:={self.bag}", "-p", f"storage:={self.o.storage}"], logs))
         # Lockstep: the breakpoints and the progress come from the driver's status; a 1 kHz
-        # /clock reader here only cost the runner (75 % of its CPU was rclpy's executor
-        # waking for it) and the driver a reader to serve.
+        # /clock reader here would only cost the runner (three quarters of its CPU: rclpy's
+        # executor waking for it) and the driver a reader to serve.
         self.graph = GraphMonitor(watch_clock=not self.lockstep)
         if self.o.composed:
             self.children.append(start_child("pph_graph", "hexapod_vibration.nodes.pph_graph",

@@ -23,7 +23,7 @@ medians of the first and last tenth of those samples over the time between them;
 MB per hour of wall time and per hour of simulated time. Divergence: the last window's
 level against the best controlled one, and against the uncontrolled level. Writes
 ``DIR/soak.json`` and ``DIR/rss.csv`` (atomically) and prints a summary; exit 0 when the
-issue's criteria hold (growth under 5 MB/hour, no divergence, no warning), 1 otherwise.
+soak's criteria hold (growth under 5 MB/hour, no divergence, no warning), 1 otherwise.
 """
 
 from __future__ import annotations

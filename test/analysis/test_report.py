@@ -63,9 +63,9 @@ def run_analyze(bag, out, *args):
     return code, report, details
 
 
-# ---------------------------------------------------------------- item 1: level over time
+# ---------------------------------------------------------------- level over time
 def test_convergence_is_not_fooled_by_gravity_and_matches_the_known_decay(tmp_path):
-    """Old 0.5 s boxcar envelopes let 1 g leak into 39 Hz: it 'converged' in 0.01 s."""
+    """A 0.5 s boxcar envelope would let 1 g leak into 39 Hz (a 'convergence' in 0.01 s)."""
     bag = write_bag(tmp_path / 'bag', struts_from_z(close_tones_z()), statuses=statuses(),
                     run_record=record())
     code, report, details = run_analyze(bag, tmp_path / 'out')
@@ -91,7 +91,7 @@ def test_the_benchmark_uses_the_same_convergence_definition():
     assert bench['final_level_db'] == ours['final_level_db']
 
 
-# ---------------------------------------------------------------- item 2: the run record
+# ---------------------------------------------------------------- the run record
 def test_analyze_reports_what_the_run_recorded(tmp_path, capsys):
     bag = write_bag(tmp_path / 'bag', struts_from_z(close_tones_z()), statuses=statuses(),
                     run_record=record())
@@ -110,7 +110,7 @@ def test_analyze_reports_what_the_run_recorded(tmp_path, capsys):
         assert row == rows[row['frequency_hz']]
 
 
-# ---------------------------------------------------------------- item 3: identification
+# ---------------------------------------------------------------- identification
 @pytest.mark.parametrize('keys', [True, False], ids=['identification keys', 'older bag'])
 def test_windows_leave_out_the_identification(tmp_path, keys):
     """A 16 s window reaches into the identification's 80 Hz test tones: left out."""
@@ -138,7 +138,7 @@ def test_a_window_left_too_short_is_refused_in_one_line(tmp_path, capsys):
     assert not (tmp_path / 'out').exists()
 
 
-# ---------------------------------------------------------------- item 4: counted from 0
+# ---------------------------------------------------------------- counted from 0
 def test_samples_are_counted_from_the_runs_sample_0(tmp_path):
     z = G0 + tone(-31.0, 40.0, END)
     index = np.arange(243, END)                      # the first 243 samples never arrived
@@ -152,7 +152,7 @@ def test_samples_are_counted_from_the_runs_sample_0(tmp_path):
     assert report['loop']['missed_samples'] == 243
 
 
-# ---------------------------------------------------------------- item 5: floor flags
+# ---------------------------------------------------------------- floor flags
 def test_at_noise_floor_is_in_the_report_and_the_table(tmp_path, capsys):
     bag = write_bag(tmp_path / 'bag', struts_from_z(close_tones_z()), statuses=statuses(),
                     run_record=record())

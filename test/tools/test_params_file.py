@@ -27,7 +27,7 @@ COMPARED = 3000     # samples before control-on (5500)
 MATCHED_BY_SAMPLE = 200
 """The relaunched driver holds here (``hold_at_time_s``, a lockstep breakpoint: the samples
 are the same) until this test's listener matched it: alone with two controllers the loop
-runs at ~3 kHz, faster than discovery on a loaded machine (CI once saw only the last 416
+runs at ~3 kHz, faster than discovery on a loaded machine (the listener would miss most
 of the 3000 compared samples)."""
 
 
