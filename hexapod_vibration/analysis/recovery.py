@@ -94,7 +94,6 @@ class _McapPrefix(_PrefixReader):
 
     def __init__(self, path: Path, data_file: Path) -> None:
         self.path = path
-        self._data_file = data_file
         self._file = data_file.open('rb')
         size = data_file.stat().st_size
         self.connections = []
