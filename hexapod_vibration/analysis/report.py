@@ -26,6 +26,7 @@ import numpy as np
 
 from hexapod_vibration.analysis.bag_files import BagError
 from hexapod_vibration.analysis.bag_signals import FS, BagSignals
+from hexapod_vibration.analysis.control_outcome import ControlOutcome, control_outcome
 from hexapod_vibration.analysis.following import configured_tones, following_tones, snap_to_tones
 from hexapod_vibration.analysis.levels import convergence_s, levels_over_time, tone_levels
 from hexapod_vibration.analysis.report_json import report_float, report_jsonable
@@ -115,12 +116,17 @@ def analyze_signals(signals: BagSignals, request: Request = Request()) -> Analys
     rows_out = tone_rows(tones, controlled, levels)
     on = signals.control_on_sample
     over_time = levels_over_time(z, index, on, tones, controlled)
+    window = windows.get("controlled")
+    outcome = control_outcome(signals.notch_statuses, on,
+                              int(index[window.start]) if window is not None else None,
+                              bool(controlled))
     report = {
         "scenario": request.scenario or (rec.scenario if rec else signals.path.resolve().name),
         "sample_rate_hz": FS,
         "tones": rows_out,
-        "convergence_s": report_float(convergence_s(over_time, controlled)),
+        "convergence_s": report_float(_convergence(over_time, rows_out, outcome)),
         "loop": loop_statistics(signals),
+        "control": outcome.as_dict(),
     }
     following = following_tones(signals, windows, configured)
     if following:
@@ -142,6 +148,20 @@ def analyze_signals(signals: BagSignals, request: Request = Request()) -> Analys
                        (ident, ident_source), harmonics)
     return Analysis(report, details, z, windows, index, over_time, ident,
                     rec.paper() if rec else {}, harmonics, curves, controlled, configured)
+
+
+def _convergence(over_time: dict, rows: list[dict], outcome: ControlOutcome) -> float:
+    """``convergence_s`` of the controlled tones control reduced, NaN (absent) otherwise.
+
+    Without control in force in the controlled window there is nothing that converged; a
+    tone reduced by less than the convergence tolerance was within it from the start (its
+    'convergence' would be the first level's time, not control's).
+    """
+    if not outcome.in_force:
+        return math.nan
+    reduced = [row["frequency_hz"] for row in rows if row["controlled"]
+               and (row["reduction_db"] or 0.0) >= spectrum.CONVERGENCE_TOLERANCE_DB]
+    return convergence_s(over_time, reduced) if reduced else math.nan
 
 
 def _fmt_tones(tones: list[float]) -> str:
@@ -183,17 +203,22 @@ def loop_statistics(signals: BagSignals) -> dict[str, Any]:
     """The ``loop`` block: from the driver's diagnostics, else estimated from the bag.
 
     ``missed_samples`` adds the samples of the run ``[0, samples)`` absent from
-    ``/pph/accel`` in the bag to the driver's own count.
+    ``/pph/accel`` in the bag to the driver's own count (in realtime: the samples whose
+    commands came late); ``notch_missed_samples``: the samples the notch controller never
+    received (its gaps).
     """
     accel, st = signals.accel, signals.driver_status
     run = signals.run_samples()
     missing = accel.missing_in(run)
+    notch = signals.notch_statuses[-1] if signals.notch_statuses else {}
+    own = {"notch_missed_samples": int(notch["missed_samples"])} \
+        if "missed_samples" in notch else {}
     if st:
         return {"mode": st.get("mode", "unknown"),
                 "samples": run,
                 "missed_samples": int(st.get("missed_samples", 0)) + missing,
                 "rate_hz": report_float(float(st.get("rate_hz", "nan"))),
-                **{k: report_float(float(st.get(k, "nan"))) for k in LOOP_KEYS}}
+                **{k: report_float(float(st.get(k, "nan"))) for k in LOOP_KEYS}, **own}
     stamps = accel.timestamp_ns
     span_s = (stamps[-1] - stamps[0]) * 1e-9 if stamps.size > 1 else 0.0
     latency = _bag_latency_ms(signals)

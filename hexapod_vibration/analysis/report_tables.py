@@ -6,6 +6,8 @@ from typing import Any
 
 import numpy as np
 
+from hexapod_vibration.analysis.control_outcome import ControlOutcome
+
 
 def level_text(level: float | None, at_floor: bool | None) -> str:
     """A level (dB) as the tables print it: ``-115.1 (floor)`` when at the noise floor."""
@@ -39,6 +41,9 @@ def format_table(report: dict[str, Any], paper_reduction_db: dict[float, float] 
     if paper_reduction_db:
         header += f" {'paper reduction':>16}"
     lines = [f"{report['scenario']}  (20 log10(a_rms / 1 g), z-axis; * = notch tone)", header]
+    headline = control_headline(report)
+    if headline:
+        lines.insert(0, headline)
     for row in report["tones"]:
         floor = row.get("at_noise_floor", {})
         mark = "*" if row["controlled"] else " "
@@ -54,9 +59,22 @@ def format_table(report: dict[str, Any], paper_reduction_db: dict[float, float] 
     loop = report["loop"]
     rate = loop["rate_hz"]
     lines.append(f"convergence {'-' if conv is None else f'{conv:.2f} s'}; loop {loop['mode']}, "
-                 f"{loop['samples']} samples, {loop['missed_samples']} missed, "
+                 f"{loop['samples']} samples, {loop_missed_text(loop)}, "
                  f"{'-' if rate is None else f'{rate:.0f}'} samples/s")
     return "\n".join(lines)
+
+
+def control_headline(report: dict[str, Any]) -> str:
+    """The report's first line when control was not in force as asked ('' when it was)."""
+    control = report.get("control")
+    return ControlOutcome(**control).headline() if control else ""
+
+
+def loop_missed_text(loop: dict[str, Any]) -> str:
+    """``N missed`` and, where the notch missed samples of its own, how many."""
+    text = f"{loop['missed_samples']} missed"
+    own = loop.get("notch_missed_samples")
+    return f"{text} ({own} not received by the notch)" if own else text
 
 
 def format_following(report: dict[str, Any]) -> str:

@@ -12,7 +12,12 @@ import os
 from pathlib import Path
 from typing import Any
 
-from hexapod_vibration.analysis.report_tables import level_text, reduction_text
+from hexapod_vibration.analysis.report_tables import (
+    control_headline,
+    level_text,
+    loop_missed_text,
+    reduction_text,
+)
 
 
 def tone_table(result: Any) -> list[str]:
@@ -50,6 +55,9 @@ def scenario_section(result: Any, out_dir: Path) -> list[str]:
     """A scenario's heading, table, convergence/THD line and figures."""
     report, details = result.report, result.details
     lines = [f"## {report['scenario']}", ""]
+    headline = control_headline(report)
+    if headline:
+        lines += [f"**{headline}**", ""]
     record = details.get("run_record") or {}
     if result.harmonics is not None and not any(r["controlled"] for r in report["tones"]):
         hd = result.harmonics
@@ -61,7 +69,7 @@ def scenario_section(result: Any, out_dir: Path) -> list[str]:
         conv = report["convergence_s"]
         per_tone = ", ".join(f"{f} Hz {v['convergence_s']:.2f} s"
                              for f, v in details.get("convergence", {}).items()
-                             if v["convergence_s"] is not None and any(
+                             if conv is not None and v["convergence_s"] is not None and any(
                                  r["controlled"] and f"{r['frequency_hz']:g}" == f
                                  for r in report["tones"]))
         lines += ["", f"Convergence (control-on to within 3 dB of the final level) "
@@ -71,7 +79,7 @@ def scenario_section(result: Any, out_dir: Path) -> list[str]:
     windows = ", ".join(f"{name} from sample {w['first_sample']} ({w['samples'] / 1000:g} s)"
                         for name, w in details.get("windows", {}).items())
     lines += ["", f"Loop: {loop['mode']}, {loop['samples']} samples, "
-                  f"{loop['missed_samples']} missed. Windows: {windows}. "
+                  f"{loop_missed_text(loop)}. Windows: {windows}. "
                   f"Window length asked: {record.get('window_s', '-')} s."]
     notes = details.get("notes", [])
     if notes:

@@ -196,7 +196,23 @@ def _run_all(args: argparse.Namespace, scenarios: list[Scenario]) -> int:
         print("\n\n".join(tables))
         summary = write_summary(args.out / "summary.md", results, args.out)
         print(f"\nwrote {summary}")
-    return 0
+    return _control_exit_code(results)
+
+
+NOT_ENGAGED = frozenset({"refused", "never_engaged"})
+"""Outcomes of a run whose control never acted (``analysis.control_outcome``)."""
+
+
+def _control_exit_code(results: list[Any]) -> int:
+    """1 if a scenario asked for control that never engaged (said on stderr), else 0."""
+    failed = [r.report for r in results
+              if r.report.get("control", {}).get("outcome") in NOT_ENGAGED]
+    for report in failed:
+        control = report["control"]
+        print(f"experiment: {report['scenario']}: control never engaged "
+              f"({control['outcome']}: {control['reason'] or 'no reason given'})",
+              file=sys.stderr)
+    return 1 if failed else 0
 
 
 def scenario_table(result: Any) -> str:

@@ -49,7 +49,9 @@ def test_known_tones_are_measured_within_half_a_db(tmp_path, storage):
                          "--control-on", str(ON_S), "--no-plots"])
     assert code == 0
     report = json.loads((out / "report.json").read_text())
-    assert set(report) == {"scenario", "sample_rate_hz", "tones", "convergence_s", "loop"}
+    assert set(report) == {"scenario", "sample_rate_hz", "tones", "convergence_s", "loop",
+                           "control"}
+    assert report["control"]["outcome"] == "unknown"          # no notch status in the bag
     assert report["sample_rate_hz"] == 1000.0
     rows = {row["frequency_hz"]: row for row in report["tones"]}
     for f, level in TONES.items():

@@ -112,3 +112,18 @@ def test_figures_are_150_dpi_and_the_spectra_are_also_csv(tmp_path):
     psd = np.array([float(r[1]) for r in rows[1:]])
     assert freq[int(np.argmax(np.where(freq > 5, psd, -1e9)))] == 40.0
     assert result.report['tones'][0]['uncontrolled_db'] < psd.max()
+
+
+def test_experiment_exits_non_zero_when_the_control_asked_for_never_engaged(capsys):
+    from types import SimpleNamespace
+
+    from hexapod_vibration.tools.experiment import _control_exit_code
+
+    def result(outcome: str, reason: str = "") -> SimpleNamespace:
+        return SimpleNamespace(report={"scenario": f"s_{outcome}", "control": {
+            "outcome": outcome, "reason": reason}})
+
+    assert _control_exit_code([result("controlled"), result("faded", "guard")]) == 0
+    assert _control_exit_code([result("controlled"), result("refused", "bound 0")]) == 1
+    assert "s_refused: control never engaged (refused: bound 0)" in capsys.readouterr().err
+    assert _control_exit_code([result("never_engaged")]) == 1
