@@ -75,6 +75,10 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--composed", action="store_true",
                         help="driver and controllers as one process (pph_graph): same nodes "
                              "and topics, intra-process delivery, faster loop")
+    parser.add_argument("--realtime-priority", type=cli.number(1, 98, integer=True), metavar="N",
+                        default=0, help="run the driver and controllers under SCHED_FIFO at "
+                        "priority N (1-98; needs CAP_SYS_NICE or an rtprio limit: refused "
+                        "otherwise, with the reason)")
     parser.add_argument("--storage", choices=STORAGES, default="mcap",
                         help="rosbag2 storage of DIR/bag (default mcap, as Jazzy)")
     parser.add_argument("--demo", action="store_true",
@@ -169,8 +173,9 @@ def _run_all(args: argparse.Namespace, scenarios: list[Scenario]) -> int:
                       flush=True)
             try:
                 # With --twin the figures come with the comparison (below).
-                result = run_scenario(RunOptions(run_sc, run_out, args.mode, args.storage,
-                                                 composed=args.composed), plots=not args.twin)
+                result = run_scenario(RunOptions(
+                    run_sc, run_out, args.mode, args.storage, composed=args.composed,
+                    realtime_priority=int(args.realtime_priority)), plots=not args.twin)
             except KeyboardInterrupt as exc:
                 print(f"\nexperiment: interrupted; processes stopped, bag in "
                       f"{run_out / 'bag'}", file=sys.stderr, flush=True)

@@ -75,6 +75,8 @@ class RunOptions:
     """Longest wall time of the whole run (s; 0 = none: only a stalled loop fails it)."""
     composed: bool = False
     """Driver and controllers in one process (``pph_graph``) instead of three."""
+    realtime_priority: int = 0
+    """SCHED_FIFO priority of the loop's processes (0: the normal scheduler)."""
 
 
 class ExperimentRun:
@@ -92,7 +94,8 @@ class ExperimentRun:
             outputs.write_text(self.model_file, model_file_text(options.scenario))
         self.params_file = options.out / "params.yaml"
         outputs.write_text(self.params_file, params_file_text(
-            options.scenario, options.mode, str(self.model_file or "")))
+            options.scenario, options.mode, str(self.model_file or ""),
+            options.realtime_priority))
         self.record = run_record(options.scenario, options.mode)
         self.children: list[Child] = []
         self.graph: GraphMonitor | None = None

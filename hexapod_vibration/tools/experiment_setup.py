@@ -26,12 +26,13 @@ EXPERIMENT_LOCKSTEP_TIMEOUT_S = 10.0
 """The driver's ``lockstep_timeout_s`` in an experiment (s, wall): the parameter's maximum."""
 
 
-def node_parameters(scenario: Scenario, mode: str, model_file: str = ""
-                    ) -> dict[str, dict[str, Any]]:
+def node_parameters(scenario: Scenario, mode: str, model_file: str = "",
+                    realtime_priority: int = 0) -> dict[str, dict[str, Any]]:
     """The ROS params file content (``{node: {"ros__parameters": {...}}}``) of a scenario.
 
     ``model_file``: the model YAML of a scenario with ``model_overrides`` (see
     :func:`model_file_text`), given to the nodes that simulate or use the physical model.
+    ``realtime_priority``: SCHED_FIFO priority of the loop's nodes (0: not set).
     """
     sh, notch = scenario.shaker, scenario.notch
     has_notch = bool(notch.tone_frequencies_hz)
@@ -71,6 +72,9 @@ def node_parameters(scenario: Scenario, mode: str, model_file: str = ""
             "adaptation": notch.adaptation, "enabled": False,
             "identify_delay_s": scenario.identify_at_s,
         }
+    if realtime_priority:
+        for values in params.values():
+            values["realtime_priority"] = int(realtime_priority)
     return {node: {"ros__parameters": values} for node, values in params.items()}
 
 
@@ -125,7 +129,8 @@ def run_model_file(out: Path, scenario: Scenario) -> Path | None:
     return (out / "model.yaml").resolve() if scenario.model_overrides else None
 
 
-def params_file_text(scenario: Scenario, mode: str, model_file: str = "") -> str:
+def params_file_text(scenario: Scenario, mode: str, model_file: str = "",
+                     realtime_priority: int = 0) -> str:
     """``params.yaml``: the nodes' parameters of a scenario, reusable with the launch file.
 
     The recorder's section carries the run record (what ``analyze`` needs to report the run
@@ -136,7 +141,7 @@ def params_file_text(scenario: Scenario, mode: str, model_file: str = "") -> str
     header = PARAMS_FILE_HEADER.format(
         scenario=scenario.name, mode=mode, control_on_s=scenario.control_on_s,
         duration_s=scenario.duration_s, control_on_sample=round(scenario.control_on_s * 1e3))
-    params = node_parameters(scenario, mode, model_file)
+    params = node_parameters(scenario, mode, model_file, realtime_priority)
     params["pph_recorder"] = {"ros__parameters": {
         "run_record": run_record(scenario, mode).to_json()}}
     return header + yaml.safe_dump(params, sort_keys=False)
