@@ -42,3 +42,28 @@ def simulate(plant, controller, dist, on_sample=None):
         if on_sample is not None:
             on_sample(n)
     return errors
+
+
+def simulate_with_gaps(plant, controller, dist, missing, sent=None):
+    """:func:`simulate` with samples the controller never receives (``missing[n]``).
+
+    The controller is told of them (``skip``) with the next sample it gets; the plant holds
+    the previous command over a missing sample, as the driver holds a late one, unless
+    ``sent(n)`` gives the command that went out all the same.
+    """
+    a, b, c = plant
+    x, u, pending = np.zeros(a.shape[0]), np.zeros(b.shape[1]), 0
+    for n in range(dist.shape[0]):
+        e = c @ x + dist[n]
+        if missing[n]:
+            pending += 1
+            if sent is not None:
+                u = sent(n)
+        else:
+            if pending:
+                controller.skip(pending)
+                pending = 0
+            u = controller.step(e)
+        x = a @ x + b @ u
+    if pending:
+        controller.skip(pending)

@@ -24,7 +24,7 @@ from rclpy.parameter_client import AsyncParameterClient
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message
 from rosgraph_msgs.msg import Clock
-from std_msgs.msg import Float64MultiArray
+from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
 from hexapod_vibration.cdr import decode_strut_cdr
 from hexapod_vibration.contract import SAMPLE_RATE_HZ, InvalidStrutMessage
@@ -278,3 +278,13 @@ def run_experiment(env, scenario, out, *extra, timeout: float = 400.0
     cmd = [sys.executable, "-m", "hexapod_vibration.tools.experiment", "--scenario", str(scenario),
            "--out", str(out), *extra]
     return subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=timeout)
+
+
+def float64_array(data, dims) -> Float64MultiArray:
+    """A Float64MultiArray of ``data`` with ``layout.dim`` from (label, size, stride) triples."""
+    msg = Float64MultiArray()
+    msg.layout.dim = [
+        MultiArrayDimension(label=lbl, size=size, stride=stride) for lbl, size, stride in dims
+    ]
+    msg.data = [float(x) for x in data]
+    return msg

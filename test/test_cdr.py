@@ -9,9 +9,10 @@ import struct
 
 import numpy as np
 import pytest
+from node_graph import float64_array
 from rclpy.serialization import deserialize_message, serialize_message
 from rosgraph_msgs.msg import Clock
-from std_msgs.msg import Float64MultiArray, MultiArrayDimension
+from std_msgs.msg import Float64MultiArray
 
 from hexapod_vibration.cdr import (
     MAX_ARRAY_VALUES,
@@ -38,13 +39,6 @@ VALUES = np.array([1.5, -2.25, 3.0e-7, 9.80665, -1.0e3, 0.0])
 RUN = 1234567890123
 
 
-def _message(data, dims):
-    msg = Float64MultiArray()
-    msg.layout.dim = [
-        MultiArrayDimension(label=lbl, size=size, stride=stride) for lbl, size, stride in dims
-    ]
-    msg.data = [float(x) for x in data]
-    return msg
 
 
 class _Logger:
@@ -80,7 +74,7 @@ def test_decode_cdr_equals_parse_of_rclpy_deserialization(index, first_label, ru
 @pytest.mark.parametrize('dims', [[], [('strut', 6, 6)], [('a', 6, 6), ('sample:4', 1, 1),
                                                           ('extra', 1, 1)]])
 def test_decode_cdr_reads_other_layouts_like_parse(dims):
-    raw = serialize_message(_message(VALUES, dims))
+    raw = serialize_message(float64_array(VALUES, dims))
     values, index, run = decode_strut_cdr(raw)
     np.testing.assert_array_equal(values, VALUES)
     assert index == (4 if len(dims) > 1 else None)
@@ -101,7 +95,7 @@ def test_decode_cdr_reads_other_layouts_like_parse(dims):
     (VALUES, [('strut', 6, 6), ('sample:3', 1, 1), ('run:x', 1, 1)], 'run'),
 ])
 def test_decode_cdr_rejects_what_parse_rejects(data, dims, reason):
-    raw = serialize_message(_message(data, dims))
+    raw = serialize_message(float64_array(data, dims))
     with pytest.raises(InvalidStrutMessage, match=reason):
         decode_strut_cdr(raw)
     with pytest.raises(InvalidStrutMessage, match=reason):

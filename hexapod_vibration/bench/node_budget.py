@@ -17,6 +17,7 @@ Realtime set-ups also give the loop's missed samples and latency (the driver's c
 from __future__ import annotations
 
 import os
+import shutil
 import sys
 import time
 from dataclasses import dataclass
@@ -86,6 +87,7 @@ def start_graph(out: Path, params: Path, setup: BudgetSetup) -> dict[str, Child]
     children = {}
     if setup.recorder:
         bag = out / f"bag_{tag}"
+        shutil.rmtree(bag, ignore_errors=True)          # the previous benchmark's bag
         children["pph_recorder"] = spawn_module(
             f"budget_recorder_{tag}", "hexapod_vibration.nodes.recorder",
             ["--ros-args", "-p", f"bag_path:={bag}"], out)

@@ -2,7 +2,7 @@
 
 import numpy as np
 import pytest
-from linear_plants import frequency_response, resonance_bank, simulate
+from linear_plants import frequency_response, resonance_bank, simulate, simulate_with_gaps
 
 from hexapod_vibration.core.control import adaptation as ad
 from hexapod_vibration.core.control.notch import AdaptiveNotchCanceller
@@ -319,20 +319,7 @@ def test_the_tone_identification_leaves_missing_samples_out_of_its_fits():
     dist = (0.5 * np.sin(2 * np.pi * 40.0 * t)[:, None] * np.ones(3)
             + 1e-4 * np.random.default_rng(3).normal(size=(n, 3)))
     missing = np.random.default_rng(7).random(n) < 0.02
-    a, b, c = plant
-    x, u, pending = np.zeros(a.shape[0]), np.zeros(3), 0
-    for k in range(n):
-        e = c @ x + dist[k]
-        if missing[k]:
-            pending += 1                       # not received: the held command stays
-        else:
-            if pending:
-                ident.skip(pending)
-                pending = 0
-            u = ident.step(e)
-        x = a @ x + b @ u
-    if pending:
-        ident.skip(pending)
+    simulate_with_gaps(plant, ident, dist, missing)
     assert ident.done and 0 < ident.missing <= np.count_nonzero(missing)
     assert ident.missing_refusal() == ''
     exact = frequency_response(plant, [40.0, 80.0])

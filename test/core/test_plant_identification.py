@@ -14,7 +14,13 @@ from hexapod_vibration.core.control.plant_identification import (
 )
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from linear_plants import FS, frequency_response, resonance_bank, simulate  # noqa: E402
+from linear_plants import (  # noqa: E402
+    FS,
+    frequency_response,
+    resonance_bank,
+    simulate,
+    simulate_with_gaps,
+)
 
 
 def _coupled_plant(seed=1):
@@ -213,19 +219,9 @@ def test_missing_samples_are_left_out_of_the_broadband_record():
         dist = (1e-3 * np.random.default_rng(2).normal(size=(n, 3))
                 + 0.5 * np.sin(2 * np.pi * 40.0 * t)[:, None])
         lost = np.random.default_rng(7).random(n) < fraction
-        a, b, c = plant
-        x, table, pending = np.zeros(a.shape[0]), ident.design.period_table(), 0
-        for k in range(n):
-            e = c @ x + dist[k]
-            if lost[k]:
-                pending += 1
-                u = table[k % table.shape[0]]        # the command went out all the same
-            else:
-                if pending:
-                    ident.skip(pending)
-                    pending = 0
-                u = ident.step(e)
-            x = a @ x + b @ u
+        table = ident.design.period_table()
+        simulate_with_gaps(plant, ident, dist, lost,
+                           sent=lambda k, table=table: table[k % table.shape[0]])
         measured = lost[int(FS * 1.0):]
         assert ident.done and ident.missing == np.count_nonzero(measured)
         if worst is None:

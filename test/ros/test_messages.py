@@ -7,8 +7,9 @@ import math
 
 import numpy as np
 import pytest
+from node_graph import float64_array
 from rclpy.serialization import deserialize_message, serialize_message
-from std_msgs.msg import Float64MultiArray, MultiArrayDimension
+from std_msgs.msg import Float64MultiArray
 
 from hexapod_vibration.contract import STRUT_COUNT
 from hexapod_vibration.ros.messages import (
@@ -25,13 +26,6 @@ def _round_trip(msg: Float64MultiArray) -> Float64MultiArray:
     return deserialize_message(serialize_message(msg), Float64MultiArray)
 
 
-def _message(data, dims):
-    msg = Float64MultiArray()
-    msg.layout.dim = [
-        MultiArrayDimension(label=lbl, size=size, stride=stride) for lbl, size, stride in dims
-    ]
-    msg.data = [float(x) for x in data]
-    return msg
 
 
 def test_layout_with_sample_index():
@@ -62,7 +56,7 @@ def test_round_trip_without_index():
 
 
 def test_message_without_layout_is_accepted():
-    values, parsed = parse_strut_array(_message(VALUES, []))
+    values, parsed = parse_strut_array(float64_array(VALUES, []))
     assert parsed is None
     np.testing.assert_array_equal(values, VALUES)
 
@@ -91,7 +85,7 @@ def test_make_rejects_negative_index():
 
 @pytest.mark.parametrize('count', [0, 5, 7])
 def test_parse_rejects_wrong_length(count):
-    msg = _message(np.zeros(count), [('strut', count, count), ('sample:3', 1, 1)])
+    msg = float64_array(np.zeros(count), [('strut', count, count), ('sample:3', 1, 1)])
     with pytest.raises(InvalidStrutMessage, match=f'expected 6 strut values, got {count}'):
         parse_strut_array(msg)
 
@@ -121,7 +115,7 @@ def test_parse_rejects_non_finite(bad):
     ],
 )
 def test_parse_rejects_garbled_sample_label(label):
-    msg = _round_trip(_message(VALUES, [('strut', 6, 6), (label, 1, 1)]))
+    msg = _round_trip(float64_array(VALUES, [('strut', 6, 6), (label, 1, 1)]))
     with pytest.raises(InvalidStrutMessage, match='label'):
         parse_strut_array(msg)
 
