@@ -148,7 +148,7 @@ def _us(value: float | None) -> str:
 
 def measure(out: Path, params: Path, setup: BudgetSetup, warmup_s: float, measure_s: float,
             watch: Any) -> dict[str, Any]:
-    """The budget of one set-up (``watch``: a /diagnostics listener, ``tools.experiment``'s)."""
+    """The budget of one set-up (``watch``: a ``tools.graph_monitor.GraphMonitor``)."""
     load = busy_core() if setup.busy_core else None
     children = start_graph(out, params, setup)
     try:

@@ -11,7 +11,7 @@ driver's own measurements from ``/diagnostics``:
 
 Configurations (:data:`CONFIGURATIONS`): the two layouts (``composed``: one ``pph_graph``
 process; ``processes``: three processes) with the default ``waitset`` executor, for 60 s
-realtime each (the issue's duration), and rclpy's SingleThreadedExecutor and
+realtime each, and rclpy's SingleThreadedExecutor and
 EventsExecutor in the three-process layout for a shorter comparison (an executor that
 stalls is reported as such, not hidden). The headline ``realtime`` and
 ``lockstep_speedup`` keys are those of the first configuration, ``composed/waitset``.

@@ -1,6 +1,6 @@
 """``/diagnostics`` messages and sim-time stamps shared by the nodes.
 
-The driver's ``/clock`` bytes are :func:`hexapod_vibration.ros.rclpy_internals.clock_cdr`.
+The driver's ``/clock`` bytes are :func:`hexapod_vibration.cdr.clock_cdr`.
 """
 
 from __future__ import annotations

@@ -13,8 +13,8 @@ Two forms of the same message, both at 1 kHz, without per-element Python work:
 - Python messages (:func:`make_strut_array`, :func:`parse_strut_array`: about 6 us to make,
   2.5 us to parse), for tools and tests;
 - serialized CDR bytes, what the nodes' loop publishes (:class:`StrutArrayPublisher`) and
-  receives (loop subscriptions are raw, :func:`create_loop_subscription`): the codec is in
-  :mod:`hexapod_vibration.ros.rclpy_internals`.
+  receives (loop subscriptions are raw, :func:`create_loop_subscription`): the codec is
+  :mod:`hexapod_vibration.cdr`.
 
 Receiving never raises: :func:`receive_strut_sample` returns None for a message it refuses,
 and :class:`ControllerLoopPort` adds the physical range and the run/sequence rules a
@@ -189,7 +189,7 @@ def create_loop_subscription(node: Node, topic: str, callback: Callable[[bytes],
 
     Raw on every executor, so no received loop message goes through rclpy's deserializer
     (which raises on malformed bytes and misreads impossible layouts, see
-    :mod:`hexapod_vibration.ros.rclpy_internals`): the callback decodes the bytes.
+    :mod:`hexapod_vibration.cdr`): the callback decodes the bytes.
     """
     return node.create_subscription(Float64MultiArray, topic, callback, qos, raw=True)
 

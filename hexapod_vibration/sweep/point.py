@@ -13,8 +13,9 @@ and :mod:`hexapod_vibration.core.spectrum`), on the top plate's z-axis accelerat
 recovered from the six accelerometers, over the scenario's two windows (the ``window_s``
 before control-on and the last ``window_s``):
 
-- ``tones_*``: the report's tone rows (:func:`report.tone_levels`, :func:`report.tone_rows`)
-  at ``report_tones_hz`` (else the notch tones): levels in dB re 1 g, reduction, floor flag.
+- ``tones_*``: the report's tone rows (``analysis.levels.tone_levels``,
+  ``analysis.report.tone_rows``) at ``report_tones_hz`` (else the notch tones): levels in
+  dB re 1 g, reduction, floor flag.
 - ``attenuation_db``: the smallest reduction among the *targeted lines*, the report tones
   within ``TARGET_RANGE_HZ`` of a notch tone (the lines the canceller is aimed at, also when
   it is told a slightly wrong frequency).
@@ -31,7 +32,7 @@ before control-on and the last ``window_s``):
   2..8 dB in the 6-32 Hz bands, where lightly damped modes dominate); this is the
   "never worse than off" comparison. The reference is computed once per process for all
   points that share it (``seeds: common``).
-- ``convergence_s``: :func:`report.convergence_s` of the targeted lines (the report's).
+- ``convergence_s``: :func:`convergence_s` of the targeted lines (the report's).
 - ``diverged``: the loop went unstable: a non-finite value; or the canceller's command went
   past the actuator's dynamic rating in the controlled window (it asked for more than a
   strut can give; the weights then grow without bound); or the largest rise elsewhere is
@@ -63,7 +64,9 @@ from typing import Any
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-from hexapod_vibration.analysis import report
+from hexapod_vibration.analysis.levels import convergence_s, levels_over_time, tone_levels
+from hexapod_vibration.analysis.report import tone_rows
+from hexapod_vibration.contract import SAMPLE_RATE_HZ
 from hexapod_vibration.core import spectrum
 from hexapod_vibration.core.model.config import ModelConfig
 from hexapod_vibration.core.sim.closed_loop import CoreLoop, LoopRecord
@@ -112,7 +115,7 @@ def failed_row(spec: PointSpec, exc: BaseException) -> dict[str, Any]:
 def analysis_windows(record: LoopRecord, scenario: Scenario) -> tuple[slice, slice]:
     """Rows of the uncontrolled and controlled windows, as the report takes them."""
     n = record.accel_m_s2.shape[0]
-    width = int(round(scenario.window_s * report.FS))
+    width = int(round(scenario.window_s * SAMPLE_RATE_HZ))
     on = record.control_on_sample
     if on - width < 0:
         raise ValueError(f"the uncontrolled window ({scenario.window_s:g} s) starts before "
@@ -125,7 +128,7 @@ def _lines(scenario: Scenario) -> tuple[list[float], list[float], list[float]]:
     notch = [float(f) for f in scenario.notch.tone_frequencies_hz]
     tones = [float(f) for f in scenario.report_tones_hz] or notch
     shaker = [float(f) for f in scenario.shaker.frequencies_hz
-              if 0.0 < f < 0.5 * report.FS]
+              if 0.0 < f < 0.5 * SAMPLE_RATE_HZ]
     excluded = sorted({*tones, *notch, *shaker})
     return tones, notch, excluded
 
@@ -138,9 +141,9 @@ def point_metrics(record: LoopRecord, scenario: Scenario, config: ModelConfig
     tones, notch, excluded = _lines(scenario)
     if not tones:
         raise ValueError("the scenario has no report_tones_hz and no notch tones")
-    levels = {"uncontrolled": report.tone_levels(z[before], tones),
-              "controlled": report.tone_levels(z[after], tones)}
-    rows = report.tone_rows(tones, notch, levels)
+    levels = {"uncontrolled": tone_levels(z[before], tones),
+              "controlled": tone_levels(z[after], tones)}
+    rows = tone_rows(tones, notch, levels)
     targeted = [f for f in tones if any(abs(f - c) <= TARGET_RANGE_HZ for c in notch)]
     reductions = [r["reduction_db"] for r in rows if r["frequency_hz"] in targeted]
     out: dict[str, Any] = {
@@ -151,7 +154,7 @@ def point_metrics(record: LoopRecord, scenario: Scenario, config: ModelConfig
         "tones_reduction_db": [r["reduction_db"] for r in rows],
         "tones_at_floor": list(levels["controlled"][2]),
         "attenuation_db": min(reductions) if reductions else None,
-        "convergence_s": _finite(report.convergence_s(report.levels_over_time(
+        "convergence_s": _finite(convergence_s(levels_over_time(
             z, np.arange(z.size), before.stop, tones, targeted), targeted))
         if targeted else None,
     }
@@ -168,8 +171,8 @@ def _window_levels(z: np.ndarray, rows: slice, scenario: Scenario
                    ) -> tuple[np.ndarray, list[float]]:
     """(band levels, report-tone levels) of one window of the z-axis acceleration."""
     tones, _, excluded = _lines(scenario)
-    bands = spectrum.band_levels_db(z[rows], report.FS, _bands(), excluded)
-    return bands, report.tone_levels(z[rows], tones)[0]
+    bands = spectrum.band_levels_db(z[rows], SAMPLE_RATE_HZ, _bands(), excluded)
+    return bands, tone_levels(z[rows], tones)[0]
 
 
 _REFERENCES: dict[str, tuple[np.ndarray, list[float]]] = {}
@@ -226,8 +229,8 @@ def _rise(z: np.ndarray, before: slice, after: slice, rows: list[dict], targeted
           excluded: list[float]) -> dict[str, Any]:
     """Band levels and the largest rise outside the targeted lines."""
     bands = _bands()
-    unc = spectrum.band_levels_db(z[before], report.FS, bands, excluded)
-    ctl = spectrum.band_levels_db(z[after], report.FS, bands, excluded)
+    unc = spectrum.band_levels_db(z[before], SAMPLE_RATE_HZ, bands, excluded)
+    ctl = spectrum.band_levels_db(z[after], SAMPLE_RATE_HZ, bands, excluded)
     candidates = [(float(c - u), float(f)) for f, u, c in zip(bands[:, 0], unc, ctl,
                                                               strict=True)
                   if np.isfinite(u) and np.isfinite(c)]
