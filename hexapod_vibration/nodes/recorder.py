@@ -48,7 +48,7 @@ from hexapod_vibration.ros.parameters import NodeParameters
 from hexapod_vibration.ros.qos import DIAGNOSTICS_QOS
 from hexapod_vibration.ros.rclpy_internals import parameter_overrides, take_serialized_batch
 from hexapod_vibration.ros.recorded_topics import LOOP_TOPICS, RECORDED_TOPICS, RecordedTopic
-from hexapod_vibration.ros.recording_loop import install_stop_event, record
+from hexapod_vibration.ros.recording_loop import install_stop_flag, record
 
 NODE_NAME = "pph_recorder"
 MAX_BATCH = 500
@@ -177,7 +177,7 @@ class BagRecorder(Node):
 
 def run(args: list[str] | None = None) -> int:
     """Record until SIGINT/SIGTERM; return the process exit code."""
-    stop = install_stop_event()
+    stop = install_stop_flag()
     if cli.stop_requested() is not None:     # it came during the imports
         return cli.interrupted_exit_code()
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)

@@ -1,12 +1,14 @@
 """The recorder's loop: everything queued taken at most every ``BATCH_PERIOD_S``, written.
 
-At SIGINT/SIGTERM what is still queued is written before the bag is closed.
+At SIGINT/SIGTERM what is still queued is written before the bag is closed. The signal
+handler only sets a plain attribute (:class:`StopFlag`): a handler that takes a lock (as
+``threading.Event.set`` does) deadlocks when the signal lands while the main thread holds
+that lock (inside ``Event.wait``), and the recorder then outlives the run.
 """
 
 from __future__ import annotations
 
 import signal
-import threading
 import time
 from typing import Any
 
@@ -14,8 +16,8 @@ from rclpy.executors import SingleThreadedExecutor
 
 from hexapod_vibration.ros.executors import LoopSpinner
 
-DRAIN_IDLE_SPINS = 3
-"""Consecutive idle spins (each up to DRAIN_SPIN_S) that end the drain at shutdown."""
+DRAIN_IDLE_S = 0.15
+"""Time (s, wall) without a new message that ends the drain at shutdown."""
 DRAIN_SPIN_S = 0.05
 DRAIN_MAX_S = 10.0
 """Upper bound (s) of the drain at shutdown, reached only if publishers keep publishing
@@ -29,29 +31,43 @@ was two thirds of the recorder's CPU. Taking what 10 ms brought at once keeps th
 
 
 def _drain(spinner: LoopSpinner, recorder: Any) -> None:
-    """Write the messages already queued: spin until idle, at most DRAIN_MAX_S."""
-    deadline = time.monotonic() + DRAIN_MAX_S
-    idle = 0
-    while idle < DRAIN_IDLE_SPINS and time.monotonic() < deadline:
+    """Write the messages still arriving: until DRAIN_IDLE_S without one, at most DRAIN_MAX_S."""
+    now = time.monotonic()
+    deadline, last_new = now + DRAIN_MAX_S, now
+    while now - last_new < DRAIN_IDLE_S and now < deadline:
         before = recorder.total
         spinner.spin_once(DRAIN_SPIN_S)
-        idle = idle + 1 if recorder.total == before else 0
+        now = time.monotonic()
+        if recorder.total != before:
+            last_new = now
 
 
-def install_stop_event() -> threading.Event:
-    """An event set by SIGINT or SIGTERM (instead of rclpy's immediate shutdown)."""
-    stop = threading.Event()
+class StopFlag:
+    """Set by the first SIGINT or SIGTERM; no lock (see the module docstring)."""
 
-    def handler(signum: int, frame: object) -> None:
-        stop.signum = getattr(stop, "signum", signum)   # the first one: the exit code
-        stop.set()
+    def __init__(self) -> None:
+        """Not set: no signal yet."""
+        self.signum: int | None = None
 
-    signal.signal(signal.SIGINT, handler)
-    signal.signal(signal.SIGTERM, handler)
+    def is_set(self) -> bool:
+        """True once a stop signal came."""
+        return self.signum is not None
+
+    def handler(self, signum: int, frame: object) -> None:
+        """The signal handler: remember the first signal (its exit code is 128 + it)."""
+        if self.signum is None:
+            self.signum = signum
+
+
+def install_stop_flag() -> StopFlag:
+    """A flag set by SIGINT or SIGTERM (instead of rclpy's immediate shutdown)."""
+    stop = StopFlag()
+    signal.signal(signal.SIGINT, stop.handler)
+    signal.signal(signal.SIGTERM, stop.handler)
     return stop
 
 
-def record(recorder: Any, stop: threading.Event) -> None:
+def record(recorder: Any, stop: StopFlag) -> None:
     """Record until ``stop``, then write what is queued and close the bag."""
     executor = SingleThreadedExecutor()
     executor.add_node(recorder)
@@ -62,7 +78,9 @@ def record(recorder: Any, stop: threading.Event) -> None:
         while not stop.is_set():
             woke = time.monotonic()
             spinner.spin_once(0.1)
-            stop.wait(BATCH_PERIOD_S - (time.monotonic() - woke))
+            rest_s = BATCH_PERIOD_S - (time.monotonic() - woke)
+            if rest_s > 0.0 and not stop.is_set():
+                time.sleep(rest_s)       # after a signal, at most BATCH_PERIOD_S more
         _drain(spinner, recorder)
     finally:
         recorder.close_bag()
