@@ -16,6 +16,7 @@ setup(
         (SHARE, ['package.xml']),
         (f'{SHARE}/config', sorted(glob('config/*.yaml'))),
         (f'{SHARE}/config/scenarios', sorted(glob('config/scenarios/*.yaml'))),
+        (f'{SHARE}/config/presets', sorted(glob('config/presets/*.yaml'))),
         (f'{SHARE}/config/sweeps', sorted(glob('config/sweeps/*.yaml'))),
         (f'{SHARE}/launch', sorted(glob('launch/*.launch.py'))),
     ],

@@ -235,6 +235,14 @@ class NodeSpec:
                 reason = spec.check(values[name])
                 if reason:
                     return reason
+        return self.check_together(values)
+
+    def check_together(self, values: Mapping[str, Any]) -> str:
+        """Why ``values`` fail a check of parameters that belong together, or ``""``.
+
+        ``values`` needs the parameters the checks read (e.g. a node's settings without its
+        loop scheduling).
+        """
         for joint in self.checks:
             reason = joint(values)
             if reason:
@@ -422,8 +430,73 @@ PPH_DRIVER = NodeSpec("pph_driver", summary="the simulated hexapod (plant, senso
 
 
 # ------------------------------------------------------------------------ notch_controller
+UPDATE_LOWPASS_AUTO = -1.0
+"""``update_lowpass_hz`` for "automatic": :data:`AUTO_UPDATE_LOWPASS_HZ` for fixed tones, the
+paper's update (0) for tones that move (``frequency_tracking``, ``reference_harmonics``)."""
+AUTO_UPDATE_LOWPASS_HZ = 10.0
+"""The automatic update low-pass of fixed tones (Hz). Table 1 at mu 0.002: the 18.7 Hz
+loop mode's predicted rise 1.9 dB -> 0.3 dB, largest third-octave rise over the twin
++1.74 -> +0.46 dB. Tones that move keep the paper's update: with it the mu policy's rate
+for ``drift_tracking`` fell from 0.00089 to 0.00036 and the tone was lost at the drift's
+turning point (guard fade, +9 dB at 50 Hz over the twin)."""
+
+
+def moving_tones(values: Mapping[str, Any]) -> bool:
+    """Whether the notch's tones may move: ``frequency_tracking`` or ``reference_harmonics``."""
+    return bool(values["frequency_tracking"]) or bool(values["reference_harmonics"])
+
+
+def update_lowpass_corner_hz(values: Mapping[str, Any]) -> float:
+    """The update low-pass corner (Hz) the settings ask for: ``update_lowpass_hz`` resolved.
+
+    :data:`UPDATE_LOWPASS_AUTO` is :data:`AUTO_UPDATE_LOWPASS_HZ` for fixed tones and 0 (the
+    paper's update) for tones that move (:func:`moving_tones`).
+    """
+    corner = float(values["update_lowpass_hz"])
+    if corner != UPDATE_LOWPASS_AUTO:
+        return corner
+    return 0.0 if moving_tones(values) else AUTO_UPDATE_LOWPASS_HZ
+
+
+def check_update_lowpass(values: Mapping[str, Any]) -> str:
+    """``update_lowpass_hz`` is -1 (automatic) or a corner >= 0 Hz."""
+    corner = float(values["update_lowpass_hz"])
+    if corner == UPDATE_LOWPASS_AUTO or corner >= 0.0:
+        return ""
+    return (f"update_lowpass_hz = {corner:g} Hz: must be {UPDATE_LOWPASS_AUTO:g} (automatic: "
+            f"{AUTO_UPDATE_LOWPASS_HZ:g} Hz for fixed tones, 0 for tones that move), 0 (the "
+            "paper's update) or a corner in (0, 100] Hz")
+
+
+def check_identification(values: Mapping[str, Any]) -> str:
+    """What needs the broadband identification's G(f) is not asked of the test tones.
+
+    ``mu_policy: auto`` bounds a rise predicted on G(f); tones that move are acquired on its
+    disturbance lines and take their P from G(f) where they move (a test-tone
+    identification measures G at the nominal tones only, and is refused when a line sits
+    off its tone: the disturbance moves between its two baselines).
+    """
+    if values["identification"] != "tones":
+        return ""
+    if values["mu_policy"] == "auto":
+        return ("mu_policy auto needs identification: broadband (the rise it bounds is "
+                "predicted on the identified G(f)); with identification: tones set mu_policy "
+                "manual first (every tone at mu, no bound on the rise off the tones)")
+    if values["frequency_tracking"]:
+        return ("frequency_tracking needs identification: broadband (a tracked tone starts on "
+                "its disturbance lines and takes P from G(f) where it moves; test tones "
+                "measure G at the nominal tones only, and are refused when the line sits off "
+                "the tone)")
+    if values["reference_harmonics"]:
+        return ("reference_harmonics needs identification: broadband (tones that follow the "
+                "reference take P from G(f) where they move; test tones measure G at the "
+                "nominal tones only)")
+    return ""
+
+
 NOTCH_CONTROLLER = NodeSpec("notch_controller", summary="six decentralized Adaptive Notch "
-                            "Cancellers (the paper's algorithm)", parameters=(
+                            "Cancellers (the paper's algorithm)",
+                            checks=(check_update_lowpass, check_identification), parameters=(
     ParameterSpec("mu", "double", 0.002, "normalised adaptation rate: the weights converge "
                   "as (1 - mu)^n", unit="1/sample", low=0.0, high=1.0,
                   constraints="below the identified stability bound (eq. 18 with the loop "
@@ -472,11 +545,13 @@ NOTCH_CONTROLLER = NodeSpec("notch_controller", summary="six decentralized Adapt
     ParameterSpec("harmonics", "int", 0, "also cancel orders 2..harmonics+1 of every "
                   "tone, following it", low=0, high=MAX_NOTCH_TONES - 1,
                   constraints=f"tones x (harmonics + 1) <= {MAX_NOTCH_TONES}"),
-    ParameterSpec("mu_policy", "string", "manual", "manual = every tone at mu, a warning "
-                  "when the predicted rise exceeds max_rise_db; auto = per tone the largest "
-                  "rate within it", choices=MU_POLICIES),
-    ParameterSpec("max_rise_db", "double", 3.0, "largest predicted rise of "
-                  "the vibration off the tones", unit="dB", low=0.1, high=20.0),
+    ParameterSpec("mu_policy", "string", "auto", "auto = per tone the largest rate up to "
+                  "mu whose predicted rise off the tones stays within max_rise_db (needs "
+                  "identification broadband); manual = every tone at mu, a warning when the "
+                  "predicted rise exceeds max_rise_db (the paper)", choices=MU_POLICIES),
+    ParameterSpec("max_rise_db", "double", 0.7, "largest predicted rise of the vibration "
+                  "off the tones (the guard's 1 dB margin less the prediction's error)",
+                  unit="dB", low=0.1, high=20.0),
     ParameterSpec("divergence_guard", "bool", True, "back off (lower mu, then fade out) "
                   "when control makes a band worse than its level before control"),
     ParameterSpec("guard_margin_db", "double", 1.0, "rise over the level before control "
@@ -486,15 +561,21 @@ NOTCH_CONTROLLER = NodeSpec("notch_controller", summary="six decentralized Adapt
     ParameterSpec("weight_limit_n", "double", 40.0, "anti-windup: each strut's weights "
                   "never add up to more than this (the actuator's dynamic rating)",
                   unit="N", low=0.0, high=1000.0, low_open=True),
-    ParameterSpec("identification", "string", "tones", "tones = test tones at the tones "
-                  "(3.2 s, eq. 18 bound); broadband = a 10 s multisine over 0..fs/2 that "
-                  "survives a disturbance next to a tone (Nyquist bound on G(f), mu_policy, "
-                  "predicted sensitivity)", choices=IDENTIFICATION_METHODS),
-    ParameterSpec("update_lowpass_hz", "double", 0.0, "corner of a first-order low-pass on "
-                  "each tone's weight correction: the canceller's gain far from its tones "
-                  "falls by update_lowpass_hz / |f - f_tone| more (no rise of a loop mode "
-                  "tens of Hz away); 0 = the paper's update", unit="Hz", low=0.0,
-                  high=100.0, read_only=True),
+    ParameterSpec("identification", "string", "broadband", "broadband = a 10 s multisine "
+                  "over 0..fs/2 that survives a disturbance next to a tone (Nyquist bound on "
+                  "G(f), mu_policy auto, predicted sensitivity, moving tones); tones = test "
+                  "tones at the tones (3.2 s, eq. 18 bound: the paper)",
+                  choices=IDENTIFICATION_METHODS,
+                  constraints="broadband for mu_policy auto, frequency_tracking and "
+                  "reference_harmonics"),
+    ParameterSpec("update_lowpass_hz", "double", UPDATE_LOWPASS_AUTO, "corner of a "
+                  "first-order low-pass on each tone's weight correction: the canceller's "
+                  "gain far from its tones falls by update_lowpass_hz / |f - f_tone| more (no "
+                  "rise of a loop mode tens of Hz away); 0 = the paper's update; -1 = "
+                  f"automatic: {AUTO_UPDATE_LOWPASS_HZ:g} Hz for fixed tones, 0 for tones "
+                  "that move (frequency_tracking, reference_harmonics; fixed at start-up)",
+                  unit="Hz", low=UPDATE_LOWPASS_AUTO, high=100.0, read_only=True,
+                  constraints="-1 or in [0, 100]"),
     *LOOP_SCHEDULING,
 ))
 

@@ -47,6 +47,7 @@ BIN_DIR = Path(sys.executable).parent
 
 SCENARIO_TESTS = (
     'test_never_worse_core_loop.py', 'test_sensitivity_core_loop.py', 'test_harmonic_rise.py',
+    'test_tracking_range_core_loop.py',
     'test_closed_loop.py::test_table1_reduces_40hz_by_60db_and_80hz_by_40db',
     'test_closed_loop.py::test_table2_close_tones_each_reduced_by_55db',
     'test_fxlms.py::test_bench_quick_writes_positive_finite_numbers',
@@ -58,7 +59,7 @@ parametrization)."""
 LONG_FIRST = ('test_moving_tones_graph.py', 'test_experiment.py', 'test_twin_graph.py',
               'test_sensitivity_core_loop.py', 'test_params_file.py', 'test_fxlms.py',
               'test_colcon_layout.py', 'test_never_worse_core_loop.py',
-              'test_harmonic_rise.py')
+              'test_tracking_range_core_loop.py', 'test_harmonic_rise.py')
 """Files of the longest tests, collected first so that pytest-xdist's workers do not end on
 them one after the other (order only: none depends on another)."""
 

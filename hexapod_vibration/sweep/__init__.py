@@ -2,8 +2,9 @@
 
 - :mod:`~hexapod_vibration.sweep.grid`: the grid YAML (a base scenario, dotted paths and
   the values to sweep), validated before any work; one :class:`~.grid.PointSpec` per point.
-- :mod:`~hexapod_vibration.sweep.timeline`: a point's control-on and windows against the
-  notch's identification (a grid that overlaps it is refused).
+- a point's control-on and windows against the notch's identification: a grid that
+  overlaps it is refused (:mod:`~hexapod_vibration.core.sim.timeline`, which ``experiment``
+  uses too).
 - :mod:`~hexapod_vibration.sweep.outcome`: what control did in a point's run (its status).
 - :mod:`~hexapod_vibration.sweep.point`: one point on the core loop (no ROS) and its
   metrics, from the report's own level, reduction and convergence code.

@@ -36,7 +36,7 @@ from cell to cell by the swept values only). A ``seed`` axis overrides both.
 :func:`load_grid` checks every path against the base scenario and builds every point's
 scenario and model before any simulation runs, and refuses a point whose control-on or
 analysis window falls inside the notch's identification
-(:func:`~hexapod_vibration.sweep.timeline.timeline_conflict`): a bad grid is a
+(:func:`~hexapod_vibration.core.sim.timeline.timeline_conflict`): a bad grid is a
 :class:`GridError` with a one-line message.
 """
 
@@ -62,8 +62,8 @@ from hexapod_vibration.core.sim.scenario import (
     Scenario,
     scenario_from_dict,
 )
+from hexapod_vibration.core.sim.timeline import timeline_conflict
 from hexapod_vibration.paths import config_path, scenario_path
-from hexapod_vibration.sweep.timeline import timeline_conflict
 
 GRID_KEYS = {"name", "description", "base_scenario", "model_file", "set", "axes", "points",
              "seeds", "plot"}

@@ -93,7 +93,9 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _scenario(name: str, duration: float | None, control_on: float | None) -> Scenario:
+    from hexapod_vibration.contract import SAMPLE_RATE_HZ
     from hexapod_vibration.core.sim.scenario import load_scenario
+    from hexapod_vibration.core.sim.timeline import control_on_conflict
 
     path = Path(name) if name.endswith((".yaml", ".yml")) else scenario_path(name)
     if not path.is_file():
@@ -102,7 +104,11 @@ def _scenario(name: str, duration: float | None, control_on: float | None) -> Sc
     model_file_text(scenario)                  # its model_overrides, checked before any work
     if duration is not None or control_on is not None:
         _check_timeline(scenario, duration, control_on)
-    return scenario.with_timeline(duration, control_on)
+    scenario = scenario.with_timeline(duration, control_on)
+    conflict = control_on_conflict(scenario, SAMPLE_RATE_HZ)
+    if conflict is not None:
+        raise ValueError(f"{path}: {conflict}")
+    return scenario
 
 
 def _check_timeline(sc: Scenario, duration: float | None, control_on: float | None) -> None:

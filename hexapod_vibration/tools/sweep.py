@@ -9,7 +9,7 @@ need this package installed). Points already in DIR are skipped, so an interrupt
 resumes where it stopped. A point that fails is recorded with its error; the sweep goes on.
 
 A grid whose control-on or analysis windows fall inside the notch's identification is
-refused before anything runs (:mod:`hexapod_vibration.sweep.timeline`). Each point's
+refused before anything runs (:mod:`hexapod_vibration.core.sim.timeline`). Each point's
 ``status`` says what control did (``ok``, ``clamped``, ``backed_off``, ``faded``,
 ``refused``, or ``failed`` with its error); the summary line counts them. A progress bar
 runs on stderr while the points complete (one line every 10 s when stderr is a file).

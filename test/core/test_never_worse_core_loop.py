@@ -18,50 +18,19 @@ with that step, +2.8..+3.5 dB in 44.7-56.2 Hz); ``single_tone_harmonic`` (paper 
 mu 0.002 with the update low-pass): no band above +1 dB, the 40 Hz band at the floor.
 """
 
-import dataclasses
 from pathlib import Path
 
 import numpy as np
 import pytest
-from scipy import signal
+from core_twins import band_db as _band_db
+from core_twins import run_with_twin as _run_with_twin
+from core_twins import worst_window_rise as _worst_window_rise
 
-from hexapod_vibration.core.model.config import load_model_config
-from hexapod_vibration.core.sim.closed_loop import CoreLoop
 from hexapod_vibration.core.sim.scenario import load_scenario
 from hexapod_vibration.core.spectrum import third_octave_bands_hz
 
 ROOT = Path(__file__).resolve().parents[2]
-CFG = load_model_config(ROOT / 'config' / 'pph_model.yaml')
 FS = 1000.0
-
-
-def _band_db(z: np.ndarray, bands: np.ndarray) -> np.ndarray:
-    """Total power (lines included) of z in each [lo, hi) band, dB."""
-    f, p = signal.welch(z, FS, window='hann', nperseg=4000)
-    return np.array([10 * np.log10(np.sum(p[(f >= lo) & (f < hi)])) for lo, hi in bands])
-
-
-def _run_with_twin(scenario):
-    """(loop, z with control, z of the twin): the scenario and its run without control."""
-    runs = []
-    for sc in (scenario, dataclasses.replace(scenario, control_on_s=scenario.duration_s)):
-        loop = CoreLoop(CFG, sc)
-        runs.append((loop, CFG.geometry.platform_from_struts(loop.run().accel_m_s2)[:, 2]))
-    (loop, z_on), (_, z_off) = runs
-    return loop, z_on, z_off
-
-
-def _worst_window_rise(scenario, z_on: np.ndarray, z_off: np.ndarray,
-                       bands: np.ndarray) -> float:
-    """The largest band rise (dB) in any window of the report's length from control-on.
-
-    The windows are ``window_s`` long and start every second (the report's
-    ``bands_over_time``).
-    """
-    n = int(scenario.window_s * FS)
-    starts = range(int(scenario.control_on_s * FS), z_on.size - n + 1, int(FS))
-    return max(float(np.max(_band_db(z_on[a:a + n], bands) - _band_db(z_off[a:a + n], bands)))
-               for a in starts)
 
 
 def _twins(name: str):

@@ -116,7 +116,7 @@ def test_auto_policy_keeps_the_predicted_rise_within_3db(close_tones_nonlinear):
     sc = loops[True].scenario
     auto = mu_policy.choose_tone_rates(
         loops[True].response.at, sc.notch.tone_frequencies_hz, FS,
-        loops[True].record_coefficients, sc.notch.mu, 'auto',
+        loops[True].record_coefficients, sc.notch.mu, 'auto', max_rise_db=3.0,
         output_weights=loops[True].z_row, disturbance_csd=loops[True].disturbance.at)
     assert auto.warning is None and auto.predicted_rise_db <= 3.0
     assert np.all(auto.tone_mu < sc.notch.mu) and np.all(auto.tone_mu > 0.5 * sc.notch.mu)

@@ -64,7 +64,10 @@ def _params_file(tmp_path) -> str:
 def test_nodes_exchange_contract_topics_and_cancel_the_tone(ros_context, node_processes,
                                                             tmp_path, composed):
     """Same contract whether the nodes run as three processes or composed in ``pph_graph``."""
-    args = ('--ros-args', '--params-file', _params_file(tmp_path))
+    # the paper's preset first (test tones: the identification fits the short timeline),
+    # this test's settings over it (the later params file wins)
+    args = ('--ros-args', '--params-file', str(config_path('presets/paper.yaml')),
+            '--params-file', _params_file(tmp_path))
     executables = ['pph_graph'] if composed else ['pph_driver', 'notch_controller',
                                                   'pointing_controller']
     processes = tuple(node_processes.start(name, *args) for name in executables)

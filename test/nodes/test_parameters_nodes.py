@@ -4,7 +4,8 @@ Each node runs as a process on the test's own ROS domain. A valid value is accep
 back with get_parameters and, where it is observable, seen in the data (by sample index,
 "eventually", never timed); each bad value is rejected with a non-empty reason and the
 old value kept. ``config/pph.yaml`` holds every parameter at its default, and a params
-file given with ``--ros-args --params-file`` is applied.
+file given with ``--ros-args --params-file`` is applied. Notch settings that cannot work
+together are refused at start-up and at run time with the same reason.
 """
 
 from __future__ import annotations
@@ -314,3 +315,58 @@ def test_pointing_controller_parameters(ros_context, node_processes):
     _check_accepted(client, 'enabled', True)
     _check_read_only(client, {'model_file': '/tmp/model.yaml', 'executor': 'events'})
     assert pointing.running() and driver.running()
+
+
+def _refused_at_start_up(process) -> str:
+    """The one error line of a node that refused its start-up parameters (exit 2)."""
+    code = process.wait(HANG_GUARD_S)
+    assert code == 2, process.output()
+    lines = process.stderr_path.read_text().strip().splitlines()
+    errors = [line for line in lines if line.startswith('notch_controller: error: ')]
+    assert len(errors) == 1 and 'Traceback' not in process.output(), process.output()
+    return errors[0]
+
+
+def test_notch_settings_that_cannot_work_are_refused_on_every_route(ros_context,
+                                                                    node_processes,
+                                                                    tmp_path):
+    """``-p``, a params file and ``ros2 param set`` refuse them with the same reason.
+
+    Tracking needs the broadband identification, and so does ``mu_policy: auto`` (the
+    default); the paper's preset (``config/presets/paper.yaml``) is a params file the node
+    takes as it is. (The scenario route: test/core/test_notch_settings.py.)
+    """
+    auto = 'mu_policy auto needs identification: broadband'
+    tracking = 'frequency_tracking needs identification: broadband'
+    line = _refused_at_start_up(node_processes.start(
+        'notch_controller', '--ros-args', '-p', 'identification:=tones'))
+    assert auto in line, line
+    params = tmp_path / 'tracked_tones.yaml'
+    params.write_text(yaml.safe_dump({'notch_controller': {'ros__parameters': {
+        'mu_policy': 'manual', 'identification': 'tones', 'frequency_tracking': True}}}))
+    line = _refused_at_start_up(node_processes.start(
+        'notch_controller', '--ros-args', '--params-file', str(params)))
+    assert tracking in line, line
+
+    preset = ROOT / 'config' / 'presets' / 'paper.yaml'
+    paper = yaml.safe_load(preset.read_text())['notch_controller']['ros__parameters']
+    process = node_processes.start('notch_controller', '--ros-args', '--params-file',
+                                   str(preset))
+    node = ros_context.create_node('param_client')
+    client = ParameterClient(ros_context, node, 'notch_controller')
+    assert client.get(*paper) == paper
+    _check_rejected(client, 'frequency_tracking', [True], tracking)
+    _check_accepted(client, 'identification', 'broadband')
+    _check_accepted(client, 'frequency_tracking', True)      # the paper's update: explicit
+    _check_rejected(client, 'identification', ['tones'], tracking)
+    assert process.stop() == 130, process.output()          # one notch_controller at a time
+
+    # At the defaults the update low-pass is automatic, chosen at start-up for fixed tones:
+    # tracking switched on later is refused with the reason (at start-up it is taken).
+    node_processes.start('notch_controller')
+    client = ParameterClient(ros_context, node, 'notch_controller')
+    _check_rejected(client, 'identification', ['tones'], auto, 'mu_policy manual first')
+    _check_rejected(client, 'frequency_tracking', [True], 'chosen at start-up',
+                    'start the node with frequency_tracking set so')
+    _check_accepted(client, 'mu_policy', 'manual')
+    _check_accepted(client, 'identification', 'tones')

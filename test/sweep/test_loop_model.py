@@ -21,7 +21,8 @@ def test_model_response_matches_the_identification_on_the_linear_plant():
     sc = dataclasses.replace(sc, nonlinear=False, duration_s=4.0, identify_at_s=0.5,
                              control_on_s=4.0, window_s=1.0,
                              notch=dataclasses.replace(sc.notch, tone_frequencies_hz=TONES,
-                                                       settings={"identification": "tones"}))
+                                                       settings={"identification": "tones",
+                                                                 "mu_policy": "manual"}))
     identified = CoreLoop(CFG, sc).run().plant_response
     plant = canceller_plant(CFG)
     modelled = frequency_response(plant, TONES, CFG.simulation.sample_rate_hz)

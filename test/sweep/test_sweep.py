@@ -11,10 +11,11 @@ import numpy as np
 import pytest
 import yaml
 
+from hexapod_vibration.core.sim import timeline
 from hexapod_vibration.core.sim.scenario import Scenario, load_scenario
 from hexapod_vibration.paths import scenario_path, share_directory
 from hexapod_vibration.sweep import grid as grids
-from hexapod_vibration.sweep import maps, results, runner, timeline
+from hexapod_vibration.sweep import maps, results, runner
 
 # A short Table 1 loop: identification 0.2 .. 3.4 s, 1 s windows (the controlled one 1 s
 # after control-on), about 0.8 s of CPU.
@@ -25,7 +26,8 @@ TINY_SET = {
     "report_tones_hz": [40.0, 80.0],
     # the bare canceller of the paper: the 3.2 s tone identification (broadband takes 10 s),
     # no divergence guard and no anti-windup, so that a mu beyond the bound winds up
-    "notch.settings": {"identification": "tones", "divergence_guard": False,
+    "notch.settings": {"identification": "tones", "mu_policy": "manual",
+                       "update_lowpass_hz": 0.0, "divergence_guard": False,
                        "weight_limit_n": 1000.0},
 }
 # Wall-clock and process fields: the only ones allowed to differ between two runs.
@@ -172,7 +174,7 @@ def test_the_identification_length_is_the_supervisors():
 
     def interval(**settings):
         notch = dataclasses.replace(base.notch, tone_frequencies_hz=(40.0,),
-                                    settings=settings)
+                                    settings={"mu_policy": "manual", **settings})
         return timeline.identification_interval(dataclasses.replace(base, notch=notch),
                                                 1000.0)
 
@@ -261,7 +263,8 @@ def test_a_point_that_did_not_run_as_asked_has_its_own_status(tmp_path):
         {"notch.mu": 0.2, "notch.settings": guarded},
         {"notch.mu": 0.003, **refused},
         {"notch.mu": 0.038, "duration_s": 8.4,         # the base's update low-pass and
-         "notch.settings": {"identification": "tones", "divergence_guard": True,
+         "notch.settings": {"identification": "tones", "mu_policy": "manual",
+                            "divergence_guard": True,
                             "update_lowpass_hz": 10.0}}])     # anti-windup (40 N)
     summary = runner.run_sweep(grids.load_grid(path), tmp_path / "out", progress=False,
                                plots=False)

@@ -23,7 +23,10 @@ SCENARIO = {
     "window_s": 2.0,
     "shaker": {"frequencies_hz": [40.0, 80.0], "amplitudes_n": [80.0, 16.0],
                "noise_rms_n": 0.5},
-    "notch": {"tone_frequencies_hz": [40.0], "mu": 0.01, "adaptation": "decentralized"},
+    # the paper's test tones (3.2 s) fit the short timeline; the default broadband
+    # identification takes 10 s
+    "notch": {"preset": "paper", "tone_frequencies_hz": [40.0], "mu": 0.01,
+              "adaptation": "decentralized"},
     "report_tones_hz": [40.0, 80.0],
 }
 
@@ -93,6 +96,17 @@ def test_existing_output_and_bad_arguments_are_refused(ros_env, scenario_file, t
     assert result.returncode == 2 and "single_tone_harmonic" in result.stderr
     result = run_experiment(ros_env, scenario_file, tmp_path / "y", "--control-on", "50")
     assert result.returncode == 2 and "control_on" in result.stderr.replace("-", "_")
+    # control-on inside the identification: refused before anything runs, with the fix
+    result = run_experiment(ros_env, scenario_file, tmp_path / "z", "--control-on", "3")
+    assert result.returncode == 2, result.stderr
+    assert ("control-on at 3 s falls inside the tones identification (0.2-3.4 s); set "
+            "control_on_s >= 5.4 s") in result.stderr and "Traceback" not in result.stderr
+    defaults = tmp_path / "defaults.yaml"          # the default identification: broadband
+    defaults.write_text(yaml.safe_dump({**SCENARIO, "notch": {"tone_frequencies_hz": [40.0]}}))
+    result = run_experiment(ros_env, defaults, tmp_path / "w")
+    assert result.returncode == 2 and "falls inside the broadband identification" in (
+        result.stderr), result.stderr
+    assert not (tmp_path / "z").exists() and not (tmp_path / "w").exists()
 
 
 def test_ctrl_c_stops_everything_and_leaves_a_readable_bag(ros_env, scenario_file, tmp_path):

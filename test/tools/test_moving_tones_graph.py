@@ -6,8 +6,8 @@ to end. They need the notch supervisor's tracking API (``tone_estimates_hz``,
 ``set_reference_frequency``): skipped where it does not exist yet.
 
 The settings are the ``mismatch`` scenario's (its broadband identification; the
-tachometer run identifies with test tones), on a shorter timeline: identification from
-0.5 s (10 s, or 3.5 s with test tones), 2 s windows, 4.5 s of control at mu 0.002
+tachometer run too: tones that follow a reference need it), on a shorter timeline:
+identification from 0.5 s (10 s), 2 s windows, 4.5 s of control at mu 0.002
 (``mu_policy: manual``: these runs check the graph, not the policy's rate). Missed
 samples are not asserted here: a lockstep timeout depends on the machine's load.
 """
@@ -31,21 +31,20 @@ pytestmark = pytest.mark.skipif(
     reason="needs the notch supervisor's frequency tracking (branch tracking)")
 
 IDENTIFY_AT_S, WINDOW_S, CONTROL_S = 0.5, 2.0, 4.5
-BROADBAND_S, TONES_S = 10.0, 3.5
-"""Identification time (s): the broadband 10 s record; test tones at two tones (3.2 s)."""
+BROADBAND_S = 10.0
+"""Identification time (s): the broadband 10 s record."""
 
 
-def _short(changes: dict, notch: dict, identification_s: float = BROADBAND_S) -> dict:
+def _short(changes: dict, notch: dict) -> dict:
     """The mismatch scenario's timeline, shortened, with ``changes`` on top.
 
-    ``notch`` is added to the scenario's own notch settings (its identification method
-    stays unless ``notch`` names another, with its ``identification_s``), with
+    ``notch`` is added to the scenario's own notch settings (its broadband identification), with
     ``mu_policy: manual``: these runs check the graph, not the policy's rate (the mismatch
     scenario's auto policy bounds 45/91 Hz to a slower rate than 5 s of control need).
     Control goes on a window after the identification.
     """
     base = yaml.safe_load(scenario_path("mismatch").read_text())
-    control_on_s = IDENTIFY_AT_S + identification_s + WINDOW_S
+    control_on_s = IDENTIFY_AT_S + BROADBAND_S + WINDOW_S
     base.update(identify_at_s=IDENTIFY_AT_S, window_s=WINDOW_S, control_on_s=control_on_s,
                 duration_s=control_on_s + CONTROL_S)
     notch = {"mu_policy": "manual", **notch}
@@ -87,9 +86,8 @@ def test_the_tachometer_drives_the_tones_through_the_graph(ros_env, tmp_path):
                    "reference_speed_hz": 45.5, "profile_time_s": [0.0],
                    "profile_speed_hz": [45.5], "tachometer": True},
          "report_tones_hz": [45.5, 91.0]},
-        # test tones at the reference's 45.5 / 91 Hz (the tracking run has the broadband one)
-        {"tone_frequencies_hz": [45.0, 91.0], "reference_harmonics": [1.0, 2.0],
-         "identification": "tones"}, TONES_S))
+        # tones that follow a reference need the broadband identification's G(f)
+        {"tone_frequencies_hz": [45.0, 91.0], "reference_harmonics": [1.0, 2.0]}))
     bag = run["bag"]
     ref_index, reference = bag.frequencies["/pph/reference_frequency"]
     samples = run["report"]["loop"]["samples"]

@@ -21,7 +21,8 @@ SCENARIO = {
     'control_on_s': 5.5, 'window_s': 1.0,
     'shaker': {'frequencies_hz': [40.0, 80.0], 'amplitudes_n': [80.0, 16.0],
                'noise_rms_n': 0.5},
-    'notch': {'tone_frequencies_hz': [40.0], 'mu': 0.01, 'adaptation': 'decentralized'},
+    'notch': {'preset': 'paper', 'tone_frequencies_hz': [40.0], 'mu': 0.01,
+              'adaptation': 'decentralized'},            # test tones: a short timeline
 }
 COMPARED = 3000     # samples before control-on (5500)
 MATCHED_BY_SAMPLE = 200

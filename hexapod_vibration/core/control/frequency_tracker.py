@@ -77,6 +77,19 @@ loop against the uncontrolled twin (last 10 s, z axis, largest third-octave rise
 40.4 Hz: +0.66 dB); ``drift`` + tracking +6.1 dB at 8 Hz, +4.0 dB at 3 Hz, +3.1 dB at
 1.5 Hz, the tone's band 42.3 dB down in each; ``spin_up`` unchanged. (Before the tones
 coasted on the acquired rate, a 3 Hz corner lost the drifting tone.)"""
+RATE_BANDWIDTH_MULTIPLE = 8.0
+"""A tone's loop is at most this many times as fast as its weights: natural frequency and
+proportional corner at most this x ``mu_k fs / (2 pi k)`` of its slowest order k
+(:func:`rate_bandwidth_caps_hz`, :meth:`FrequencyTracker.limit_bandwidth`).
+
+The loop closes a second feedback path on the tone (its phase, in quadrature, through the
+oscillator) that the predicted sensitivity, and so the mu policy's bound, leaves out. At
+1.5 Hz beside weights at mu 0.0006-0.0009 (0.1-0.14 Hz) it was the larger one: core loop
+against the twin, ``mismatch_tracking`` with the shaker at 41.0 / 41.5 Hz, the 44.7-56.2 Hz
+third octave +1.10 / +1.16..+1.46 dB (a fixed notch on 41.0 Hz: +0.18 dB), the tone 62 / 43
+dB down; with this 8 (1.03 / 0.76 Hz) +0.69 / +0.67..+0.75 dB, 65.7 / 57-60 dB;
+``drift_tracking`` 44.8 -> 42.8 dB; ``spin_up`` (rates 0.0033-0.006) unchanged. A flat
+1.0 Hz kept ``spin_up`` order 2 at 25 dB in the ramp's first second (30 required)."""
 MAX_PHASE_ERROR_RAD = 0.5
 """A measured phase error above this (rad) is clipped: the linear loop holds to there."""
 
@@ -129,6 +142,20 @@ def loop_bandwidths_hz(nominal_hz: Sequence[float] | np.ndarray, orders: Sequenc
             d = np.abs(bank[:, t][:, None] - others[None, :]).min(axis=1)     # (K,)
             out[t] = min(out[t], float(np.min(NEIGHBOUR_BANDWIDTH_RATIO * d / k)))
     return out
+
+
+def rate_bandwidth_caps_hz(orders: Sequence[float] | np.ndarray,
+                           tone_mu: Sequence[float] | np.ndarray,
+                           sample_rate_hz: float) -> np.ndarray:
+    """Each tone's largest loop bandwidth (Hz) for the rates its weights adapt at.
+
+    :data:`RATE_BANDWIDTH_MULTIPLE` x ``mu_k fs / (2 pi k)`` of its slowest order k (the
+    weights' loop bandwidth, in the fundamental's frequency). ``tone_mu`` holds one rate per
+    oscillator, order-major as the bank (row ``k * T + t``: order k + 1 of tone t).
+    """
+    k = np.asarray(orders, dtype=float).reshape(-1)
+    rates = np.asarray(tone_mu, dtype=float).reshape(k.size, -1) / k[:, None]
+    return RATE_BANDWIDTH_MULTIPLE * rates.min(axis=0) * float(sample_rate_hz) / TWO_PI
 
 
 def weight_phase_error(previous: np.ndarray, current: np.ndarray, rate: float,
@@ -232,24 +259,50 @@ class FrequencyTracker:
         if int(block_samples) < 1:
             raise ValueError(f'block_samples must be >= 1, got {block_samples!r}')
         self.block_samples = int(block_samples)
-        omega_n = TWO_PI * np.broadcast_to(np.asarray(bandwidth_hz, float),
-                                           self.nominal_hz.shape) / self.fs
-        self._alpha = 2.0 * float(damping) * omega_n         # K1 + mu (rad per rad)
-        self._beta = omega_n * omega_n                      # K2 (rad/sample per rad/sample)
-        self._gamma = self._beta * RAMP_FRACTION * omega_n  # K3 (rate per rad)
+        self._damping = float(damping)
+        self._bandwidth_hz = np.broadcast_to(np.asarray(bandwidth_hz, float),
+                                             self.nominal_hz.shape).copy()
+        self._set_gains(self._bandwidth_hz, PROPORTIONAL_CORNER_HZ)
         self._rate = np.zeros(self.nominal_hz.size)         # rad/sample per sample
-        self._beta_b = self._beta * self.block_samples      # per block
-        self._k1_rate = float('nan')                        # K1 = alpha - mu, cached
-        self._k1 = self._alpha
-        self._gamma_b = self._gamma * self.block_samples
         self._max_step = TWO_PI * MAX_SLEW_HZ_PER_S * self.block_samples / self.fs ** 2
         self._lo = TWO_PI * self.lower_hz / self.fs         # bounds, rad/sample
         self._hi = TWO_PI * self.upper_hz / self.fs
         self._omega = TWO_PI * self.nominal_hz / self.fs     # integrator (rad/sample)
         self._effective = self._omega.copy()
-        self._smoothing = -np.expm1(-TWO_PI * PROPORTIONAL_CORNER_HZ * self.block_samples
-                                    / self.fs)
         self._e_smooth = np.zeros(self.nominal_hz.size)     # low-passed phase error (rad)
+
+    def _set_gains(self, bandwidth_hz: np.ndarray, corner_hz: float | np.ndarray) -> None:
+        """The loop gains for natural frequencies ``bandwidth_hz`` (Hz, (T,)).
+
+        K1 + mu, K2, K3 per sample and per block; the proportional path's low-pass at
+        ``corner_hz`` (Hz).
+        """
+        omega_n = TWO_PI * np.asarray(bandwidth_hz, float) / self.fs
+        self._alpha = 2.0 * self._damping * omega_n         # K1 + mu (rad per rad)
+        self._beta = omega_n * omega_n                      # K2 (rad/sample per rad/sample)
+        self._gamma = self._beta * RAMP_FRACTION * omega_n  # K3 (rate per rad)
+        self._beta_b = self._beta * self.block_samples      # per block
+        self._gamma_b = self._gamma * self.block_samples
+        self._k1_rate = float('nan')                        # K1 = alpha - mu, cached
+        self._k1 = self._alpha
+        self._smoothing = -np.expm1(-TWO_PI * np.asarray(corner_hz, float)
+                                    * self.block_samples / self.fs)
+
+    def limit_bandwidth(self, cap_hz: float | np.ndarray) -> None:
+        """Natural frequencies and proportional corner at most ``cap_hz`` (Hz, one or (T,)).
+
+        The loops keep their state (frequencies, learnt rates); the bandwidths they were
+        built with (and :data:`PROPORTIONAL_CORNER_HZ`) come back where the cap is above
+        them (:func:`rate_bandwidth_caps_hz`: the weights' rates).
+        """
+        cap = np.broadcast_to(np.asarray(cap_hz, float), self.nominal_hz.shape)
+        self._set_gains(np.minimum(self._bandwidth_hz, cap),
+                        np.minimum(PROPORTIONAL_CORNER_HZ, cap))
+
+    @property
+    def bandwidths_hz(self) -> np.ndarray:
+        """Each loop's natural frequency (Hz) in force, a new array."""
+        return np.sqrt(self._beta) * (self.fs / TWO_PI)
 
     def reset(self, frequencies_hz: Sequence[float] | np.ndarray | None = None,
               rates_hz_per_s: Sequence[float] | np.ndarray | None = None) -> None:

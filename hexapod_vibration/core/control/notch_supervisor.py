@@ -35,9 +35,8 @@ import numpy as np
 
 from hexapod_vibration.contract import SAMPLE_RATE_HZ, STRUT_COUNT, NotchState
 from hexapod_vibration.core.control import mu_policy, sensitivity
-from hexapod_vibration.core.control.divergence_guard import FADE_S
 from hexapod_vibration.core.control.filters import DCBlocker
-from hexapod_vibration.core.control.notch import AdaptiveNotchCanceller
+from hexapod_vibration.core.control.notch import FADE_S, AdaptiveNotchCanceller
 from hexapod_vibration.core.control.notch_weights import validate_mu
 from hexapod_vibration.core.control.plant_identification import (
     DisturbanceSpectrum,
@@ -76,7 +75,7 @@ def _initial_canceller(config: NotchConfig, tones: list[float],
         canceller.set_tone_frequencies(tones, ramp_samples=0)
     canceller.set_enabled(False, ramp_samples=0)
     canceller.set_weight_limit(config.weight_limit_n)
-    canceller.set_update_lowpass(config.update_lowpass_hz)
+    canceller.set_update_lowpass(settings.update_lowpass_hz)
     return canceller
 
 
@@ -99,16 +98,14 @@ class NotchSupervisor:
         """Build the canceller and the DC blocker; identification waits for the first sample."""
         self.fs = float(sample_rate_hz)
         self.channels = int(channels)
-        self.output_weights = (None if output_weights is None
-                               else np.asarray(output_weights, dtype=float))
+        self.output_weights = None if output_weights is None else np.asarray(output_weights, float)
         settings = self._settings = Settings(config, self.fs, self.channels)
         events = self._events = EventLog()
         tones = bank_frequencies(config.tone_frequencies_hz, config.harmonics).tolist()
         canceller = self.canceller = _initial_canceller(config, tones, settings)
         self.dc_blocker = DCBlocker(self.channels, self.fs, config.dc_cutoff_hz)
         self._command = np.zeros(self.channels)
-        self._clock = SampleClock()
-        self._gaps = GapReport(int(round(sample_rate_hz)))
+        self._clock, self._gaps = SampleClock(), GapReport(int(round(sample_rate_hz)))
         self._plant = PlantKnowledge()
         self._gate = ControlGate(settings, canceller, events)
         self._rates = RatePolicy(settings, canceller, self._plant, events, self.output_weights)
@@ -123,10 +120,9 @@ class NotchSupervisor:
             settings, canceller, self._clock, self._plant, self._rates, self._gate,
             self.safety, self.follower, events)
         """The plant's identification (running, its span)."""
-        self._rates.bound = self._plan({"mu": config.mu,
-                                        "tone_frequencies_hz": list(config.tone_frequencies_hz),
-                                        "adaptation": config.adaptation,
-                                        "harmonics": config.harmonics}).bound
+        first = {"mu": config.mu, "tone_frequencies_hz": list(config.tone_frequencies_hz),
+                 "adaptation": config.adaptation, "harmonics": config.harmonics}
+        self._rates.bound = self._plan(first).bound
         self.follower.rebuild()
         if config.adaptation == "raw" or not config.auto_identify:
             canceller.set_enabled(config.enabled, ramp_samples=0)
@@ -154,8 +150,7 @@ class NotchSupervisor:
         """Apply a set of changes that :meth:`check` accepted.
 
         Raises:
-            KeyError, ValueError: the set is refused (nothing changed), as :meth:`check`
-                would say.
+            KeyError, ValueError: refused (nothing changed), as :meth:`check` would say.
         """
         plan = self._plan(changes)
         canceller, settings = self.canceller, self._settings

@@ -20,7 +20,8 @@ import yaml
 from hexapod_vibration.core.control.notch_supervisor import NotchConfig, NotchSupervisor
 from hexapod_vibration.core.model.rotor import Rotor, rotor_or_none
 from hexapod_vibration.core.model.shaker import ShakerTone, tones_from_arrays
-from hexapod_vibration.parameter_specs import ADAPTATION_MODES
+from hexapod_vibration.parameter_specs import ADAPTATION_MODES, NOTCH_CONTROLLER
+from hexapod_vibration.paths import share_directory
 
 
 @dataclass(frozen=True)
@@ -70,6 +71,37 @@ class RotorSettings:
 
 RUNNER_NOTCH_SETTINGS = frozenset({"enabled", "identify_delay_s"})
 """Notch settings the timeline sets (``control_on_s``, ``identify_at_s``), not the YAML."""
+PRESETS_FOLDER = "presets"
+"""Folder of ``config/`` holding the notch presets: ROS params files for notch_controller."""
+
+
+def available_presets() -> list[str]:
+    """Names of the notch presets (``config/presets/*.yaml`` without ``.yaml``)."""
+    return sorted(p.stem for p in (share_directory() / "config" / PRESETS_FOLDER).glob("*.yaml"))
+
+
+def notch_preset(name: str) -> dict[str, Any]:
+    """The notch settings of preset ``name`` (``config/presets/<name>.yaml``, a params file).
+
+    Raises:
+        ValueError: an unknown preset (the reason lists the known ones), or a file that is
+            not a params file of notch_controller's parameters.
+    """
+    if not isinstance(name, str) or name not in available_presets():
+        raise ValueError(f"unknown preset {name!r}; presets: {', '.join(available_presets())}")
+    path = share_directory() / "config" / PRESETS_FOLDER / f"{name}.yaml"
+    with open(path, encoding="utf-8") as stream:
+        data = yaml.safe_load(stream)
+    try:
+        values = dict(data["notch_controller"]["ros__parameters"])
+    except (TypeError, KeyError):
+        raise ValueError(f"{path}: not a params file of notch_controller (no "
+                         "notch_controller: ros__parameters:)") from None
+    unknown = set(values) - set(NOTCH_CONTROLLER.names)
+    if unknown:
+        raise ValueError(f"{path}: not a notch_controller parameter: "
+                         f"{', '.join(sorted(unknown))}")
+    return values
 
 
 @dataclass(frozen=True)
@@ -79,6 +111,8 @@ class NotchSettings:
     ``settings`` holds any other notch parameter by its own name (``frequency_tracking``,
     ``harmonics``, ``mu_policy``, ...: the fields of
     :class:`~hexapod_vibration.core.control.notch_supervisor.NotchConfig`), checked there.
+    In the YAML, ``preset: NAME`` starts from a preset's settings (:func:`notch_preset`,
+    e.g. ``paper``: the paper's algorithm) and the section's own keys override them.
     """
 
     tone_frequencies_hz: tuple[float, ...] = ()
@@ -91,7 +125,12 @@ class NotchSettings:
         """Split the YAML's ``notch:`` mapping; a name that is no notch setting raises."""
         values = _tuples(values)
         nested = values.pop("settings", None) or {}       # a dataclasses.asdict() round trip
-        values = {**_tuples(nested), **values}
+        preset = values.pop("preset", None)
+        try:
+            base = _tuples(notch_preset(preset)) if preset is not None else {}
+        except ValueError as exc:
+            raise ValueError(f"notch: {exc}") from None
+        values = {**base, **_tuples(nested), **values}
         own = {k: values.pop(k) for k in ("tone_frequencies_hz", "mu", "adaptation")
                if k in values}
         unknown = set(values) - set(NotchConfig.__dataclass_fields__)

@@ -4,8 +4,10 @@
 :data:`~hexapod_vibration.parameter_specs.NOTCH_CONTROLLER` (every parameter of the node but
 the scheduling of its loop), with the declared default, and checks every value against its
 declaration when it is built: ``parameter_specs`` is the one definition of the settings,
-their defaults and ranges. What depends on several settings or on the controller's state
-(tones x orders, the stability bound) is checked by :mod:`.planning`.
+their defaults and ranges. The checks of settings that belong together (the node's joint
+checks, e.g. ``frequency_tracking`` needs ``identification: broadband``) run there too;
+what depends on the controller's state (tones x orders, the stability bound, the update
+low-pass fixed at start-up) is checked by :mod:`.planning`.
 
 :class:`Settings` holds the settings in force; the collaborators read what they need from
 it when they need it.
@@ -17,7 +19,13 @@ import dataclasses
 from collections.abc import Mapping
 from typing import Any
 
-from hexapod_vibration.parameter_specs import LOOP_SCHEDULING, NOTCH_CONTROLLER, ParameterSpec
+from hexapod_vibration.core.control.notch import FADE_S
+from hexapod_vibration.parameter_specs import (
+    LOOP_SCHEDULING,
+    NOTCH_CONTROLLER,
+    ParameterSpec,
+    update_lowpass_corner_hz,
+)
 
 NOTCH_SETTINGS: tuple[ParameterSpec, ...] = tuple(
     spec for spec in NOTCH_CONTROLLER.parameters
@@ -36,8 +44,9 @@ def _field(spec: ParameterSpec) -> tuple[str, type, dataclasses.Field]:
 def _docstring() -> str:
     lines = ["Settings of the notch controller; the field names are the node's ROS parameters.",
              "", "Generated from ``parameter_specs.NOTCH_CONTROLLER``: each value is checked "
-             "against its", "declaration when the settings are built (ValueError with the "
-             "reason).", "", "Attributes:"]
+             "against its", "declaration, and the values together against the node's joint "
+             "checks, when the", "settings are built (ValueError with the reason).", "",
+             "Attributes:"]
     for spec in NOTCH_SETTINGS:
         unit = f" ({spec.unit})" if spec.unit else ""
         lines.append(f"    {spec.name}: {spec.description}{unit}.")
@@ -45,11 +54,14 @@ def _docstring() -> str:
 
 
 def _check(self: Any) -> None:
-    """Refuse a value its declaration refuses (the spec's one-line reason)."""
+    """Refuse a value its declaration refuses, or values the joint checks refuse (the reason)."""
     for spec in NOTCH_SETTINGS:
         reason = spec.check(getattr(self, spec.name))
         if reason:
             raise ValueError(reason)
+    reason = NOTCH_CONTROLLER.check_together(vars(self))
+    if reason:
+        raise ValueError(reason)
 
 
 def _replaced(self: Any, changes: Mapping[str, Any]) -> Any:
@@ -93,11 +105,23 @@ class Settings:
         self.config = config
         self.fs = float(sample_rate_hz)
         self.channels = int(channels)
+        self.update_lowpass_hz = update_lowpass_corner_hz(vars(config))
+        """The update low-pass corner in force (Hz; ``update_lowpass_hz`` resolved at
+        start-up, :func:`~hexapod_vibration.parameter_specs.update_lowpass_corner_hz`)."""
 
     @property
     def ramp_samples(self) -> int:
-        """Fade length (samples) for enable/disable and removed tones (``ramp_s``)."""
+        """Ramp length (samples) for enabling and removed tones (``ramp_s``)."""
         return int(round(self.config.ramp_s * self.fs))
+
+    @property
+    def fade_out_samples(self) -> int:
+        """Length (samples) of the output's smooth fade when control is switched off.
+
+        ``ramp_s``, at least :data:`~hexapod_vibration.core.control.notch.FADE_S`: a
+        shorter fade of a cancelled line splatters it over the bands beside it.
+        """
+        return max(self.ramp_samples, int(round(FADE_S * self.fs)))
 
     def set_mu(self, mu: float) -> None:
         """The supervisor set ``mu`` itself (a clamp, a lowered rate): the setting follows."""

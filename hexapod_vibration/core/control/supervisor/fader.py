@@ -4,7 +4,9 @@ A fade that follows a line off the notch first lowers mu to 0 over ``mu_fall_s``
 cosine, set every :data:`MU_RAMP_STEP_SAMPLES`) with the weights still adapting: weights
 that follow a line turn at its offset, and frozen at once they would stop turning, the
 output's frequency jumping back to the oscillator's (a kink of its phase, a 1/df^2 skirt);
-with mu falling they slow down and shrink smoothly. Then they freeze and the output fades.
+with mu falling they slow down and shrink smoothly. Then they freeze and the output fades
+along a curve without a kink (:func:`~hexapod_vibration.core.control.notch.smooth_fade_gain`:
+a linear fade of a cancelled line splatters it over the bands beside it).
 """
 
 from __future__ import annotations
@@ -67,7 +69,7 @@ class OutputFader:
             self.falling = True
         else:
             canceller.set_frozen(True)
-            canceller.set_enabled(False, fade)
+            canceller.set_enabled(False, fade, smooth=True)
 
     def step(self) -> None:
         """One sample of a mu fall: a raised cosine to 0, then freeze and fade the output."""
@@ -83,7 +85,7 @@ class OutputFader:
         if fall.done >= fall.samples:
             self.falling = False
             self._canceller.set_frozen(True)
-            self._canceller.set_enabled(False, fall.fade_samples)
+            self._canceller.set_enabled(False, fall.fade_samples, smooth=True)
 
     def end(self) -> None:
         """Forget a mu fall; give mu back unless someone else set one since."""

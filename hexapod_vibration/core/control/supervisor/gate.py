@@ -54,11 +54,15 @@ class ControlGate:
         return self.hold is not Hold.NONE
 
     def refuse(self, reason: str) -> None:
-        """Keep control off (frozen, faded out over the ramp) and say why (error)."""
+        """Keep control off (frozen, faded out smoothly) and say why (error)."""
         self.hold, self.reason = Hold.REFUSED, reason
         self._canceller.set_frozen(True)
-        self._canceller.set_enabled(False, self._settings.ramp_samples)
+        self._switch_off()
         self._events.add("error", reason)
+
+    def _switch_off(self) -> None:
+        """The output fades to 0 along the smooth curve (``Settings.fade_out_samples``)."""
+        self._canceller.set_enabled(False, self._settings.fade_out_samples, smooth=True)
 
     def faded_out(self, reason: str) -> None:
         """The safety monitor faded control out: held off, and why (error)."""
@@ -70,17 +74,26 @@ class ControlGate:
         self.hold, self.reason = Hold.NONE, ""
 
     def resume(self) -> None:
-        """Adapt again, and the output as set (ramped)."""
+        """Adapt again, and the output as set (ramped on, or faded out smoothly)."""
         self._canceller.set_frozen(False)
-        self._canceller.set_enabled(self._settings.config.enabled, self._settings.ramp_samples)
+        self._set_output(self._settings.config.enabled)
+
+    def _set_output(self, flag: bool) -> None:
+        """The output on (ramped over ``ramp_s``) or off (the smooth fade)."""
+        if flag:
+            self._canceller.set_enabled(True, self._settings.ramp_samples)
+        else:
+            self._switch_off()
 
     def switch(self, flag: bool, identifying: bool, next_sample: int) -> None:
         """Control switched on or off from ``next_sample``.
 
-        The output waits while the plant is identified, and stays off while held.
+        The output waits while the plant is identified, and stays off while held; switched
+        off it fades out along the smooth curve (``Settings.fade_out_samples``), as the
+        safety monitor's fades do.
         """
         if not identifying and not (flag and self.held):
-            self._canceller.set_enabled(flag, self._settings.ramp_samples)
+            self._set_output(flag)
         self.enabled_since_sample = next_sample if flag else -1
         self._events.add("info", f"control {'on' if flag else 'off'} from sample {next_sample}")
 

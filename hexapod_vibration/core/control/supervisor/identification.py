@@ -121,7 +121,7 @@ class PlantIdentification:
         cfg, settings = self._settings.config, self._settings
         if cfg.identification == "broadband":
             self.identifier = BroadbandIdentifier(settings.channels, settings.fs)
-            what = "over 0..fs/2 (multisine)"
+            what = f"over 0..fs/2 (multisine) for the tones {tones} Hz"
         else:
             self.identifier = adaptation.ToneResponseIdentifier(
                 settings.channels, tones, settings.fs, cfg.identification_amplitude_n,
@@ -273,6 +273,8 @@ class PlantIdentification:
         if broadband:
             yield
             rates.choose(tones, coefficients)
+            yield from rates.check_type2(tones)
+        self._follower.limit_bandwidth()
         self._safety.restart()
         self._gate.resume()
         self._gate.started(self._clock.last + 1)

@@ -3,8 +3,9 @@
 Each value is checked against its declaration by :class:`~.config.NotchConfig`; here what
 depends on several settings or on what the supervisor knows: the oscillators (tones x
 orders, at most :data:`~hexapod_vibration.parameter_specs.MAX_NOTCH_TONES`, every order below
-fs/2 over the whole tracking range, one reference order per tone), ``update_lowpass_hz``
-fixed at start-up, and the stability bound on ``mu`` of the resulting tones and mode (the
+fs/2 over the whole tracking range, one reference order per tone), the update low-pass
+fixed at start-up (``update_lowpass_hz``, and with -1 whether the tones move), and the
+stability bound on ``mu`` of the resulting tones and mode (the
 identified plant at those tones, else the normalised bound): a change of ``adaptation`` or
 of the tones is refused too if it would leave the present ``mu`` unstable. ``mu = 0`` (no
 adaptation) is always stable.
@@ -22,7 +23,11 @@ from hexapod_vibration.core.control.notch import validate_frequencies
 from hexapod_vibration.core.control.supervisor.config import NotchConfig, Settings
 from hexapod_vibration.core.control.supervisor.plant_knowledge import PlantKnowledge
 from hexapod_vibration.core.control.supervisor.rate_policy import RatePolicy
-from hexapod_vibration.parameter_specs import MAX_NOTCH_TONES
+from hexapod_vibration.parameter_specs import (
+    MAX_NOTCH_TONES,
+    UPDATE_LOWPASS_AUTO,
+    update_lowpass_corner_hz,
+)
 
 RETUNING_SETTINGS = ("tone_frequencies_hz", "adaptation", "harmonics")
 """Settings whose change needs new coefficients and a new bound."""
@@ -76,6 +81,30 @@ def oscillators(config: NotchConfig, sample_rate_hz: float) -> list[float]:
     return bank.tolist()
 
 
+def check_update_lowpass_in_force(config: NotchConfig, present: NotchConfig,
+                                  corner_hz: float) -> None:
+    """ValueError unless ``config`` asks for the update low-pass in force (``corner_hz``, Hz).
+
+    It is fixed at start-up (the stability bound and the prediction were computed with
+    it): a new ``update_lowpass_hz`` is refused, and with -1 (automatic) so is a change
+    that would move the tones where they were fixed, or fix them where they moved.
+    """
+    if config.update_lowpass_hz != present.update_lowpass_hz:
+        raise ValueError("update_lowpass_hz is set at start-up (the stability bound and "
+                         "the prediction were computed with "
+                         f"{present.update_lowpass_hz:g} Hz)")
+    wanted = update_lowpass_corner_hz(vars(config))
+    if wanted == corner_hz:
+        return
+    what = ("frequency_tracking" if config.frequency_tracking != present.frequency_tracking
+            else "reference_harmonics")
+    raise ValueError(f"{what}: with update_lowpass_hz {UPDATE_LOWPASS_AUTO:g} (automatic) "
+                     f"these tones would adapt with a {wanted:g} Hz update low-pass, but the "
+                     f"one in force is {corner_hz:g} Hz, chosen at start-up (the stability "
+                     "bound and the prediction were computed with it): start the node with "
+                     f"{what} set so, or with update_lowpass_hz set")
+
+
 def plan_changes(settings: Settings, changes: Mapping[str, Any], mu_in_force: float,
                  plant: PlantKnowledge, rates: RatePolicy) -> Plan:
     """Check ``changes`` (parameter name -> value) against the settings in force.
@@ -86,11 +115,8 @@ def plan_changes(settings: Settings, changes: Mapping[str, Any], mu_in_force: fl
     """
     present = settings.config
     config = present.replaced(changes)
-    if config.update_lowpass_hz != present.update_lowpass_hz:
-        raise ValueError("update_lowpass_hz is set at start-up (the stability bound and "
-                         "the prediction were computed with "
-                         f"{present.update_lowpass_hz:g} Hz)")
     tones = oscillators(config, settings.fs)
+    check_update_lowpass_in_force(config, present, settings.update_lowpass_hz)
     mode = config.adaptation
     if any(name in changes for name in RETUNING_SETTINGS):
         response = plant.known_response(tones)

@@ -12,7 +12,12 @@
 - with G(f), ``mu_policy`` folds its per-tone rates into P and the predicted sensitivity
   |S(f)| is kept (:attr:`RatePolicy.sensitivity`);
 - moving tones (tracking, a reference) sweep with a type-2 update
-  (:data:`MOVING_TONE_INTEGRAL_RATIO`), in the bound too (:mod:`.sweep_gate` gates it).
+  (:data:`MOVING_TONE_INTEGRAL_RATIO`; :mod:`.sweep_gate` switches it on while a tone
+  sweeps). The bound is the first-order update's, the one steady tones run; the type-2
+  update is allowed only where the Nyquist test finds it stable at the rates in force
+  (:meth:`RatePolicy.check_type2`). (The bound of the type-2 update is 0 at 39.0 Hz on the
+  PPH, decentralized: a tracked tone told 40 Hz on a line at 39.0 Hz never engaged,
+  though the first-order update it runs there is stable at every rate.)
 """
 
 from __future__ import annotations
@@ -106,6 +111,10 @@ class RatePolicy:
         """The mu policy's per-tone rates after a broadband identification, else None."""
         self.sensitivity: sensitivity.SensitivityPrediction | None = None
         """The predicted |S(f)| with those rates, else None."""
+        self.type2_max_mu = float("inf")
+        """The largest ``mu`` the type-2 update of sweeping tones is allowed at: the ``mu``
+        the Nyquist test found it stable at, 0 where it found it unstable, inf untested
+        (no G(f))."""
 
     def normalised_bound(self) -> float:
         """The bound of a normalised mode (M = I) with the loop delay."""
@@ -131,25 +140,23 @@ class RatePolicy:
         """Largest common rate the Nyquist test finds stable on the identified G(f)."""
         return sensitivity.stable_mu_limit(
             self._plant.frequency_response.at, tones, self._settings.fs, coefficients,
-            update_lowpass_hz=self._settings.config.update_lowpass_hz)
+            update_lowpass_hz=self._settings.update_lowpass_hz)
 
     def limit_steps(self, tones: list[float], coefficients: np.ndarray
                     ) -> Generator[None, None, float]:
         """The Nyquist limit on G(f), one stability test per ``yield`` (a generator).
 
         As :func:`~hexapod_vibration.core.control.sensitivity.stable_mu_limit` (the
-        largest stable common rate), found by doubling from 1e-5 and bisecting to 2 %;
-        moving tones with the type-2 update they sweep with
-        (:func:`~.sweep_gate.moving_tone_integral_ratio`).
+        largest stable common rate), found by doubling from 1e-5 and bisecting to 2 %, for
+        the first-order update that steady tones run (the type-2 update of sweeping tones:
+        :meth:`check_type2`).
         """
         settings = self._settings
-        cfg = settings.config
 
         def stable(mu: float) -> bool:
             return sensitivity.closed_loop_is_stable(
                 self._plant.frequency_response.at, tones, settings.fs, coefficients, mu,
-                integral_ratio=moving_tone_integral_ratio(settings.config),
-                update_lowpass_hz=cfg.update_lowpass_hz)
+                update_lowpass_hz=self._settings.update_lowpass_hz)
 
         lo = 1e-5
         if not stable(lo):
@@ -172,6 +179,30 @@ class RatePolicy:
     def forget_choice(self) -> None:
         """A new identification: no policy result and no prediction until it is analysed."""
         self.sensitivity = self.choice = None
+        self.type2_max_mu = float("inf")
+
+    def check_type2(self, tones: list[float]) -> Generator[None, None, None]:
+        """Whether sweeping tones may adapt with the type-2 update (one Nyquist test).
+
+        At the rates in force (the policy's, folded into P) with each tone's ratio
+        :data:`MOVING_TONE_INTEGRAL_RATIO` ``mu_t / mu`` (:mod:`.sweep_gate`'s);
+        :attr:`type2_max_mu` is ``mu`` if stable, else 0 (reported when the tones may move:
+        they then sweep with the first-order update). A generator: one ``yield`` first.
+        """
+        canceller, cfg = self._canceller, self._settings.config
+        mu = canceller.mu
+        yield
+        ratio = MOVING_TONE_INTEGRAL_RATIO * self.tone_rates() / max(mu, 1e-300)
+        stable = mu > 0.0 and sensitivity.closed_loop_is_stable(
+            self._plant.frequency_response.at, tones, self._settings.fs,
+            canceller.coefficients, mu, integral_ratio=ratio,
+            update_lowpass_hz=self._settings.update_lowpass_hz)
+        self.type2_max_mu = mu if stable else 0.0
+        if not stable and moving_tone_integral_ratio(cfg) > 0.0:
+            self._events.add("warn", f"the type-2 update of sweeping tones is unstable at "
+                                     f"mu={mu:g} at {np.round(tones, 3).tolist()} Hz (Nyquist "
+                                     "on G(f)): tones that sweep adapt with the first-order "
+                                     "update")
 
     def choose(self, tones: list[float], coefficients: np.ndarray) -> None:
         """Per-tone rates of ``mu_policy`` folded into P; the predicted sensitivity."""
@@ -183,18 +214,31 @@ class RatePolicy:
                                              max_rise_db=cfg.max_rise_db,
                                              output_weights=self._output_weights,
                                              disturbance_csd=phi.at,
-                                             update_lowpass_hz=cfg.update_lowpass_hz)
+                                             update_lowpass_hz=self._settings.update_lowpass_hz)
         self.choice = choice
         folded = sensitivity.per_tone_coefficients(coefficients, mu, choice.tone_mu)
         self._canceller.set_coefficients(folded)
         self.sensitivity = sensitivity.predict_sensitivity(
             pfr.at, tones, fs, folded, mu, output_weights=self._output_weights,
             disturbance_csd=phi.at, check_stability=False,
-            update_lowpass_hz=cfg.update_lowpass_hz)
+            update_lowpass_hz=self._settings.update_lowpass_hz)
         self._events.add("warn" if choice.warning else "info",
                          choice.warning or f"mu_policy {choice.policy}: tone rates "
                          f"{np.round(choice.tone_mu, 6).tolist()}, predicted rise "
                          f"{choice.predicted_rise_db:.2f} dB at {choice.rise_at_hz:.2f} Hz")
+
+    def tone_rates(self) -> np.ndarray:
+        """Each oscillator's rate in force (1/sample): the policy's, scaled to ``mu`` now.
+
+        The policy's per-tone rates (folded into P) follow ``mu`` when it changes (the guard
+        lowers it); without a policy's choice every oscillator adapts at ``mu``.
+        """
+        canceller, choice = self._canceller, self.choice
+        mu = canceller.mu
+        if (choice is None or choice.tone_mu.shape != (canceller.n_tones,)
+                or not choice.mu > 0.0):
+            return np.full(canceller.n_tones, mu)
+        return choice.tone_mu * (mu / choice.mu)
 
     def clamp(self, bound: float) -> None:
         """Lower ``mu`` to half the bound (0 for a bound of 0) if it is not below it."""
@@ -220,6 +264,7 @@ class RatePolicy:
         rise, at_hz = ((choice.predicted_rise_db, choice.rise_at_hz) if choice is not None
                        else (float("nan"), float("nan")))
         return {"mu_limit": self.mu_limit, "mu_policy": self._settings.config.mu_policy,
+                "update_lowpass_hz": self._settings.update_lowpass_hz,
                 "tone_mu": ([] if choice is None else np.round(choice.tone_mu, 8).tolist()),
                 "predicted_rise_db": round(float(rise), 3),
                 "predicted_rise_at_hz": round(float(at_hz), 3)}

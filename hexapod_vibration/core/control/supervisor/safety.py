@@ -27,7 +27,6 @@ from typing import Any
 import numpy as np
 
 from hexapod_vibration.core.control.divergence_guard import (
-    FADE_S,
     GUARD_BACKED_OFF,
     GUARD_DISABLED,
     GUARD_OFF,
@@ -38,7 +37,7 @@ from hexapod_vibration.core.control.divergence_guard import (
     GuardVerdict,
 )
 from hexapod_vibration.core.control.line_offset import MIN_COHERENCE, LineOffsetMonitor
-from hexapod_vibration.core.control.notch import AdaptiveNotchCanceller
+from hexapod_vibration.core.control.notch import FADE_S, AdaptiveNotchCanceller
 from hexapod_vibration.core.control.supervisor.config import Settings
 from hexapod_vibration.core.control.supervisor.events import EventLog
 from hexapod_vibration.core.control.supervisor.fader import OutputFader

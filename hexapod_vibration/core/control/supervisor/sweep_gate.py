@@ -70,7 +70,8 @@ class SweepGate:
         A tone sweeps when its fundamental moves faster than
         :data:`SWEEP_RATE_FLOOR_HZ_PER_S` (the reference's slope, or the tracker's learnt
         rate), and for :data:`SWEEP_HOLD_TIME_CONSTANTS` after. Off (the weights' rates
-        cleared) for steady tones, and while the canceller is frozen, off or ramping; on
+        cleared) for steady tones, while the canceller is frozen, off or ramping, and above
+        the ``mu`` the Nyquist test found it stable at (:attr:`RatePolicy.type2_max_mu`); on
         :data:`INTEGRAL_DELAY_TIME_CONSTANTS` time constants after that ended. (A steady
         tone keeps the paper's update: with the tracker closing its loop on the weights'
         rotation, a type-2 update on a steady 1 % mismatch left 40-48 dB where the
@@ -79,7 +80,8 @@ class SweepGate:
         canceller = self._canceller
         running = (canceller.enabled and not canceller.frozen and canceller.mu > 0.0
                    and canceller.output_gain == 1.0 and bool(np.all(canceller.adapting)))
-        ratio = moving_tone_integral_ratio(self._settings.config)
+        ratio = (moving_tone_integral_ratio(self._settings.config)
+                 if canceller.mu <= self._rates.type2_max_mu else 0.0)
         sweep = self.sweep_hz_per_s
         size = canceller.tone_frequencies_hz.size
         if not running or ratio <= 0.0 or sweep is None or size % max(sweep.size, 1):

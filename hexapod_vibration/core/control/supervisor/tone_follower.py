@@ -24,6 +24,7 @@ from hexapod_vibration.core.control.frequency_tracker import (
     DEFAULT_BLOCK_SAMPLES,
     FrequencyTracker,
     loop_bandwidths_hz,
+    rate_bandwidth_caps_hz,
 )
 from hexapod_vibration.core.control.notch import AdaptiveNotchCanceller
 from hexapod_vibration.core.control.plant_identification import RemovedLine
@@ -80,6 +81,8 @@ class ToneFollower:
         self._acquisition = Acquisition(settings.fs, settings.channels)
         self._detector = PhaseDetector(settings, canceller, plant)
         self._retuner = Retuner(settings, canceller, guard, plant)
+        self._rates = rates
+        self._limited_at_mu = float("nan")
         self._sweep = SweepGate(settings, canceller, rates)
 
     def rebuild(self) -> None:
@@ -102,6 +105,7 @@ class ToneFollower:
                                          block_samples=self.block)
                         if cfg.frequency_tracking and nominal.size else None)
         self._acquisition.reset(self.tracker is not None)
+        self.limit_bandwidth()
         self.active = bool(nominal.size) and (self.tracker is not None
                                                or self.reference.orders.size > 0)
         self._sweep.restart()
@@ -120,6 +124,19 @@ class ToneFollower:
         if self._canceller.tone_frequencies_hz.size == target.size * self.orders.size:
             self._retune(target)
 
+    def limit_bandwidth(self) -> None:
+        """Each tracked tone's loop no faster than its weights allow (the rates in force).
+
+        :func:`~hexapod_vibration.core.control.frequency_tracker.rate_bandwidth_caps_hz`
+        of :meth:`RatePolicy.tone_rates`; again whenever ``mu`` changes (:meth:`step`).
+        """
+        self._limited_at_mu = self._canceller.mu
+        rates = self._rates.tone_rates()
+        if self.tracker is None or rates.size != self.orders.size * self.nominal_hz.size:
+            return
+        self.tracker.limit_bandwidth(rate_bandwidth_caps_hz(self.orders, rates,
+                                                            self._settings.fs))
+
     def step(self, index: int, error: np.ndarray, identifying: bool) -> None:
         """Count sample ``index``; at a block's end choose and apply the next block's tones.
 
@@ -134,6 +151,8 @@ class ToneFollower:
         if self._count < self.block:
             return
         self._count = 0
+        if self._canceller.mu != self._limited_at_mu:
+            self.limit_bandwidth()
         plant_matrix = self._detector.matrices[0]
         if self._guard.moved_away and plant_matrix is not None:
             self._guard.set_cancelled(np.einsum("tij,tj->ti", plant_matrix, canceller.weights))

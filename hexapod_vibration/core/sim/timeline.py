@@ -1,4 +1,4 @@
-"""A point's timeline against the notch's identification: what a grid must not do.
+"""A scenario's timeline against the notch's identification: what a run must not do.
 
 The identification injects its own excitation (test tones or a broadband multisine) and
 keeps the canceller frozen until it is done, so
@@ -11,8 +11,10 @@ The identification starts ``identify_at_s`` after the first sample and lasts wha
 notch supervisor's own identifier takes for the point's settings
 (:meth:`NotchSupervisor.start_identification` builds it; its ``duration_s`` is the length):
 10 s for ``identification: broadband``, 3.2 s for one or two tones identified with test
-tones. :func:`timeline_conflict` says, in one line, why a point's timeline cannot measure
-what it claims.
+tones. :func:`control_on_conflict` says why control cannot start when the scenario asks
+(``experiment`` refuses such a scenario before it runs); :func:`timeline_conflict` says too
+why a sweep point's windows cannot measure what they claim (a sweep refuses the grid; a
+single run's report leaves the identification's samples out of its windows instead).
 """
 
 from __future__ import annotations
@@ -60,21 +62,39 @@ def analysis_intervals(scenario: Scenario) -> dict[str, Interval]:
             "controlled": Interval(max(on, end - scenario.window_s), end)}
 
 
-def timeline_conflict(scenario: Scenario, sample_rate_hz: float) -> str | None:
-    """Why the point's timeline cannot measure control (one line), or None if it can."""
+def _fix(scenario: Scenario, identification: Interval) -> str:
+    """The control-on that leaves a whole uncontrolled window after the identification."""
+    return (f"set control_on_s >= {identification.stop_s + scenario.window_s:g} s (the "
+            f"{scenario.window_s:g} s uncontrolled window after it)")
+
+
+def control_on_conflict(scenario: Scenario, sample_rate_hz: float) -> str | None:
+    """Why control cannot go on when the scenario asks (one line), or None if it can.
+
+    Control-on inside the identification: the canceller is held until the identification
+    ends and its analysis is done, so the run would measure no control at all.
+    """
     found = identification_interval(scenario, sample_rate_hz)
     if found is None:
         return None
     identification, method = found
-    what = f"the {method} identification"
-    fix = (f"control_on_s >= {identification.stop_s + scenario.window_s:g} s (the "
-           f"{scenario.window_s:g} s uncontrolled window after it)")
     on = scenario.control_on_s
     if identification.start_s <= on < identification.stop_s:
-        return (f"control-on at {on:g} s falls inside {what} ({identification}); "
-                f"set {fix}")
+        return (f"control-on at {on:g} s falls inside the {method} identification "
+                f"({identification}); {_fix(scenario, identification)}")
+    return None
+
+
+def timeline_conflict(scenario: Scenario, sample_rate_hz: float) -> str | None:
+    """Why the point's timeline cannot measure control (one line), or None if it can."""
+    conflict = control_on_conflict(scenario, sample_rate_hz)
+    found = identification_interval(scenario, sample_rate_hz)
+    if conflict is not None or found is None:
+        return conflict
+    identification, method = found
+    what = f"the {method} identification"
     for name, window in analysis_intervals(scenario).items():
         if window.overlaps(identification):
             return (f"the {name} window ({window}) overlaps {what} ({identification}); "
-                    f"set {fix}")
+                    f"{_fix(scenario, identification)}")
     return None
