@@ -32,13 +32,13 @@ NEVER_WORSE_DB = 1.0
 """Never worse than off: a band more than this above its level without control is worse
 (dB; the twin comparison's ``never_worse`` and the sweep maps' rise scale)."""
 
-STRUT_LABEL = 'strut'
+STRUT_LABEL = "strut"
 """Label of ``layout.dim[0]``."""
 
-SAMPLE_LABEL_PREFIX = 'sample:'
+SAMPLE_LABEL_PREFIX = "sample:"
 """Prefix of the label of ``layout.dim[1]``, followed by the decimal sample index."""
 
-RUN_LABEL_PREFIX = 'run:'
+RUN_LABEL_PREFIX = "run:"
 """Prefix of the label of ``layout.dim[2]``, followed by the decimal run identity."""
 
 MAX_SAMPLE_INDEX = 2**31 * 1000 - 1
@@ -47,50 +47,50 @@ MAX_SAMPLE_INDEX = 2**31 * 1000 - 1
 MAX_RUN_ID = 2**63 - 1
 """Run identities are drawn in [1, MAX_RUN_ID]."""
 
-REFERENCE_FREQUENCY_TOPIC = '/pph/reference_frequency'
+REFERENCE_FREQUENCY_TOPIC = "/pph/reference_frequency"
 """The rotor's tachometer (driver, when ``rotor_tachometer`` is on): one value, Hz, every
 sample, ``layout.dim[0] = ("frequency_hz", 1, 1)`` then the sample and run labels."""
 
-DISTURBANCE_FREQUENCIES_TOPIC = '/pph/disturbance_frequencies'
+DISTURBANCE_FREQUENCIES_TOPIC = "/pph/disturbance_frequencies"
 """The true frequency (Hz) of every sounding tone (driver, every
 ``FREQUENCIES_EVERY_SAMPLES``): shaker tones (with their drift), then the rotor's orders."""
 
-NOTCH_FREQUENCIES_TOPIC = '/pph/notch_frequencies'
+NOTCH_FREQUENCIES_TOPIC = "/pph/notch_frequencies"
 """The notch controller's frequency of each configured tone now (Hz, one per tone, every
 ``FREQUENCIES_EVERY_SAMPLES``): nominal, tracked or following the reference."""
 
-NOTCH_SENSITIVITY_TOPIC = '/pph/notch_sensitivity'
+NOTCH_SENSITIVITY_TOPIC = "/pph/notch_sensitivity"
 """The predicted sensitivity |S(f)| (transient local, after each identification): rows
 named in ``layout.dim[0].label`` (``SENSITIVITY_ROWS_PREFIX`` + comma-separated names:
 ``frequency_hz`` then |S| in dB per view), ``layout.dim[1] = ("frequency", F, 1)``."""
 
-FREQUENCY_LABEL = 'frequency_hz'
+FREQUENCY_LABEL = "frequency_hz"
 """``layout.dim[0]`` label of the frequency topics (values in Hz)."""
 
-SENSITIVITY_ROWS_PREFIX = 'rows:'
+SENSITIVITY_ROWS_PREFIX = "rows:"
 
 FREQUENCIES_EVERY_SAMPLES = 10
 """Samples between two messages of /pph/disturbance_frequencies and /pph/notch_frequencies
 (100 Hz: tones move by at most a few Hz per second)."""
 
-DRIVER_STATUS = 'pph_driver: loop'
+DRIVER_STATUS = "pph_driver: loop"
 """``/diagnostics`` status name of the driver's loop."""
 
-NOTCH_STATUS = 'notch_controller'
+NOTCH_STATUS = "notch_controller"
 """``/diagnostics`` status name of the notch controller."""
 
-POINTING_STATUS = 'pointing_controller'
+POINTING_STATUS = "pointing_controller"
 """``/diagnostics`` status name of the pointing controller."""
 
 
 class NotchState(StrEnum):
     """The notch controller's ``state`` on ``/diagnostics``."""
 
-    IDENTIFYING = 'identifying'
-    ADAPTING = 'adapting'
-    ENABLED = 'enabled'
-    DISABLED = 'disabled'
-    REFUSED = 'refused'
+    IDENTIFYING = "identifying"
+    ADAPTING = "adapting"
+    ENABLED = "enabled"
+    DISABLED = "disabled"
+    REFUSED = "refused"
     """Control kept off: the identification gave no usable coefficients or no stable mu."""
 
 
@@ -121,8 +121,8 @@ def sample_label(sample_index: int) -> str:
         ValueError: ``sample_index`` is negative.
     """
     if sample_index < 0:
-        raise ValueError(f'sample index must be >= 0, got {sample_index}')
-    return f'{SAMPLE_LABEL_PREFIX}{int(sample_index)}'
+        raise ValueError(f"sample index must be >= 0, got {sample_index}")
+    return f"{SAMPLE_LABEL_PREFIX}{int(sample_index)}"
 
 
 def run_label(run_id: int) -> str:
@@ -132,8 +132,8 @@ def run_label(run_id: int) -> str:
         ValueError: ``run_id`` is out of range.
     """
     if not 1 <= run_id <= MAX_RUN_ID:
-        raise ValueError(f'run id must be in [1, {MAX_RUN_ID}], got {run_id}')
-    return f'{RUN_LABEL_PREFIX}{int(run_id)}'
+        raise ValueError(f"run id must be in [1, {MAX_RUN_ID}], got {run_id}")
+    return f"{RUN_LABEL_PREFIX}{int(run_id)}"
 
 
 def new_run_id() -> int:
@@ -146,11 +146,11 @@ def _decimal(label: str, prefix: str, maximum: int, what: str) -> int:
     digits = label[len(prefix):]
     if not (digits.isascii() and digits.isdigit()):
         raise InvalidStrutMessage(
-            f'garbled {what} label {label!r}: expected {prefix!r} followed by '
-            'a non-negative decimal integer'
+            f"garbled {what} label {label!r}: expected {prefix!r} followed by "
+            "a non-negative decimal integer"
         )
     if len(digits) > len(str(maximum)) or int(digits) > maximum:
-        raise InvalidStrutMessage(f'{what} label {label!r} is out of range (max {maximum})')
+        raise InvalidStrutMessage(f"{what} label {label!r} is out of range (max {maximum})")
     return int(digits)
 
 
@@ -162,9 +162,9 @@ def parse_sample_label(label: str) -> int:
     """
     if not label.startswith(SAMPLE_LABEL_PREFIX):
         raise InvalidStrutMessage(
-            f'layout.dim[1] label {label!r} is not {SAMPLE_LABEL_PREFIX!r}<sample index>'
+            f"layout.dim[1] label {label!r} is not {SAMPLE_LABEL_PREFIX!r}<sample index>"
         )
-    return _decimal(label, SAMPLE_LABEL_PREFIX, MAX_SAMPLE_INDEX, 'sample')
+    return _decimal(label, SAMPLE_LABEL_PREFIX, MAX_SAMPLE_INDEX, "sample")
 
 
 def parse_run_label(label: str) -> int | None:
@@ -175,9 +175,9 @@ def parse_run_label(label: str) -> int | None:
     """
     if not label.startswith(RUN_LABEL_PREFIX):
         return None
-    run = _decimal(label, RUN_LABEL_PREFIX, MAX_RUN_ID, 'run')
+    run = _decimal(label, RUN_LABEL_PREFIX, MAX_RUN_ID, "run")
     if run < 1:
-        raise InvalidStrutMessage(f'run label {label!r}: the run id must be >= 1')
+        raise InvalidStrutMessage(f"run label {label!r}: the run id must be >= 1")
     return run
 
 

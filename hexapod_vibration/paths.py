@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-PACKAGE_NAME = 'hexapod_vibration'
+PACKAGE_NAME = "hexapod_vibration"
 
 
 def _ament_share_directory() -> Path | None:
@@ -40,11 +40,11 @@ def share_directory() -> Path:
         FileNotFoundError: Neither location has a ``config/`` folder.
     """
     for candidate in (_ament_share_directory(), _source_root()):
-        if candidate is not None and (candidate / 'config').is_dir():
+        if candidate is not None and (candidate / "config").is_dir():
             return candidate
     raise FileNotFoundError(
-        f'cannot find the config/ folder of {PACKAGE_NAME}: not in the ament index '
-        f'(AMENT_PREFIX_PATH) and not in the source tree at {_source_root()}'
+        f"cannot find the config/ folder of {PACKAGE_NAME}: not in the ament index "
+        f"(AMENT_PREFIX_PATH) and not in the source tree at {_source_root()}"
     )
 
 
@@ -54,9 +54,9 @@ def config_path(name: str) -> Path:
     Raises:
         FileNotFoundError: The file does not exist; the message lists the folder's files.
     """
-    path = share_directory() / 'config' / name
+    path = share_directory() / "config" / name
     if not path.is_file():
-        available = sorted(p.name for p in path.parent.glob('*.yaml'))
+        available = sorted(p.name for p in path.parent.glob("*.yaml"))
         raise FileNotFoundError(
             f'no config file {name!r} in {path.parent}; available: {", ".join(available) or "none"}'
         )
@@ -65,8 +65,8 @@ def config_path(name: str) -> Path:
 
 def available_scenarios() -> list[str]:
     """Names of the scenarios in ``config/scenarios/`` (file names without ``.yaml``)."""
-    folder = share_directory() / 'config' / 'scenarios'
-    return sorted(p.stem for p in folder.glob('*.yaml'))
+    folder = share_directory() / "config" / "scenarios"
+    return sorted(p.stem for p in folder.glob("*.yaml"))
 
 
 def scenario_path(name: str) -> Path:
@@ -75,7 +75,7 @@ def scenario_path(name: str) -> Path:
     Raises:
         FileNotFoundError: Unknown scenario; the message lists the available ones.
     """
-    path = share_directory() / 'config' / 'scenarios' / f'{name}.yaml'
+    path = share_directory() / "config" / "scenarios" / f"{name}.yaml"
     if not path.is_file():
         raise FileNotFoundError(
             f'unknown scenario {name!r} (no {path}); available scenarios: '

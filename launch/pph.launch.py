@@ -29,59 +29,59 @@ from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 from launch_ros.parameter_descriptions import ParameterValue
 
-PACKAGE = 'hexapod_vibration'
-PARAMS_FILE = 'pph.yaml'
+PACKAGE = "hexapod_vibration"
+PARAMS_FILE = "pph.yaml"
 
 
 def generate_launch_description() -> LaunchDescription:
     """The launch description: arguments, the three nodes and the optional recorder."""
-    default_params = os.path.join(get_package_share_directory(PACKAGE), 'config', PARAMS_FILE)
-    params_file = LaunchConfiguration('params_file')
-    clock_mode = LaunchConfiguration('clock_mode')
-    record = LaunchConfiguration('record')
-    bag_path = LaunchConfiguration('bag_path')
-    composed = LaunchConfiguration('composed')
-    priority = LaunchConfiguration('realtime_priority')
+    default_params = os.path.join(get_package_share_directory(PACKAGE), "config", PARAMS_FILE)
+    params_file = LaunchConfiguration("params_file")
+    clock_mode = LaunchConfiguration("clock_mode")
+    record = LaunchConfiguration("record")
+    bag_path = LaunchConfiguration("bag_path")
+    composed = LaunchConfiguration("composed")
+    priority = LaunchConfiguration("realtime_priority")
     arguments = [
         DeclareLaunchArgument(
-            'params_file', default_value=default_params,
-            description='ROS params file for pph_driver, notch_controller, pointing_controller'),
+            "params_file", default_value=default_params,
+            description="ROS params file for pph_driver, notch_controller, pointing_controller"),
         DeclareLaunchArgument(
-            'clock_mode', default_value='lockstep', choices=['lockstep', 'realtime'],
-            description='driver clock: lockstep (deterministic, as fast as the controllers '
-                        'answer) or realtime (paced at 1 kHz wall clock)'),
+            "clock_mode", default_value="lockstep", choices=["lockstep", "realtime"],
+            description="driver clock: lockstep (deterministic, as fast as the controllers "
+                        "answer) or realtime (paced at 1 kHz wall clock)"),
         DeclareLaunchArgument(
-            'record', default_value='false', choices=['true', 'false'],
-            description='also start pph_recorder (rosbag2 bag of the contract topics)'),
+            "record", default_value="false", choices=["true", "false"],
+            description="also start pph_recorder (rosbag2 bag of the contract topics)"),
         DeclareLaunchArgument(
-            'composed', default_value='false', choices=['true', 'false'],
-            description='run the driver and both controllers in one process (pph_graph)'),
+            "composed", default_value="false", choices=["true", "false"],
+            description="run the driver and both controllers in one process (pph_graph)"),
         DeclareLaunchArgument(
-            'realtime_priority', default_value='0',
-            description='SCHED_FIFO priority (1-98) of the driver and controllers; 0: the '
-                        'normal scheduler (overrides the params file)'),
+            "realtime_priority", default_value="0",
+            description="SCHED_FIFO priority (1-98) of the driver and controllers; 0: the "
+                        "normal scheduler (overrides the params file)"),
         DeclareLaunchArgument(
-            'bag_path', default_value='',
-            description='bag directory of the recorder (must not exist); empty: '
-                        'rosbag2_<date>-<time> in the current directory'),
+            "bag_path", default_value="",
+            description="bag directory of the recorder (must not exist); empty: "
+                        "rosbag2_<date>-<time> in the current directory"),
     ]
-    scheduling = {'realtime_priority': ParameterValue(priority, value_type=int)}
+    scheduling = {"realtime_priority": ParameterValue(priority, value_type=int)}
     controller_parameters = [params_file, scheduling]
     driver_parameters = [*controller_parameters,
-                         {'clock_mode': ParameterValue(clock_mode, value_type=str)}]
+                         {"clock_mode": ParameterValue(clock_mode, value_type=str)}]
     separate = UnlessCondition(composed)
     nodes = [
-        Node(package=PACKAGE, executable='pph_driver', name='pph_driver', output='screen',
+        Node(package=PACKAGE, executable="pph_driver", name="pph_driver", output="screen",
              parameters=driver_parameters, condition=separate),
-        Node(package=PACKAGE, executable='notch_controller', name='notch_controller',
-             output='screen', parameters=controller_parameters, condition=separate),
-        Node(package=PACKAGE, executable='pointing_controller', name='pointing_controller',
-             output='screen', parameters=controller_parameters, condition=separate),
+        Node(package=PACKAGE, executable="notch_controller", name="notch_controller",
+             output="screen", parameters=controller_parameters, condition=separate),
+        Node(package=PACKAGE, executable="pointing_controller", name="pointing_controller",
+             output="screen", parameters=controller_parameters, condition=separate),
         # No name=: a name remap would rename all three nodes of the process.
-        Node(package=PACKAGE, executable='pph_graph', output='screen',
+        Node(package=PACKAGE, executable="pph_graph", output="screen",
              parameters=driver_parameters, condition=IfCondition(composed)),
-        Node(package=PACKAGE, executable='pph_recorder', name='pph_recorder', output='screen',
-             parameters=[{'bag_path': ParameterValue(bag_path, value_type=str)}],
+        Node(package=PACKAGE, executable="pph_recorder", name="pph_recorder", output="screen",
+             parameters=[{"bag_path": ParameterValue(bag_path, value_type=str)}],
              condition=IfCondition(record)),
     ]
     return LaunchDescription([*arguments, *nodes])

@@ -41,11 +41,11 @@ def tone(level_db: float, f: float, n: int, phase: float = 0.0) -> np.ndarray:
 
 def strut_cdr(values: np.ndarray, index: int | None) -> bytes:
     store = typestore()
-    dim = store.types['std_msgs/msg/MultiArrayDimension']
-    dims = [dim(label='strut', size=6, stride=6)]
+    dim = store.types["std_msgs/msg/MultiArrayDimension"]
+    dims = [dim(label="strut", size=6, stride=6)]
     if index is not None:
-        dims.append(dim(label=f'sample:{index}', size=1, stride=1))
-    layout = store.types['std_msgs/msg/MultiArrayLayout'](dim=dims, data_offset=0)
+        dims.append(dim(label=f"sample:{index}", size=1, stride=1))
+    layout = store.types["std_msgs/msg/MultiArrayLayout"](dim=dims, data_offset=0)
     msg = store.types[STRUT_MSGTYPE](layout=layout, data=np.asarray(values, np.float64))
     return bytes(store.serialize_cdr(msg, STRUT_MSGTYPE))
 
@@ -53,8 +53,8 @@ def strut_cdr(values: np.ndarray, index: int | None) -> bytes:
 def array_cdr(values: np.ndarray, labels: list[tuple[str, int, int]]) -> bytes:
     """Any Float64MultiArray: values and (label, size, stride) dimensions."""
     store = typestore()
-    dim = store.types['std_msgs/msg/MultiArrayDimension']
-    layout = store.types['std_msgs/msg/MultiArrayLayout'](
+    dim = store.types["std_msgs/msg/MultiArrayDimension"]
+    layout = store.types["std_msgs/msg/MultiArrayLayout"](
         dim=[dim(label=a, size=b, stride=c) for a, b, c in labels], data_offset=0)
     msg = store.types[STRUT_MSGTYPE](layout=layout,
                                      data=np.asarray(values, np.float64).reshape(-1))
@@ -64,18 +64,18 @@ def array_cdr(values: np.ndarray, labels: list[tuple[str, int, int]]) -> bytes:
 def frequencies_cdr(values_hz, index: int) -> bytes:
     """A frequency-topic message (``ros.messages.make_vector_array``'s layout)."""
     values = np.asarray(values_hz, np.float64).reshape(-1)
-    return array_cdr(values, [('frequency_hz', values.size, values.size),
-                              (f'sample:{index}', 1, 1)])
+    return array_cdr(values, [("frequency_hz", values.size, values.size),
+                              (f"sample:{index}", 1, 1)])
 
 
 def diagnostics_cdr(name: str, values: dict[str, str], sample: int) -> bytes:
     store = typestore()
     t = store.types
-    status = t['diagnostic_msgs/msg/DiagnosticStatus'](
-        level=0, name=name, message='', hardware_id='pph_sim',
-        values=[t['diagnostic_msgs/msg/KeyValue'](key=k, value=v) for k, v in values.items()])
-    stamp = t['builtin_interfaces/msg/Time'](sec=sample // 1000, nanosec=(sample % 1000) * 10**6)
-    header = t['std_msgs/msg/Header'](stamp=stamp, frame_id='')
+    status = t["diagnostic_msgs/msg/DiagnosticStatus"](
+        level=0, name=name, message="", hardware_id="pph_sim",
+        values=[t["diagnostic_msgs/msg/KeyValue"](key=k, value=v) for k, v in values.items()])
+    stamp = t["builtin_interfaces/msg/Time"](sec=sample // 1000, nanosec=(sample % 1000) * 10**6)
+    header = t["std_msgs/msg/Header"](stamp=stamp, frame_id="")
     msg = t[DIAGNOSTICS_MSGTYPE](header=header, status=[status])
     return bytes(store.serialize_cdr(msg, DIAGNOSTICS_MSGTYPE))
 
@@ -83,17 +83,17 @@ def diagnostics_cdr(name: str, values: dict[str, str], sample: int) -> bytes:
 def notch_status(sample: int, state: str, tones: list[float], on: int = -1,
                  ident: tuple[int, int] | None = None) -> dict[str, str]:
     """The notch controller's /diagnostics values (with identification keys if given)."""
-    values = {'state': state, 'enabled_since_sample': str(on), 'last_sample': str(sample),
-              'tones_hz': str([float(f) for f in tones])}
+    values = {"state": state, "enabled_since_sample": str(on), "last_sample": str(sample),
+              "tones_hz": str([float(f) for f in tones])}
     if ident is not None:
-        values['identification_start_sample'] = str(ident[0])
-        values['identification_end_sample'] = str(ident[1])
+        values["identification_start_sample"] = str(ident[0])
+        values["identification_end_sample"] = str(ident[1])
     return values
 
 
 def write_bag(path: Path, accel: np.ndarray, index: np.ndarray | None = None,
               statuses: list[tuple[int, dict[str, str]]] = (),
-              run_record: str = '', storage: str = 'mcap',
+              run_record: str = "", storage: str = "mcap",
               extra: list[tuple[str, int, bytes]] = (),
               topics: dict[str, list[tuple[int, bytes]]] | None = None) -> Path:
     """A bag with /pph/accel (in-band index), notch statuses and optional run record.
@@ -103,12 +103,12 @@ def write_bag(path: Path, accel: np.ndarray, index: np.ndarray | None = None,
     """
     index = np.arange(accel.shape[0]) if index is None else np.asarray(index)
     store = typestore()
-    plugin = {'mcap': StoragePlugin.MCAP, 'sqlite3': StoragePlugin.SQLITE3}[storage]
+    plugin = {"mcap": StoragePlugin.MCAP, "sqlite3": StoragePlugin.SQLITE3}[storage]
     with Writer(path, version=BAG_VERSION, storage_plugin=plugin) as writer:
         if run_record:
             writer.set_custom_data(RUN_RECORD_KEY, run_record)
-        conn = writer.add_connection('/pph/accel', STRUT_MSGTYPE, typestore=store)
-        diag = writer.add_connection('/diagnostics', DIAGNOSTICS_MSGTYPE, typestore=store)
+        conn = writer.add_connection("/pph/accel", STRUT_MSGTYPE, typestore=store)
+        diag = writer.add_connection("/diagnostics", DIAGNOSTICS_MSGTYPE, typestore=store)
         status_at = dict(statuses)
         extras: dict[int, list[bytes]] = {}
         for _topic, sample, raw in extra:
@@ -122,6 +122,6 @@ def write_bag(path: Path, accel: np.ndarray, index: np.ndarray | None = None,
             for raw in extras.get(n, []):
                 writer.write(conn, n * 10**6, raw)
             if n in status_at:
-                writer.write(diag, n * 10**6, diagnostics_cdr('notch_controller',
+                writer.write(diag, n * 10**6, diagnostics_cdr("notch_controller",
                                                               status_at[n], n))
     return path

@@ -35,10 +35,10 @@ from hexapod_vibration.tools import processes
 
 DOMAIN_MIN = 20
 DOMAIN_LIMIT = 230  # exclusive; Fast DDS port arithmetic allows up to 232
-_domain_base = int(os.environ.get('HEXAPOD_TEST_DOMAIN_BASE') or random.randint(DOMAIN_MIN, 200))
+_domain_base = int(os.environ.get("HEXAPOD_TEST_DOMAIN_BASE") or random.randint(DOMAIN_MIN, 200))
 _domain_counter = itertools.count()
 
-ROS_FIXTURES = frozenset({'ros_env', 'node_processes', 'ros_context'})
+ROS_FIXTURES = frozenset({"ros_env", "node_processes", "ros_context"})
 """Fixtures that put a test on a ROS domain: such a test is in the ``graph`` tier."""
 
 TEST_DIR = Path(__file__).resolve().parent
@@ -46,28 +46,28 @@ BIN_DIR = Path(sys.executable).parent
 """Folder of the virtualenv's console scripts (pph_recorder, ...)."""
 
 SCENARIO_TESTS = (
-    'test_never_worse_core_loop.py', 'test_sensitivity_core_loop.py', 'test_harmonic_rise.py',
-    'test_tracking_range_core_loop.py',
-    'test_closed_loop.py::test_table1_reduces_40hz_by_60db_and_80hz_by_40db',
-    'test_closed_loop.py::test_table2_close_tones_each_reduced_by_55db',
-    'test_fxlms.py::test_bench_quick_writes_positive_finite_numbers',
+    "test_never_worse_core_loop.py", "test_sensitivity_core_loop.py", "test_harmonic_rise.py",
+    "test_tracking_range_core_loop.py",
+    "test_closed_loop.py::test_table1_reduces_40hz_by_60db_and_80hz_by_40db",
+    "test_closed_loop.py::test_table2_close_tones_each_reduced_by_55db",
+    "test_fxlms.py::test_bench_quick_writes_positive_finite_numbers",
 )
 """The ``scenario`` tier: core closed-loop runs of a shipped scenario, 30-240 s each on a
 quiet 2-core machine (a file name: all its tests; ``file::test``: that test, every
 parametrization)."""
 
-LONG_FIRST = ('test_moving_tones_graph.py', 'test_experiment.py', 'test_twin_graph.py',
-              'test_sensitivity_core_loop.py', 'test_params_file.py', 'test_fxlms.py',
-              'test_colcon_layout.py', 'test_never_worse_core_loop.py',
-              'test_tracking_range_core_loop.py', 'test_harmonic_rise.py')
+LONG_FIRST = ("test_moving_tones_graph.py", "test_experiment.py", "test_twin_graph.py",
+              "test_sensitivity_core_loop.py", "test_params_file.py", "test_fxlms.py",
+              "test_colcon_layout.py", "test_never_worse_core_loop.py",
+              "test_tracking_range_core_loop.py", "test_harmonic_rise.py")
 """Files of the longest tests, collected first so that pytest-xdist's workers do not end on
 them one after the other (order only: none depends on another)."""
 
 
 def _scenario_entry(item: pytest.Item) -> str | None:
     """The :data:`SCENARIO_TESTS` entry that names ``item``, or None."""
-    name = getattr(item, 'originalname', item.name)
-    for entry in (item.path.name, f'{item.path.name}::{name}'):
+    name = getattr(item, "originalname", item.name)
+    for entry in (item.path.name, f"{item.path.name}::{name}"):
         if entry in SCENARIO_TESTS:
             return entry
     return None
@@ -75,12 +75,12 @@ def _scenario_entry(item: pytest.Item) -> str | None:
 
 def _tier(item: pytest.Item) -> str:
     """``graph``, ``scenario`` or ``unit`` (see the module docstring)."""
-    uses_ros = bool(ROS_FIXTURES.intersection(getattr(item, 'fixturenames', ())))
+    uses_ros = bool(ROS_FIXTURES.intersection(getattr(item, "fixturenames", ())))
     scenario = _scenario_entry(item) is not None
     if uses_ros and scenario:
-        raise pytest.UsageError(f'{item.nodeid} is listed in SCENARIO_TESTS (test/conftest.py) '
-                                'but uses a ROS fixture: it is a graph test')
-    return 'graph' if uses_ros else 'scenario' if scenario else 'unit'
+        raise pytest.UsageError(f"{item.nodeid} is listed in SCENARIO_TESTS (test/conftest.py) "
+                                "but uses a ROS fixture: it is a graph test")
+    return "graph" if uses_ros else "scenario" if scenario else "unit"
 
 
 def _whole_suite(config: pytest.Config) -> bool:
@@ -95,7 +95,7 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
     for item in items:
         tier = _tier(item)
         item.add_marker(tier)
-        if tier == 'graph':
+        if tier == "graph":
             item.add_marker(pytest.mark.ros)
     if _whole_suite(config):
         used = {_scenario_entry(item) for item in items}
@@ -109,8 +109,8 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
 
 def _worker() -> tuple[int, int]:
     """(this pytest-xdist worker's number, the number of workers); (0, 1) without xdist."""
-    name = os.environ.get('PYTEST_XDIST_WORKER', 'gw0')
-    return int(name.removeprefix('gw') or 0), int(os.environ.get('PYTEST_XDIST_WORKER_COUNT', 1))
+    name = os.environ.get("PYTEST_XDIST_WORKER", "gw0")
+    return int(name.removeprefix("gw") or 0), int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", 1))
 
 
 def next_domain_id() -> int:
@@ -129,19 +129,19 @@ def next_domain_id() -> int:
 # purpose, which leaves Fast DDS shared-memory port files locked in /dev/shm, and a later
 # participant can then pick a dead shared-memory channel and silently receive nothing
 # (seen: a controller that never got /pph/accel). Loopback UDP has no such state.
-os.environ.setdefault('FASTDDS_BUILTIN_TRANSPORTS', 'UDPv4')
+os.environ.setdefault("FASTDDS_BUILTIN_TRANSPORTS", "UDPv4")
 
 
 @pytest.fixture
 def ros_env() -> dict[str, str]:
     """Environment for ROS processes of one test: own domain, localhost discovery only."""
     env = dict(os.environ)
-    env.pop('ROS_LOCALHOST_ONLY', None)  # deprecated; conflicts with the discovery range
+    env.pop("ROS_LOCALHOST_ONLY", None)  # deprecated; conflicts with the discovery range
     env.update(
         ROS_DOMAIN_ID=str(next_domain_id()),
-        ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST',
-        RMW_IMPLEMENTATION='rmw_fastrtps_cpp',
-        PYTHONUNBUFFERED='1',
+        ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
+        RMW_IMPLEMENTATION="rmw_fastrtps_cpp",
+        PYTHONUNBUFFERED="1",
     )
     return env
 
@@ -158,8 +158,8 @@ class NodeProcess:
                  cwd: Path | None = None, command: list[str] | None = None):
         """Start ``BIN_DIR/executable args`` (or ``command``) with ``env``, logs in ``log_dir``."""
         self.name = executable
-        self.stdout_path = log_dir / f'{executable}.{id(self)}.stdout'
-        self.stderr_path = log_dir / f'{executable}.{id(self)}.stderr'
+        self.stdout_path = log_dir / f"{executable}.{id(self)}.stdout"
+        self.stderr_path = log_dir / f"{executable}.{id(self)}.stderr"
         self.child = processes.spawn(executable, command or [str(BIN_DIR / executable), *args],
                                      log=self.stdout_path, stderr_log=self.stderr_path,
                                      env=env, cwd=cwd)
@@ -184,9 +184,9 @@ class NodeProcess:
 
     def output(self) -> str:
         """Everything the process wrote so far, stdout then stderr."""
-        out = self.stdout_path.read_text(errors='replace')
-        err = self.stderr_path.read_text(errors='replace')
-        return f'--- {self.name} stdout ---\n{out}--- {self.name} stderr ---\n{err}'
+        out = self.stdout_path.read_text(errors="replace")
+        err = self.stderr_path.read_text(errors="replace")
+        return f"--- {self.name} stdout ---\n{out}--- {self.name} stderr ---\n{err}"
 
 
 class NodeProcesses:
@@ -227,10 +227,10 @@ def ros_context(ros_env: dict[str, str], monkeypatch: pytest.MonkeyPatch) -> Ite
     """An in-test rclpy context (``RosTestContext``) on the domain of the test's nodes."""
     from ros_test_context import RosTestContext  # rclpy only for the tests that use it
 
-    for key in ('ROS_AUTOMATIC_DISCOVERY_RANGE', 'RMW_IMPLEMENTATION'):
+    for key in ("ROS_AUTOMATIC_DISCOVERY_RANGE", "RMW_IMPLEMENTATION"):
         monkeypatch.setenv(key, ros_env[key])
-    monkeypatch.delenv('ROS_LOCALHOST_ONLY', raising=False)
-    context = RosTestContext(int(ros_env['ROS_DOMAIN_ID']))
+    monkeypatch.delenv("ROS_LOCALHOST_ONLY", raising=False)
+    context = RosTestContext(int(ros_env["ROS_DOMAIN_ID"]))
     try:
         yield context
     finally:

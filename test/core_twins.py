@@ -19,7 +19,7 @@ from hexapod_vibration.core.sim.scenario import Scenario
 from hexapod_vibration.core.spectrum import third_octave_bands_hz
 
 ROOT = Path(__file__).resolve().parents[1]
-CFG = load_model_config(ROOT / 'config' / 'pph_model.yaml')
+CFG = load_model_config(ROOT / "config" / "pph_model.yaml")
 FS = 1000.0
 THIRD_OCTAVES = third_octave_bands_hz(5.0, 450.0)[:, 1:]
 """(lo, hi) Hz of every one-third-octave band 5..450 Hz (the contract's bands)."""
@@ -27,7 +27,7 @@ THIRD_OCTAVES = third_octave_bands_hz(5.0, 450.0)[:, 1:]
 
 def band_db(z: np.ndarray, bands: np.ndarray) -> np.ndarray:
     """Total power (lines included) of z in each [lo, hi) band, dB."""
-    f, p = signal.welch(z, FS, window='hann', nperseg=4000)
+    f, p = signal.welch(z, FS, window="hann", nperseg=4000)
     return np.array([10 * np.log10(np.sum(p[(f >= lo) & (f < hi)])) for lo, hi in bands])
 
 

@@ -17,7 +17,7 @@ def resonance_bank(f_res_hz, zeta, gain):
     for f in np.atleast_1d(f_res_hz):
         w = 2 * np.pi * f
         ss = signal.tf2ss([gain * w * w], [1.0, 2 * zeta * w, w * w])
-        blocks.append(signal.cont2discrete(ss, 1 / FS, method='zoh')[:3])
+        blocks.append(signal.cont2discrete(ss, 1 / FS, method="zoh")[:3])
     return tuple(block_diag(*m) for m in zip(*blocks, strict=True))
 
 

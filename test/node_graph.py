@@ -48,8 +48,8 @@ RECORD_QOS = QoSProfile(
 )
 """Test-side subscriptions: deep enough that a busy test process loses nothing it needs."""
 
-STRUT_TOPICS = ('/pph/accel', '/pph/eddy', '/pph/notch_command', '/pph/pointing_command',
-                '/pph/actuator_force')
+STRUT_TOPICS = ("/pph/accel", "/pph/eddy", "/pph/notch_command", "/pph/pointing_command",
+                "/pph/actuator_force")
 
 
 class StrutTopic:
@@ -112,7 +112,7 @@ class ClockTopic:
         self.times_ns: list[int] = []
         qos = QoSProfile(reliability=ReliabilityPolicy.BEST_EFFORT,
                          history=HistoryPolicy.KEEP_LAST, depth=1000)
-        node.create_subscription(Clock, '/clock', self._on_clock, qos)
+        node.create_subscription(Clock, "/clock", self._on_clock, qos)
 
     def _on_clock(self, msg: Clock) -> None:
         self.times_ns.append(msg.clock.sec * 1_000_000_000 + msg.clock.nanosec)
@@ -126,7 +126,7 @@ class Diagnostics:
         self.history: list[Any] = []
         # a deep queue: a listener starved by a loaded machine must not lose one node's
         # status under another's (the composed graph's notch status never arrived on CI)
-        node.create_subscription(DiagnosticArray, '/diagnostics', self._on_diag,
+        node.create_subscription(DiagnosticArray, "/diagnostics", self._on_diag,
                                  QoSProfile(reliability=DIAGNOSTICS_QOS.reliability,
                                             history=DIAGNOSTICS_QOS.history, depth=1000,
                                             durability=DIAGNOSTICS_QOS.durability))
@@ -145,11 +145,11 @@ class Diagnostics:
         """Key/values of every status called ``name`` received, oldest first."""
         return [{kv.key: kv.value for kv in st.values} for st in self.history if st.name == name]
 
-    def value(self, name: str, key: str, default: str = '') -> str:
+    def value(self, name: str, key: str, default: str = "") -> str:
         return self.values(name).get(key, default)
 
     def int_value(self, name: str, key: str) -> int:
-        return int(self.value(name, key, '-1'))
+        return int(self.value(name, key, "-1"))
 
 
 def drain(ros_context, budget_s: float = 0.05) -> None:
@@ -200,10 +200,10 @@ class ParameterClient:
         self.ros_context = ros_context
         self.target = target
         self.client = AsyncParameterClient(node, target)
-        assert self.client.wait_for_services(timeout_sec=HANG_GUARD_S), f'{target}: no services'
+        assert self.client.wait_for_services(timeout_sec=HANG_GUARD_S), f"{target}: no services"
 
     def _wait(self, future):
-        assert wait_until(self.ros_context, future.done), f'{self.target}: no answer'
+        assert wait_until(self.ros_context, future.done), f"{self.target}: no answer"
         return future.result()
 
     def names(self) -> list[str]:
@@ -211,7 +211,7 @@ class ParameterClient:
 
     def get(self, *names: str) -> dict[str, Any]:
         values = self._wait(self.client.get_parameters(list(names))).values
-        assert len(values) == len(names), f'{self.target}: get_parameters({names}) failed'
+        assert len(values) == len(names), f"{self.target}: get_parameters({names}) failed"
         return {n: _python(v) for n, v in zip(names, values, strict=True)}
 
     def get_all(self) -> dict[str, Any]:
@@ -231,7 +231,7 @@ class ParameterClient:
 
 def _python(value) -> Any:
     result = parameter_value_to_python(value)
-    if isinstance(result, (list, tuple)) or type(result).__name__ == 'array':
+    if isinstance(result, (list, tuple)) or type(result).__name__ == "array":
         return list(result)
     return result
 
@@ -257,8 +257,8 @@ def db(ratio: float | np.ndarray) -> float | np.ndarray:
 
 def assert_rejected(result: SetParametersResult, *words: str) -> None:
     """The set was refused with a non-empty reason containing ``words``."""
-    assert not result.successful, 'accepted, expected a rejection'
-    assert result.reason.strip(), 'rejected without a reason'
+    assert not result.successful, "accepted, expected a rejection"
+    assert result.reason.strip(), "rejected without a reason"
     for word in words:
         assert word.lower() in result.reason.lower(), result.reason
 

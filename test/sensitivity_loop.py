@@ -34,13 +34,13 @@ FS = 1000.0
 class IdentifyingLoop(CoreLoop):
     """CoreLoop with the supervisor's broadband identification and mu policy (the module)."""
 
-    def __init__(self, config: ModelConfig, scenario: Scenario, policy: str = 'manual',
+    def __init__(self, config: ModelConfig, scenario: Scenario, policy: str = "manual",
                  max_rise_db: float = mu_policy.DEFAULT_MAX_RISE_DB,
                  enable_control: bool = True, guard: bool = True) -> None:
         """The scenario with ``identification: broadband`` and the policy's settings."""
-        settings = {**scenario.notch.settings, 'identification': 'broadband',
-                    'mu_policy': policy, 'max_rise_db': max_rise_db,
-                    'divergence_guard': guard}
+        settings = {**scenario.notch.settings, "identification": "broadband",
+                    "mu_policy": policy, "max_rise_db": max_rise_db,
+                    "divergence_guard": guard}
         scenario = dataclasses.replace(
             scenario, notch=dataclasses.replace(scenario.notch, settings=settings))
         if not enable_control:
@@ -125,7 +125,7 @@ def error_csd(accel: np.ndarray, frequencies_hz: np.ndarray, segment_s: float = 
     csd = np.empty((f.size, 6, 6), dtype=complex)
     for i in range(6):
         for j in range(6):
-            csd[:, i, j] = signal.csd(accel[:, i], accel[:, j], FS, window='hann',
+            csd[:, i, j] = signal.csd(accel[:, i], accel[:, j], FS, window="hann",
                                       nperseg=nper)[1]
     out = np.empty((frequencies_hz.size, 6, 6), dtype=complex)
     for i in range(6):
@@ -175,7 +175,7 @@ class ImpulseIdentifier:
 
 
 def welch_ratio_db(controlled: np.ndarray, uncontrolled: np.ndarray, segment_s: float = 4.0,
-                   window: str = 'hann') -> tuple[np.ndarray, np.ndarray]:
+                   window: str = "hann") -> tuple[np.ndarray, np.ndarray]:
     """(f Hz, 10 log10 of the Welch PSD ratio) of two records of the same length."""
     nper = int(segment_s * FS)
     f, p1 = signal.welch(controlled, FS, window=window, nperseg=nper)
@@ -185,7 +185,7 @@ def welch_ratio_db(controlled: np.ndarray, uncontrolled: np.ndarray, segment_s: 
 
 def windowed_prediction_db(prediction: sensitivity.SensitivityPrediction, bins_hz: np.ndarray,
                            disturbance_psd: np.ndarray | None = None, segment_s: float = 4.0,
-                           span_hz: float = 3.0, window: str = 'hann') -> np.ndarray:
+                           span_hz: float = 3.0, window: str = "hann") -> np.ndarray:
     """What a Welch ratio (``window``) expects from the predicted z-axis |S|^2 and disturbance PSD.
 
     The Welch estimate at bin f is the true PSD seen through the window's spectral kernel
@@ -196,7 +196,7 @@ def windowed_prediction_db(prediction: sensitivity.SensitivityPrediction, bins_h
     (None: flat).
     """
     f = prediction.frequencies_hz
-    s2 = prediction.values('output') ** 2
+    s2 = prediction.values("output") ** 2
     phi = np.ones(f.size) if disturbance_psd is None else np.asarray(disturbance_psd)
     n = int(segment_s * FS)
     win = signal.get_window(window, n)

@@ -51,13 +51,13 @@ class _Logger:
         self.warnings.append(text)
 
 
-LABELS = ['', 's', 'strut', 'x' * 7, 'dim with spaces', 'ü-label']
+LABELS = ["", "s", "strut", "x" * 7, "dim with spaces", "ü-label"]
 
 
 # ------------------------------------------------------------------ against rclpy
-@pytest.mark.parametrize('run', [None, 1, RUN])
-@pytest.mark.parametrize('index', [0, 1, 9, 10, 12345, MAX_SAMPLE_INDEX, None])
-@pytest.mark.parametrize('first_label', LABELS)
+@pytest.mark.parametrize("run", [None, 1, RUN])
+@pytest.mark.parametrize("index", [0, 1, 9, 10, 12345, MAX_SAMPLE_INDEX, None])
+@pytest.mark.parametrize("first_label", LABELS)
 def test_decode_cdr_equals_parse_of_rclpy_deserialization(index, first_label, run):
     """Every label length (string padding) and index width, against rclpy's own CDR."""
     msg = make_strut_array(VALUES, index, run if index is not None else None)
@@ -71,8 +71,8 @@ def test_decode_cdr_equals_parse_of_rclpy_deserialization(index, first_label, ru
     assert decoded_run == expected.run == (run if index is not None else None)
 
 
-@pytest.mark.parametrize('dims', [[], [('strut', 6, 6)], [('a', 6, 6), ('sample:4', 1, 1),
-                                                          ('extra', 1, 1)]])
+@pytest.mark.parametrize("dims", [[], [("strut", 6, 6)], [("a", 6, 6), ("sample:4", 1, 1),
+                                                          ("extra", 1, 1)]])
 def test_decode_cdr_reads_other_layouts_like_parse(dims):
     raw = serialize_message(float64_array(VALUES, dims))
     values, index, run = decode_strut_cdr(raw)
@@ -81,18 +81,18 @@ def test_decode_cdr_reads_other_layouts_like_parse(dims):
     assert run is None
 
 
-@pytest.mark.parametrize('data, dims, reason', [
-    (VALUES[:5], [('strut', 6, 6)], 'expected 6'),
-    (np.append(VALUES, 1.0), [('strut', 6, 6)], 'expected 6'),
-    ([], [], 'expected 6'),
-    ([1, 2, math.nan, 4, 5, 6], [('strut', 6, 6)], 'non-finite'),
-    ([1, 2, 3, -math.inf, 5, 6], [('strut', 6, 6)], 'non-finite'),
-    (VALUES, [('strut', 6, 6), ('sample:-1', 1, 1)], 'garbled'),
-    (VALUES, [('strut', 6, 6), ('frame:3', 1, 1)], 'sample'),
-    (VALUES, [('strut', 6, 6), ('sample:99999999999999999999', 1, 1)], 'out of range'),
-    (VALUES, [('strut', 6, 6), (f'sample:{MAX_SAMPLE_INDEX + 1}', 1, 1)], 'out of range'),
-    (VALUES, [('strut', 6, 6), ('sample:3', 1, 1), ('run:0', 1, 1)], 'run'),
-    (VALUES, [('strut', 6, 6), ('sample:3', 1, 1), ('run:x', 1, 1)], 'run'),
+@pytest.mark.parametrize("data, dims, reason", [
+    (VALUES[:5], [("strut", 6, 6)], "expected 6"),
+    (np.append(VALUES, 1.0), [("strut", 6, 6)], "expected 6"),
+    ([], [], "expected 6"),
+    ([1, 2, math.nan, 4, 5, 6], [("strut", 6, 6)], "non-finite"),
+    ([1, 2, 3, -math.inf, 5, 6], [("strut", 6, 6)], "non-finite"),
+    (VALUES, [("strut", 6, 6), ("sample:-1", 1, 1)], "garbled"),
+    (VALUES, [("strut", 6, 6), ("frame:3", 1, 1)], "sample"),
+    (VALUES, [("strut", 6, 6), ("sample:99999999999999999999", 1, 1)], "out of range"),
+    (VALUES, [("strut", 6, 6), (f"sample:{MAX_SAMPLE_INDEX + 1}", 1, 1)], "out of range"),
+    (VALUES, [("strut", 6, 6), ("sample:3", 1, 1), ("run:0", 1, 1)], "run"),
+    (VALUES, [("strut", 6, 6), ("sample:3", 1, 1), ("run:x", 1, 1)], "run"),
 ])
 def test_decode_cdr_rejects_what_parse_rejects(data, dims, reason):
     raw = serialize_message(float64_array(data, dims))
@@ -109,8 +109,8 @@ def test_truncated_or_foreign_bytes_are_unsupported_not_misread():
             values, index, run = decode_strut_cdr(raw[:cut])
         except InvalidStrutMessage:
             continue
-        pytest.fail(f'{cut} bytes decoded as {values}, {index}, {run}')
-    big_endian = b'\x00\x00' + raw[2:]
+        pytest.fail(f"{cut} bytes decoded as {values}, {index}, {run}")
+    big_endian = b"\x00\x00" + raw[2:]
     with pytest.raises(UnsupportedCdr):
         decode_strut_cdr(big_endian)
 
@@ -119,13 +119,13 @@ def _big_endian_bytes(index: int) -> bytes:
     from rosbags.typesys import Stores, get_typestore
 
     store = get_typestore(Stores.ROS2_JAZZY)
-    msg = store.types['std_msgs/msg/Float64MultiArray'](
-        layout=store.types['std_msgs/msg/MultiArrayLayout'](
-            dim=[store.types['std_msgs/msg/MultiArrayDimension'](label=lbl, size=s, stride=s)
-                 for lbl, s in (('strut', 6), (f'sample:{index}', 1), (f'run:{RUN}', 1))],
+    msg = store.types["std_msgs/msg/Float64MultiArray"](
+        layout=store.types["std_msgs/msg/MultiArrayLayout"](
+            dim=[store.types["std_msgs/msg/MultiArrayDimension"](label=lbl, size=s, stride=s)
+                 for lbl, s in (("strut", 6), (f"sample:{index}", 1), (f"run:{RUN}", 1))],
             data_offset=0),
         data=VALUES.copy())
-    return bytes(store.serialize_cdr(msg, 'std_msgs/msg/Float64MultiArray',
+    return bytes(store.serialize_cdr(msg, "std_msgs/msg/Float64MultiArray",
                                      little_endian=False))
 
 
@@ -138,13 +138,13 @@ def test_big_endian_cdr_is_read_as_rclpy_reads_it():
     assert values.dtype == np.float64 and not values.flags.writeable
     assert (index, run) == (expected.index, expected.run) == (31, RUN)
     logger = _Logger()
-    values, index = receive_strut_array(raw, logger, '/pph/accel')
+    values, index = receive_strut_array(raw, logger, "/pph/accel")
     np.testing.assert_array_equal(values, VALUES)
     assert index == 31 and not logger.warnings
 
 
-@pytest.mark.parametrize('index', [0, 1, 9, 10, 99, 100, 12345, MAX_SAMPLE_INDEX])
-@pytest.mark.parametrize('run', [None, 1, 7, RUN, 2**63 - 1])
+@pytest.mark.parametrize("index", [0, 1, 9, 10, 99, 100, 12345, MAX_SAMPLE_INDEX])
+@pytest.mark.parametrize("run", [None, 1, 7, RUN, 2**63 - 1])
 def test_encode_cdr_is_what_rclpy_serializes(index, run):
     """Deserialized by rclpy, the bytes are make_strut_array's message; they decode back."""
     values = VALUES * (index % 1000 + 1)
@@ -156,14 +156,14 @@ def test_encode_cdr_is_what_rclpy_serializes(index, run):
     assert (decoded_index, decoded_run) == (index, run)
 
 
-@pytest.mark.parametrize('values, index, run', [(np.zeros(5), 1, None), (np.zeros(7), 1, None),
+@pytest.mark.parametrize("values, index, run", [(np.zeros(5), 1, None), (np.zeros(7), 1, None),
                                                 (np.zeros(6), -1, None), (np.zeros(6), 1, 0)])
 def test_encode_cdr_rejects_bad_input(values, index, run):
     with pytest.raises(ValueError):
         encode_strut_cdr(values, index, run)
 
 
-@pytest.mark.parametrize('sample', [0, 1, 999, 1000, 1001, 123456789, 2**40])
+@pytest.mark.parametrize("sample", [0, 1, 999, 1000, 1001, 123456789, 2**40])
 def test_clock_bytes_are_what_rclpy_serializes(sample):
     expected = Clock(clock=sample_time(sample))
     raw = clock_cdr(sample)
@@ -175,40 +175,40 @@ def test_clock_bytes_are_what_rclpy_serializes(sample):
 def _hostile_bytes() -> dict[str, bytes]:
     raw = encode_strut_cdr(np.arange(1.0, 7.0), 77, RUN)
     cases = {
-        'truncated_by_8': raw[:-8],
-        'truncated_at_half': raw[:len(raw) // 2],
-        'header_only': raw[:4],
-        'empty': b'',
-        'ff_garbage': b'\xff' * len(raw),
-        'big_endian_header': b'\x00\x00' + raw[2:],
-        'trailing_garbage': raw + b'\x01' * 8,
-        'xcdr2_header': b'\x00\x07' + raw[2:],
+        "truncated_by_8": raw[:-8],
+        "truncated_at_half": raw[:len(raw) // 2],
+        "header_only": raw[:4],
+        "empty": b"",
+        "ff_garbage": b"\xff" * len(raw),
+        "big_endian_header": b"\x00\x00" + raw[2:],
+        "trailing_garbage": raw + b"\x01" * 8,
+        "xcdr2_header": b"\x00\x07" + raw[2:],
     }
-    for name, dims in (('huge_dims_count', 0xFFFFFFFF), ('dims_beyond_max', MAX_LAYOUT_DIMS + 1),
-                       ('one_dim_too_many', 4)):
+    for name, dims in (("huge_dims_count", 0xFFFFFFFF), ("dims_beyond_max", MAX_LAYOUT_DIMS + 1),
+                       ("one_dim_too_many", 4)):
         bad = bytearray(raw)
-        bad[4:8] = struct.pack('<I', dims)
+        bad[4:8] = struct.pack("<I", dims)
         cases[name] = bytes(bad)
     bad = bytearray(raw)
-    bad[8:12] = struct.pack('<I', 0xFFFFFFF0)          # dim[0] label length
-    cases['huge_label_length'] = bytes(bad)
+    bad[8:12] = struct.pack("<I", 0xFFFFFFF0)          # dim[0] label length
+    cases["huge_label_length"] = bytes(bad)
     bad = bytearray(raw)
-    bad[-52:-48] = struct.pack('<I', 7)                 # data length beyond the bytes
-    cases['data_length_beyond_bytes'] = bytes(bad)
-    cases['big_endian_truncated'] = _big_endian_bytes(31)[:-8]
+    bad[-52:-48] = struct.pack("<I", 7)                 # data length beyond the bytes
+    cases["data_length_beyond_bytes"] = bytes(bad)
+    cases["big_endian_truncated"] = _big_endian_bytes(31)[:-8]
     return cases
 
 
 HOSTILE = _hostile_bytes()
 
 
-@pytest.mark.parametrize('name', sorted(HOSTILE))
+@pytest.mark.parametrize("name", sorted(HOSTILE))
 def test_hostile_bytes_are_refused_without_an_exception(name):
     """Where rclpy's deserializer would raise RMWError (crashing the node) or decode garbage."""
     logger = _Logger()
-    assert receive_strut_sample(HOSTILE[name], logger, '/pph/accel') is None
-    assert receive_strut_array(HOSTILE[name], logger, '/pph/accel') is None
-    assert len(logger.warnings) == 2 and '/pph/accel' in logger.warnings[0]
+    assert receive_strut_sample(HOSTILE[name], logger, "/pph/accel") is None
+    assert receive_strut_array(HOSTILE[name], logger, "/pph/accel") is None
+    assert len(logger.warnings) == 2 and "/pph/accel" in logger.warnings[0]
     with pytest.raises(InvalidStrutMessage):
         decode_strut_cdr(HOSTILE[name])
 
@@ -216,7 +216,7 @@ def test_hostile_bytes_are_refused_without_an_exception(name):
 def test_the_data_length_case_hits_the_length_field():
     """The hostile case above edits the data length, not some other field."""
     raw = encode_strut_cdr(np.arange(1.0, 7.0), 77, RUN)
-    assert struct.unpack('<I', raw[-52:-48]) == (6,)
+    assert struct.unpack("<I", raw[-52:-48]) == (6,)
 
 
 # ------------------------------------------------------------------ a bag's arrays
@@ -226,30 +226,30 @@ def _rosbags_array(values, dims, little_endian=True) -> bytes:
 
     store = get_typestore(Stores.ROS2_JAZZY)
     t = store.types
-    msg = t['std_msgs/msg/Float64MultiArray'](
-        layout=t['std_msgs/msg/MultiArrayLayout'](
-            dim=[t['std_msgs/msg/MultiArrayDimension'](label=lbl, size=s, stride=s)
+    msg = t["std_msgs/msg/Float64MultiArray"](
+        layout=t["std_msgs/msg/MultiArrayLayout"](
+            dim=[t["std_msgs/msg/MultiArrayDimension"](label=lbl, size=s, stride=s)
                  for lbl, s in dims], data_offset=0),
         data=np.asarray(values, np.float64))
-    return bytes(store.serialize_cdr(msg, 'std_msgs/msg/Float64MultiArray',
+    return bytes(store.serialize_cdr(msg, "std_msgs/msg/Float64MultiArray",
                                      little_endian=little_endian))
 
 
-@pytest.mark.parametrize('count', [0, 1, 3, 12, MAX_ARRAY_VALUES])
+@pytest.mark.parametrize("count", [0, 1, 3, 12, MAX_ARRAY_VALUES])
 def test_a_bag_array_is_read_with_every_label(count):
     values = np.arange(count) * 0.5
-    dims = [('frequency_hz', count), ('sample:12', 1), ('run:3', 1), ('sample:99', 1)]
-    decoded, labels = decode_float64_array(_rosbags_array(values, dims) + b'\x00' * 8)
+    dims = [("frequency_hz", count), ("sample:12", 1), ("run:3", 1), ("sample:99", 1)]
+    decoded, labels = decode_float64_array(_rosbags_array(values, dims) + b"\x00" * 8)
     np.testing.assert_array_equal(decoded, values)
     assert labels == [label for label, _ in dims]
 
 
-@pytest.mark.parametrize('name, raw', [
-    ('too_many_values', _rosbags_array(np.zeros(MAX_ARRAY_VALUES + 1), [('x', 65)])),
-    ('big_endian', _rosbags_array(np.zeros(6), [('strut', 6)], little_endian=False)),
-    ('dims_beyond_max', _rosbags_array(np.zeros(6), [('d', 1)] * (MAX_LAYOUT_DIMS + 1))),
-    ('values_beyond_bytes', _rosbags_array(np.zeros(6), [('strut', 6)])[:-1]),
-    ('label_not_utf8', _rosbags_array(np.zeros(6), [('strut', 6)]).replace(b'strut', b'st\xffut')),
+@pytest.mark.parametrize("name, raw", [
+    ("too_many_values", _rosbags_array(np.zeros(MAX_ARRAY_VALUES + 1), [("x", 65)])),
+    ("big_endian", _rosbags_array(np.zeros(6), [("strut", 6)], little_endian=False)),
+    ("dims_beyond_max", _rosbags_array(np.zeros(6), [("d", 1)] * (MAX_LAYOUT_DIMS + 1))),
+    ("values_beyond_bytes", _rosbags_array(np.zeros(6), [("strut", 6)])[:-1]),
+    ("label_not_utf8", _rosbags_array(np.zeros(6), [("strut", 6)]).replace(b"strut", b"st\xffut")),
 ])
 def test_a_bag_array_that_is_not_one_is_refused(name, raw):
     with pytest.raises((ValueError, struct.error)):
@@ -257,14 +257,14 @@ def test_a_bag_array_that_is_not_one_is_refused(name, raw):
 
 
 def test_the_sample_index_is_found_in_any_dimension():
-    weights = _rosbags_array(np.zeros(24), [('tone', 2), ('strut', 6), ('ab', 2),
-                                            ('sample:4567', 1)])
+    weights = _rosbags_array(np.zeros(24), [("tone", 2), ("strut", 6), ("ab", 2),
+                                            ("sample:4567", 1)])
     assert sample_index_of_cdr(weights) == 4567
     assert sample_index_of_cdr(encode_strut_cdr(VALUES, 77, RUN)) == 77
-    assert sample_index_of_cdr(_rosbags_array(VALUES, [('strut', 6)])) is None
-    assert sample_index_of_cdr(_rosbags_array(VALUES, [('strut', 6), ('sample:12', 1)],
+    assert sample_index_of_cdr(_rosbags_array(VALUES, [("strut", 6)])) is None
+    assert sample_index_of_cdr(_rosbags_array(VALUES, [("strut", 6), ("sample:12", 1)],
                                               little_endian=False)) is None
-    assert sample_index_of_cdr(b'\x00\x01\x00\x00' + b'\xff' * 40) is None
+    assert sample_index_of_cdr(b"\x00\x01\x00\x00" + b"\xff" * 40) is None
     assert sample_index_of_cdr(encode_strut_cdr(VALUES, MAX_BAG_SAMPLE_INDEX, RUN)) is None
     assert sample_index_of_cdr(encode_strut_cdr(VALUES, MAX_BAG_SAMPLE_INDEX - 1)) == (
         MAX_BAG_SAMPLE_INDEX - 1)

@@ -46,18 +46,18 @@ def _bag_directory(bag_path: str | Path) -> Path:
     """The bag directory for ``bag_path`` (a bag directory or a file inside it)."""
     path = Path(bag_path)
     if not path.exists():
-        raise BagError(f'bag not found: {path}')
+        raise BagError(f"bag not found: {path}")
     return path.parent if path.is_file() else path
 
 
 def _metadata_custom_data(path: Path) -> dict[str, str] | None:
     """``custom_data`` of ``path/metadata.yaml`` (None if absent, {} if it has none)."""
-    meta = path / 'metadata.yaml'
+    meta = path / "metadata.yaml"
     if not meta.is_file():
         return None
     try:
-        info = yaml.safe_load(meta.read_text(encoding='utf-8'))['rosbag2_bagfile_information']
-        custom = info.get('custom_data') or {}
+        info = yaml.safe_load(meta.read_text(encoding="utf-8"))["rosbag2_bagfile_information"]
+        custom = info.get("custom_data") or {}
     except (yaml.YAMLError, OSError, KeyError, TypeError, AttributeError, UnicodeDecodeError):
         return {}   # rosbags' Reader reports what is wrong with it
     return {str(k): str(v) for k, v in custom.items()} if isinstance(custom, dict) else {}
@@ -77,17 +77,17 @@ def open_reader(bag_path: str | Path) -> Any:
         reader.open()
     except _READ_ERRORS as err:
         raise BagError(
-            f'cannot open bag {path} (truncated, corrupt or not a rosbag2 bag): {err}'
+            f"cannot open bag {path} (truncated, corrupt or not a rosbag2 bag): {err}"
         ) from err
     return reader
 
 
 def custom_data_of(reader: Any) -> dict[str, str]:
     """The bag's ``custom_data`` (rosbags' Reader or the recovery reader)."""
-    custom = getattr(reader, 'custom_data', None)
+    custom = getattr(reader, "custom_data", None)
     if custom is None:
-        storage = getattr(reader, 'storage', None)
-        custom = getattr(getattr(storage, 'metadata', None), 'custom', None)
+        storage = getattr(reader, "storage", None)
+        custom = getattr(getattr(storage, "metadata", None), "custom", None)
     return {str(k): str(v) for k, v in (custom or {}).items()}
 
 
@@ -117,30 +117,30 @@ def iter_messages(
                         counts[conn.id] += 1
                         yield conn, timestamp, data
     except _READ_ERRORS as err:
-        raise BagError(f'bag {reader.path} is truncated or corrupt: {err!r}') from err
+        raise BagError(f"bag {reader.path} is truncated or corrupt: {err!r}") from err
     for conn in connections:  # a damaged MCAP chunk can end the iteration silently
         if counts[conn.id] < conn.msgcount:
             raise BagError(
-                f'bag {reader.path} is truncated or corrupt: read {counts[conn.id]} of the '
-                f'{conn.msgcount} messages on {conn.topic} listed in its metadata.yaml'
+                f"bag {reader.path} is truncated or corrupt: read {counts[conn.id]} of the "
+                f"{conn.msgcount} messages on {conn.topic} listed in its metadata.yaml"
             )
 
 
 def _sequential_mcap_files(reader: Any) -> list[Path] | None:
     """The data files of a closed, uncompressed MCAP bag (None: read through rosbags)."""
-    storage = getattr(reader, 'storage', None)
-    storages = getattr(storage, 'storages', None)
-    metadata = getattr(storage, 'metadata', None)
-    if not storages or getattr(metadata, 'compression_mode', None):
+    storage = getattr(reader, "storage", None)
+    storages = getattr(storage, "storages", None)
+    metadata = getattr(storage, "metadata", None)
+    if not storages or getattr(metadata, "compression_mode", None):
         return None
-    paths = [Path(getattr(s, 'path', '')) for s in storages]
-    return paths if all(p.suffix == '.mcap' and p.is_file() for p in paths) else None
+    paths = [Path(getattr(s, "path", "")) for s in storages]
+    return paths if all(p.suffix == ".mcap" and p.is_file() for p in paths) else None
 
 
 def topics_summary(reader: Any) -> str:
     """``"topic (type), ..."`` of every topic of the bag, for error messages."""
-    items = sorted(f'{name} ({info.msgtype})' for name, info in reader.topics.items())
-    return ', '.join(items) or 'no topics'
+    items = sorted(f"{name} ({info.msgtype})" for name, info in reader.topics.items())
+    return ", ".join(items) or "no topics"
 
 
 def strut_connections(reader: Any, topics: Sequence[str]) -> list[Connection]:
@@ -149,7 +149,7 @@ def strut_connections(reader: Any, topics: Sequence[str]) -> list[Connection]:
     for conn in wanted:
         if conn.msgtype != STRUT_MSGTYPE:
             raise BagError(
-                f'bag {reader.path}: topic {conn.topic} has type {conn.msgtype}, '
-                f'expected {STRUT_MSGTYPE}'
+                f"bag {reader.path}: topic {conn.topic} has type {conn.msgtype}, "
+                f"expected {STRUT_MSGTYPE}"
             )
     return wanted

@@ -18,23 +18,23 @@ from hexapod_vibration.contract import (
 )
 
 STRUT_TOPICS: tuple[str, ...] = (
-    '/pph/accel',
-    '/pph/eddy',
-    '/pph/notch_command',
-    '/pph/pointing_command',
-    '/pph/actuator_force',
+    "/pph/accel",
+    "/pph/eddy",
+    "/pph/notch_command",
+    "/pph/pointing_command",
+    "/pph/actuator_force",
 )
 """The contract's ``std_msgs/Float64MultiArray`` topics, six values each."""
 
-ACCEL_TOPIC = '/pph/accel'
-STRUT_MSGTYPE = 'std_msgs/msg/Float64MultiArray'
-CLOCK_TOPIC = '/clock'
-CLOCK_MSGTYPE = 'rosgraph_msgs/msg/Clock'
-PARAMETER_EVENTS_TOPIC = '/parameter_events'
-PARAMETER_EVENT_MSGTYPE = 'rcl_interfaces/msg/ParameterEvent'
-DIAGNOSTICS_TOPIC = '/diagnostics'
-DIAGNOSTICS_MSGTYPE = 'diagnostic_msgs/msg/DiagnosticArray'
-WEIGHTS_TOPIC = '/pph/notch_weights'
+ACCEL_TOPIC = "/pph/accel"
+STRUT_MSGTYPE = "std_msgs/msg/Float64MultiArray"
+CLOCK_TOPIC = "/clock"
+CLOCK_MSGTYPE = "rosgraph_msgs/msg/Clock"
+PARAMETER_EVENTS_TOPIC = "/parameter_events"
+PARAMETER_EVENT_MSGTYPE = "rcl_interfaces/msg/ParameterEvent"
+DIAGNOSTICS_TOPIC = "/diagnostics"
+DIAGNOSTICS_MSGTYPE = "diagnostic_msgs/msg/DiagnosticArray"
+WEIGHTS_TOPIC = "/pph/notch_weights"
 FREQUENCY_TOPICS: tuple[str, ...] = (
     REFERENCE_FREQUENCY_TOPIC, DISTURBANCE_FREQUENCIES_TOPIC, NOTCH_FREQUENCIES_TOPIC)
 """Frequencies (Hz) per sample: any number of values, ``sample:<n>`` in ``layout.dim[1]``."""
@@ -46,16 +46,16 @@ TYPESTORE_NAME = Stores.ROS2_JAZZY
 BAG_VERSION = 9
 """rosbag2 metadata version written (the one ROS 2 Jazzy writes)."""
 
-STORAGE_PLUGINS = {'mcap': StoragePlugin.MCAP, 'sqlite3': StoragePlugin.SQLITE3}
+STORAGE_PLUGINS = {"mcap": StoragePlugin.MCAP, "sqlite3": StoragePlugin.SQLITE3}
 """rosbag2 storage plugins by their ``ros2 bag`` name (the recorder's ``storage``)."""
 
-RECORDING_KEY = 'hexapod_vibration.recording'
+RECORDING_KEY = "hexapod_vibration.recording"
 """``custom_data`` key of the provisional ``metadata.yaml`` written when a recording starts;
 the final one (written when the bag is closed) does not have it."""
 
-RECORDING_OPEN = 'open'
+RECORDING_OPEN = "open"
 
-RUN_RECORD_KEY = 'hexapod_vibration.run'
+RUN_RECORD_KEY = "hexapod_vibration.run"
 """``custom_data`` key holding the experiment's run record (JSON), see
 :mod:`hexapod_vibration.analysis.run_record`."""
 

@@ -39,16 +39,16 @@ def decode_strut_message(data: bytes | memoryview) -> tuple[np.ndarray, int | No
     try:
         values, labels = decode_array(data)
     except DECODE_ERRORS as err:
-        raise InvalidStrutMessage(f'undecodable message ({err.__class__.__name__})') from None
+        raise InvalidStrutMessage(f"undecodable message ({err.__class__.__name__})") from None
     if values.shape != (STRUT_COUNT,):
-        raise InvalidStrutMessage(f'expected {STRUT_COUNT} strut values, got {values.size}')
+        raise InvalidStrutMessage(f"expected {STRUT_COUNT} strut values, got {values.size}")
     if not np.isfinite(values).all():
-        raise InvalidStrutMessage('non-finite strut value')
+        raise InvalidStrutMessage("non-finite strut value")
     if len(labels) < 2:
         return values, None
     index = parse_sample_label(labels[1])
     if index >= MAX_BAG_SAMPLE_INDEX:
-        raise InvalidStrutMessage(f'sample index {index} out of range')
+        raise InvalidStrutMessage(f"sample index {index} out of range")
     return values, index
 
 
@@ -72,23 +72,23 @@ def table_of_message(msg: Any) -> tuple[int, dict[str, np.ndarray]]:
     """
     dims = msg.layout.dim
     if len(dims) < 3 or not dims[0].label.startswith(SENSITIVITY_ROWS_PREFIX):
-        raise ValueError('not a table message')
-    names = dims[0].label[len(SENSITIVITY_ROWS_PREFIX):].split(',')
+        raise ValueError("not a table message")
+    names = dims[0].label[len(SENSITIVITY_ROWS_PREFIX):].split(",")
     table = np.asarray(msg.data, dtype=np.float64).reshape(len(names), int(dims[1].size))
     return parse_sample_label(dims[2].label), dict(zip(names, table, strict=True))
 
 
 # ParameterValue.type -> field holding the value (rcl_interfaces/msg/ParameterType).
 _PARAMETER_FIELDS = {
-    1: 'bool_value',
-    2: 'integer_value',
-    3: 'double_value',
-    4: 'string_value',
-    5: 'byte_array_value',
-    6: 'bool_array_value',
-    7: 'integer_array_value',
-    8: 'double_array_value',
-    9: 'string_array_value',
+    1: "bool_value",
+    2: "integer_value",
+    3: "double_value",
+    4: "string_value",
+    5: "byte_array_value",
+    6: "bool_array_value",
+    7: "integer_array_value",
+    8: "double_array_value",
+    9: "string_array_value",
 }
 
 

@@ -63,7 +63,7 @@ class BagContent:
     parameter_events: list[tuple[int, Any]]
     clock: tuple[np.ndarray, np.ndarray]
     custom_data: dict[str, str]
-    recovered: str = ''
+    recovered: str = ""
     """Empty for a closed bag; else how an unfinished recording was read."""
     bad_messages: dict[str, int] = field(default_factory=dict)
     """Undecodable messages skipped on the other topics, per topic."""
@@ -80,7 +80,7 @@ def read_bag(
     sample_rate_hz: float = SAMPLE_RATE_HZ,
     required: Sequence[str] | None = None,
     weights_every: int = 1,
-    parameter: tuple[str, str] = ('/notch_controller', 'enabled'),
+    parameter: tuple[str, str] = ("/notch_controller", "enabled"),
 ) -> BagContent:
     """Read everything the analysis uses in ONE streaming pass over the bag.
 
@@ -167,7 +167,7 @@ def _stream(reader: Any, struts: list[Connection], others: list[Connection],
     clock_ns = np.array([c for _, c in clock], dtype=np.int64)
     w_index, w_values = weights.arrays()
     return BagContent(Path(reader.path), series, diagnostics, w_index, w_values, events,
-                      (stamps, clock_ns), custom_data_of(reader), getattr(reader, 'recovered', ''),
+                      (stamps, clock_ns), custom_data_of(reader), getattr(reader, "recovered", ""),
                       bad, {t: v.arrays() for t, v in vectors.items() if v.rows}, sensitivity)
 
 
@@ -209,7 +209,7 @@ def read_clock(bag_path: str | Path) -> tuple[np.ndarray, np.ndarray]:
 
 
 def read_parameter_events(
-    bag_path: str | Path, node: str = '/notch_controller', name: str = 'enabled'
+    bag_path: str | Path, node: str = "/notch_controller", name: str = "enabled"
 ) -> list[tuple[int, Any]]:
     """Values taken by one parameter, from ``/parameter_events`` if it was recorded.
 

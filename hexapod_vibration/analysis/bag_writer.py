@@ -54,12 +54,12 @@ from hexapod_vibration.analysis.bag_format import (
 )
 from hexapod_vibration.contract import SAMPLE_RATE_HZ, STRUT_COUNT, STRUT_LABEL, sample_label
 
-ROS_DISTRO = 'jazzy'
-_TIME = struct.Struct('<iI')
+ROS_DISTRO = "jazzy"
+_TIME = struct.Struct("<iI")
 
 
 def _distro(metadata: str) -> str:
-    return metadata.replace('ros_distro: rosbags', f'ros_distro: {ROS_DISTRO}')
+    return metadata.replace("ros_distro: rosbags", f"ros_distro: {ROS_DISTRO}")
 
 
 class _JazzyMcap(McapWriter):
@@ -67,7 +67,7 @@ class _JazzyMcap(McapWriter):
 
     def __init__(self, path: Path, compression: Any) -> None:
         super().__init__(path, compression)
-        target = path / f'{path.name}_0.mcap'
+        target = path / f"{path.name}_0.mcap"
         self.path.rename(target)       # the open file handle follows the rename
         self.path = target
 
@@ -89,12 +89,12 @@ class _JazzySqlite(Sqlite3Writer):
         super().__init__(path, compression)
         self.conn.commit()
         self.conn.close()
-        target = path / f'{path.name}_0.db3'
+        target = path / f"{path.name}_0.db3"
         self.path.rename(target)
         self.path = target
-        self.conn = sqlite3.connect(f'file:{self.path}', uri=True)
-        self.conn.execute('PRAGMA journal_mode=WAL')
-        self.conn.execute('UPDATE schema SET ros_distro = ?', (ROS_DISTRO,))
+        self.conn = sqlite3.connect(f"file:{self.path}", uri=True)
+        self.conn.execute("PRAGMA journal_mode=WAL")
+        self.conn.execute("UPDATE schema SET ros_distro = ?", (ROS_DISTRO,))
         self.conn.commit()
         self.cursor = self.conn.cursor()
 
@@ -149,9 +149,9 @@ class JazzyWriter(Writer):
         """Close the storage and write the final ``metadata.yaml`` (``ros_distro: jazzy``)."""
         super().close()
         meta = self.metapath
-        text = _distro(meta.read_text(encoding='utf-8'))
-        tmp = meta.with_suffix('.yaml.tmp')
-        tmp.write_text(text, encoding='utf-8')
+        text = _distro(meta.read_text(encoding="utf-8"))
+        tmp = meta.with_suffix(".yaml.tmp")
+        tmp.write_text(text, encoding="utf-8")
         os.replace(tmp, meta)
 
     def _write_metadata(self, custom_data: dict[str, str]) -> None:
@@ -159,28 +159,28 @@ class JazzyWriter(Writer):
         assert self.storage is not None
         name = self.storage.path.name
         info = {
-            'version': self.version,
-            'storage_identifier': self.storage_plugin.name.lower(),
-            'relative_file_paths': [name],
-            'duration': {'nanoseconds': 0},
-            'starting_time': {'nanoseconds_since_epoch': 0},
-            'message_count': 0,
-            'topics_with_message_count': [],
-            'compression_format': '',
-            'compression_mode': '',
-            'files': [{'path': name, 'starting_time': {'nanoseconds_since_epoch': 0},
-                       'duration': {'nanoseconds': 0}, 'message_count': 0}],
-            'custom_data': custom_data,
-            'ros_distro': ROS_DISTRO,
+            "version": self.version,
+            "storage_identifier": self.storage_plugin.name.lower(),
+            "relative_file_paths": [name],
+            "duration": {"nanoseconds": 0},
+            "starting_time": {"nanoseconds_since_epoch": 0},
+            "message_count": 0,
+            "topics_with_message_count": [],
+            "compression_format": "",
+            "compression_mode": "",
+            "files": [{"path": name, "starting_time": {"nanoseconds_since_epoch": 0},
+                       "duration": {"nanoseconds": 0}, "message_count": 0}],
+            "custom_data": custom_data,
+            "ros_distro": ROS_DISTRO,
         }
-        tmp = self.metapath.with_suffix('.yaml.tmp')
-        tmp.write_text(yaml.safe_dump({'rosbag2_bagfile_information': info},
-                                      default_flow_style=False), encoding='utf-8')
+        tmp = self.metapath.with_suffix(".yaml.tmp")
+        tmp.write_text(yaml.safe_dump({"rosbag2_bagfile_information": info},
+                                      default_flow_style=False), encoding="utf-8")
         os.replace(tmp, self.metapath)
 
 
 def _time(duration: Any) -> QosTime:
-    ns = int(getattr(duration, 'nanoseconds', 0))
+    ns = int(getattr(duration, "nanoseconds", 0))
     sec, nsec = divmod(ns, 1_000_000_000)
     return QosTime(sec, nsec)
 
@@ -222,11 +222,11 @@ def stamp_of_cdr(topic: str, data: bytes) -> int:
 def _strut_message(values: np.ndarray, index: int | None) -> Any:
     """A rosbags Float64MultiArray with the contract layout (index in band when given)."""
     store = typestore()
-    dim_type = store.types['std_msgs/msg/MultiArrayDimension']
+    dim_type = store.types["std_msgs/msg/MultiArrayDimension"]
     dims = [dim_type(label=STRUT_LABEL, size=STRUT_COUNT, stride=STRUT_COUNT)]
     if index is not None:
         dims.append(dim_type(label=sample_label(index), size=1, stride=1))
-    layout = store.types['std_msgs/msg/MultiArrayLayout'](dim=dims, data_offset=0)
+    layout = store.types["std_msgs/msg/MultiArrayLayout"](dim=dims, data_offset=0)
     return store.types[STRUT_MSGTYPE](layout=layout, data=np.asarray(values, np.float64))
 
 
@@ -249,7 +249,7 @@ def _timeline(
 def write_strut_bag(
     path: str | Path,
     series: Mapping[str, tuple[Iterable[int], np.ndarray]],
-    storage: Literal['mcap', 'sqlite3'] = 'mcap',
+    storage: Literal["mcap", "sqlite3"] = "mcap",
     sample_rate_hz: float = SAMPLE_RATE_HZ,
     in_band_index: bool = True,
     start_time_ns: int = 0,
@@ -286,5 +286,5 @@ def write_strut_bag(
                 msg = _strut_message(values, index if in_band_index else None)
                 writer.write(conns[topic], stamp, store.serialize_cdr(msg, STRUT_MSGTYPE))
     except (WriterError, OSError) as err:
-        raise BagError(f'cannot write bag {path}: {err}') from err
+        raise BagError(f"cannot write bag {path}: {err}") from err
     return Path(path)

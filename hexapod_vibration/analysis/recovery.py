@@ -35,9 +35,9 @@ from rosbags.interfaces import (
     TopicInfo,
 )
 
-MCAP_MAGIC = b'\x89MCAP0\r\n'
+MCAP_MAGIC = b"\x89MCAP0\r\n"
 _OP_FOOTER, _OP_SCHEMA, _OP_CHANNEL, _OP_MESSAGE, _OP_CHUNK = 0x02, 0x03, 0x04, 0x05, 0x06
-_U16, _U32, _U64 = struct.Struct('<H'), struct.Struct('<I'), struct.Struct('<Q')
+_U16, _U32, _U64 = struct.Struct("<H"), struct.Struct("<I"), struct.Struct("<Q")
 
 
 def open_unfinished(path: Path, custom_data: dict[str, str], error: type[Exception]) -> Any:
@@ -46,30 +46,30 @@ def open_unfinished(path: Path, custom_data: dict[str, str], error: type[Excepti
     Raises:
         error: No data file, or one without any readable message.
     """
-    files = sorted(p for p in path.iterdir() if p.suffix in ('.mcap', '.db3'))
-    why = ('its metadata.yaml is the provisional one of a recording that was not closed'
-           if custom_data else 'it has no metadata.yaml')
+    files = sorted(p for p in path.iterdir() if p.suffix in (".mcap", ".db3"))
+    why = ("its metadata.yaml is the provisional one of a recording that was not closed"
+           if custom_data else "it has no metadata.yaml")
     if len(files) != 1:
         raise error(
-            f'{path} is not a readable rosbag2 bag: {why} and it holds '
-            f'{len(files)} data files (not a bag, or a recording that was not closed '
-            f'cleanly: `ros2 bag reindex {path}` can rebuild it)')
-    reader = (_McapPrefix if files[0].suffix == '.mcap' else _SqlitePrefix)(path, files[0])
+            f"{path} is not a readable rosbag2 bag: {why} and it holds "
+            f"{len(files)} data files (not a bag, or a recording that was not closed "
+            f"cleanly: `ros2 bag reindex {path}` can rebuild it)")
+    reader = (_McapPrefix if files[0].suffix == ".mcap" else _SqlitePrefix)(path, files[0])
     reader.custom_data = dict(custom_data)
     if not reader.connections or reader.message_count == 0:
         reader.close()
         raise error(
-            f'{path} is not a readable rosbag2 bag: {why} and {files[0].name} holds no '
-            'readable message (not a bag, or a recording killed before it wrote anything)')
-    reader.recovered = (f'{why}: read the {reader.message_count} messages of '
-                        f'{files[0].name} {reader.extent}')
+            f"{path} is not a readable rosbag2 bag: {why} and {files[0].name} holds no "
+            "readable message (not a bag, or a recording killed before it wrote anything)")
+    reader.recovered = (f"{why}: read the {reader.message_count} messages of "
+                        f"{files[0].name} {reader.extent}")
     return reader
 
 
 def _connection(cid: int, topic: str, msgtype: str, owner: object) -> Connection:
     return Connection(id=cid, topic=topic, msgtype=msgtype,
-                      msgdef=MessageDefinition(MessageDefinitionFormat.NONE, ''), digest='',
-                      msgcount=0, ext=ConnectionExtRosbag2('cdr', []), owner=owner)
+                      msgdef=MessageDefinition(MessageDefinitionFormat.NONE, ""), digest="",
+                      msgcount=0, ext=ConnectionExtRosbag2("cdr", []), owner=owner)
 
 
 class _PrefixReader:
@@ -94,13 +94,13 @@ class _McapPrefix(_PrefixReader):
 
     def __init__(self, path: Path, data_file: Path) -> None:
         self.path = path
-        self._file = data_file.open('rb')
+        self._file = data_file.open("rb")
         size = data_file.stat().st_size
         self.connections = []
         self.message_count = 0
         self._end = 0
         if self._file.read(8) != MCAP_MAGIC:
-            self.extent = 'no MCAP header'
+            self.extent = "no MCAP header"
             return
         schemas: dict[int, str] = {}
         channels: dict[int, tuple[str, int]] = {}
@@ -109,13 +109,13 @@ class _McapPrefix(_PrefixReader):
                 sid = _U16.unpack_from(body, 0)[0]
                 schemas[sid] = _string(body, 2)[0]
             elif op == _OP_CHANNEL:
-                cid, sid = struct.unpack_from('<HH', body, 0)
+                cid, sid = struct.unpack_from("<HH", body, 0)
                 channels[cid] = (_string(body, 4)[0], sid)
             elif op == _OP_MESSAGE:
                 self.message_count += 1
-        self.connections = [_connection(cid, topic, schemas.get(sid, ''), self)
+        self.connections = [_connection(cid, topic, schemas.get(sid, ""), self)
                             for cid, (topic, sid) in sorted(channels.items())]
-        self.extent = f'(complete records up to byte {self._end} of {size})'
+        self.extent = f"(complete records up to byte {self._end} of {size})"
 
     def _records(self) -> Iterator[tuple[int, memoryview]]:
         """(opcode, body) of every complete record, chunks opened; stops at damage.
@@ -168,7 +168,7 @@ def iter_mcap_messages(data_file: Path) -> Iterator[tuple[str, str, int, bytes]]
     caller compares the counts with the metadata.
     """
     reader = _McapPrefix.__new__(_McapPrefix)
-    reader._file = data_file.open('rb')
+    reader._file = data_file.open("rb")
     reader._end = 0
     schemas: dict[int, str] = {}
     channels: dict[int, tuple[str, str]] = {}
@@ -177,13 +177,13 @@ def iter_mcap_messages(data_file: Path) -> Iterator[tuple[str, str, int, bytes]]
             return
         for op, body in reader._records():
             if op == _OP_MESSAGE:
-                topic, schema = channels.get(_U16.unpack_from(body, 0)[0], ('', ''))
+                topic, schema = channels.get(_U16.unpack_from(body, 0)[0], ("", ""))
                 yield topic, schema, _U64.unpack_from(body, 6)[0], bytes(body[22:])
             elif op == _OP_SCHEMA:
                 schemas[_U16.unpack_from(body, 0)[0]] = _string(body, 2)[0]
             elif op == _OP_CHANNEL:
-                cid, sid = struct.unpack_from('<HH', body, 0)
-                channels[cid] = (_string(body, 4)[0], schemas.get(sid, ''))
+                cid, sid = struct.unpack_from("<HH", body, 0)
+                channels[cid] = (_string(body, 4)[0], schemas.get(sid, ""))
             del body
     finally:
         reader.close()
@@ -191,7 +191,7 @@ def iter_mcap_messages(data_file: Path) -> Iterator[tuple[str, str, int, bytes]]
 
 def _string(body: memoryview, pos: int) -> tuple[str, int]:
     length = _U32.unpack_from(body, pos)[0]
-    return bytes(body[pos + 4:pos + 4 + length]).decode('utf-8'), pos + 4 + length
+    return bytes(body[pos + 4:pos + 4 + length]).decode("utf-8"), pos + 4 + length
 
 
 def _chunk_records(body: memoryview) -> memoryview | None:
@@ -199,13 +199,13 @@ def _chunk_records(body: memoryview) -> memoryview | None:
     compression, pos = _string(body, 28)
     size = _U64.unpack_from(body, pos)[0]
     data = body[pos + 8:pos + 8 + size]
-    if compression == '':
+    if compression == "":
         return data
     try:
-        if compression == 'zstd':
+        if compression == "zstd":
             from backports import zstd  # rosbags' own dependency
             return memoryview(zstd.decompress(bytes(data)))
-        if compression == 'lz4':
+        if compression == "lz4":
             import lz4.frame
             return memoryview(lz4.frame.decompress(bytes(data)))
     except (ImportError, OSError, ValueError, RuntimeError):
@@ -230,18 +230,18 @@ class _SqlitePrefix(_PrefixReader):
         self.path = path
         self._db = _connect(data_file)
         try:
-            topics = self._db.execute('SELECT id, name, type FROM topics').fetchall()
-            (self.message_count,) = self._db.execute('SELECT COUNT(*) FROM messages').fetchone()
+            topics = self._db.execute("SELECT id, name, type FROM topics").fetchall()
+            (self.message_count,) = self._db.execute("SELECT COUNT(*) FROM messages").fetchone()
         except sqlite3.Error:
             topics, self.message_count = [], 0
         self.connections = [_connection(int(i), str(n), str(t), self) for i, n, t in topics]
-        self.extent = '(committed transactions)'
+        self.extent = "(committed transactions)"
 
     def messages(self, connections: Sequence[Connection] = ()) -> Iterator[
             tuple[Connection, int, bytes]]:
         """``(connection, timestamp (ns), data)`` in insertion order."""
         wanted = {c.id: c for c in (connections or self.connections)}
-        cursor = self._db.execute('SELECT topic_id, timestamp, data FROM messages ORDER BY id')
+        cursor = self._db.execute("SELECT topic_id, timestamp, data FROM messages ORDER BY id")
         for cid, timestamp, data in cursor:
             conn = wanted.get(cid)
             if conn is not None:
@@ -255,8 +255,8 @@ class _SqlitePrefix(_PrefixReader):
 def _connect(data_file: Path) -> sqlite3.Connection:
     """Read-only connection that sees the write-ahead log if there is one."""
     try:
-        db = sqlite3.connect(f'file:{data_file}?mode=ro', uri=True)
-        db.execute('SELECT COUNT(*) FROM sqlite_master').fetchone()
+        db = sqlite3.connect(f"file:{data_file}?mode=ro", uri=True)
+        db.execute("SELECT COUNT(*) FROM sqlite_master").fetchone()
         return db
     except sqlite3.Error:
-        return sqlite3.connect(f'file:{data_file}?immutable=1', uri=True)
+        return sqlite3.connect(f"file:{data_file}?immutable=1", uri=True)

@@ -20,7 +20,7 @@ from hexapod_vibration.analysis.bag_format import STRUT_MSGTYPE, typestore
 from hexapod_vibration.analysis.bag_messages import decode_array, decode_strut_message
 from hexapod_vibration.contract import STRUT_COUNT, InvalidStrutMessage, parse_sample_label
 
-IndexSource = Literal['in-band', 'timestamp']
+IndexSource = Literal["in-band", "timestamp"]
 
 
 @dataclass(frozen=True)
@@ -230,18 +230,18 @@ class TopicStream:
         self._labels, self._stamps, self._values = [], [], []
         invalid = self.invalid
         if self._set.count:
-            source: IndexSource = 'in-band'
+            source: IndexSource = "in-band"
             labelled = labels >= 0
             invalid += int(np.count_nonzero(~labelled))
             index, stamps, values = labels[labelled], stamps[labelled], values[labelled]
-            order = np.argsort(index, kind='stable')
+            order = np.argsort(index, kind="stable")
             index, stamps, values = index[order], stamps[order], values[order]
             distinct, duplicates = self._set.count, self.duplicates
             first, last = self._set.first, self._set.last
         else:
-            source = 'timestamp'
+            source = "timestamp"
             index = _index_from_timestamps(stamps, t0_ns, sample_rate_hz)
-            order = np.argsort(index, kind='stable')  # stable: the first copy comes first
+            order = np.argsort(index, kind="stable")  # stable: the first copy comes first
             index, stamps, values = index[order], stamps[order], values[order]
             keep = np.ones(index.shape, dtype=bool)
             keep[1:] = index[1:] != index[:-1]
@@ -264,7 +264,7 @@ class TopicStream:
             last_sample=last,
         )
         if self.keep.block > 0:
-            series = (self._block_series(series) if source == 'in-band' else dataclasses.replace(
+            series = (self._block_series(series) if source == "in-band" else dataclasses.replace(
                 series, sample_index=np.zeros(0, np.int64), values=np.zeros((0, 2 * width))))
         return series
 
@@ -289,7 +289,7 @@ class VectorStream:
         """
         values, labels = decode_array(data)
         if len(labels) < 2 or not np.all(np.isfinite(values)):
-            raise ValueError('no sample index, or a non-finite value')
+            raise ValueError("no sample index, or a non-finite value")
         self.rows.setdefault(parse_sample_label(labels[1]), values)
 
     def arrays(self) -> tuple[np.ndarray, np.ndarray]:

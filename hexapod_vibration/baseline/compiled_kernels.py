@@ -162,9 +162,9 @@ class CompiledNotch:
         if (c._q is None or not c.enabled or c.frozen or c.output_gain != 1.0
                 or c._fading.active or c.mu <= 0.0 or c.integrating
                 or c.update_lowpass_hz > 0.0):
-            raise ValueError('the compiled notch models only an adapting, enabled notch '
-                             'with diagonal P, output gain 1, no fading tones, the paper\'s '
-                             'first-order update and no update low-pass')
+            raise ValueError("the compiled notch models only an adapting, enabled notch "
+                             "with diagonal P, output gain 1, no fading tones, the paper's "
+                             "first-order update and no update low-pass")
         self.n_channels = c.n_channels
         self._v = c._v.copy()
         self._q = c._q.copy()
@@ -194,8 +194,8 @@ class CompiledFxlms:
         f = controller
         fresh = f._warmup == f._nl + f._n_taps - 1 and f._hist.pos == f._hist.block + 1
         if not fresh or not f.enabled or f._frozen or f._keep != 1.0:
-            raise ValueError('the compiled FxLMS starts from a fresh, enabled, adapting '
-                             'controller without leakage')
+            raise ValueError("the compiled FxLMS starts from a fresh, enabled, adapting "
+                             "controller without leakage")
         k, n = f._freqs.size, f._n_taps
         self.n_channels = f._ni           # error channels I (commands: J = f._nj)
         self._paths_rev = np.ascontiguousarray(

@@ -57,7 +57,7 @@ HISTORY_BLOCK = 256
 def _check_positive_int(name: str, value: int) -> int:
     v = int(value)
     if v != value or v < 1:
-        raise ValueError(f'{name} must be a positive integer, got {value!r}')
+        raise ValueError(f"{name} must be a positive integer, got {value!r}")
     return v
 
 
@@ -81,7 +81,7 @@ def fir_frequency_response(paths: np.ndarray, freqs_hz: Sequence[float] | np.nda
     f = np.asarray(freqs_hz, dtype=float).reshape(-1)
     lags = np.arange(s.shape[2])
     kernel = np.exp(-1j * TWO_PI * f[:, None] * lags[None, :] / sample_rate_hz)
-    return np.einsum('ijl,tl->tij', s, kernel)
+    return np.einsum("ijl,tl->tij", s, kernel)
 
 
 class SecondaryPathIdentifier(SampledRun):
@@ -115,23 +115,23 @@ class SecondaryPathIdentifier(SampledRun):
                  nuisance_frequencies_hz: Sequence[float] | np.ndarray = (),
                  seed: int = 0) -> None:
         """Validate the arguments (ValueError) and pre-generate the excitation."""
-        self._c = _check_positive_int('n_channels', n_channels)
+        self._c = _check_positive_int("n_channels", n_channels)
         self._fs = float(sample_rate_hz)
         if not np.isfinite(self._fs) or self._fs <= 0.0:
-            raise ValueError(f'sample_rate_hz must be finite and > 0, got {sample_rate_hz!r}')
-        self._taps = _check_positive_int('n_taps', n_taps)
+            raise ValueError(f"sample_rate_hz must be finite and > 0, got {sample_rate_hz!r}")
+        self._taps = _check_positive_int("n_taps", n_taps)
         lo, hi = PATH_TAPS_RANGE
         if not lo <= self._taps <= hi:
-            raise ValueError(f'n_taps must be in [{lo}, {hi}], got {n_taps}')
+            raise ValueError(f"n_taps must be in [{lo}, {hi}], got {n_taps}")
         if not np.isfinite(amplitude_n) or amplitude_n <= 0.0:
-            raise ValueError(f'amplitude_n must be finite and > 0, got {amplitude_n!r}')
+            raise ValueError(f"amplitude_n must be finite and > 0, got {amplitude_n!r}")
         self._nuisance = validate_frequencies(nuisance_frequencies_hz, self._fs)
         self._settle = int(round(settle_s * self._fs))
         self._measure = int(round(measure_s * self._fs))
         n_par = self._taps + 1 + 2 * self._nuisance.size
         if self._settle < 0 or self._measure < 4 * n_par:
-            raise ValueError(f'settle_s must be >= 0 and measure_s must hold >= 4 x {n_par} '
-                             f'samples (L + 1 + 2T parameters), got {self._measure}')
+            raise ValueError(f"settle_s must be >= 0 and measure_s must hold >= 4 x {n_par} "
+                             f"samples (L + 1 + 2T parameters), got {self._measure}")
         self._seg_len = self._settle + self._measure
         self._total = self._c * self._seg_len
         rng = np.random.default_rng(seed)
@@ -177,7 +177,7 @@ class SecondaryPathIdentifier(SampledRun):
             RuntimeError: if the run is not finished.
         """
         if not self.done:
-            raise RuntimeError(f'identification not finished ({100 * self.progress:.0f} %)')
+            raise RuntimeError(f"identification not finished ({100 * self.progress:.0f} %)")
         return self._paths.copy()
 
 
@@ -255,15 +255,15 @@ class FilteredXLMSController:
         s = _validate_paths(secondary_paths)
         self._fs = float(sample_rate_hz)
         if not np.isfinite(self._fs) or self._fs <= 0.0:
-            raise ValueError(f'sample_rate_hz must be finite and > 0, got {sample_rate_hz!r}')
+            raise ValueError(f"sample_rate_hz must be finite and > 0, got {sample_rate_hz!r}")
         freqs = validate_frequencies(tone_frequencies_hz, self._fs)
         if freqs.size == 0:
-            raise ValueError('at least one tone frequency is required')
+            raise ValueError("at least one tone frequency is required")
         self._freqs = freqs
         self._mu = validate_mu(mu)
-        self._n_taps = _check_positive_int('n_taps', n_taps)
+        self._n_taps = _check_positive_int("n_taps", n_taps)
         if not 0.0 <= leakage < 1.0:
-            raise ValueError(f'leakage must be in [0, 1), got {leakage!r}')
+            raise ValueError(f"leakage must be in [0, 1), got {leakage!r}")
         self._keep = 1.0 - float(leakage)
         self._ni, self._nj, self._nl = s.shape
         self._paths = s
@@ -321,7 +321,7 @@ class FilteredXLMSController:
         """
         e = np.asarray(error, dtype=float)
         if e.shape != (self._ni,):
-            raise ValueError(f'error must have shape ({self._ni},), got {e.shape}')
+            raise ValueError(f"error must have shape ({self._ni},), got {e.shape}")
         p = self._hist.push()
         np.copyto(self._x_slot[p], self._z_re)                              # x_k[n]
         np.dot(self._x_model[p], self._paths_t, out=self._r_slot[p])        # r_kji[n]
@@ -413,17 +413,17 @@ class FilteredXLMSController:
         """
         m = np.arange(self._n_taps)
         kernel = np.exp(-1j * self._dphi[:, None] * m[None, :])                 # (K, N)
-        return self._osc.amplitudes[:, None] * np.einsum('km,mkj->kj', kernel, self._w)
+        return self._osc.amplitudes[:, None] * np.einsum("km,mkj->kj", kernel, self._w)
 
 
 def _validate_paths(secondary_paths: np.ndarray) -> np.ndarray:
     """Return the (I, J, L) secondary paths as a float array or raise ValueError."""
     s = np.array(secondary_paths, dtype=float)
     if s.ndim != 3 or not np.all(np.isfinite(s)):
-        raise ValueError(f'secondary_paths must be a finite (I, J, L) array, got {s.shape}')
+        raise ValueError(f"secondary_paths must be a finite (I, J, L) array, got {s.shape}")
     lo, hi = PATH_TAPS_RANGE
     if not lo <= s.shape[2] <= hi:
-        raise ValueError(f'secondary-path length L must be in [{lo}, {hi}], got {s.shape[2]}')
+        raise ValueError(f"secondary-path length L must be in [{lo}, {hi}], got {s.shape[2]}")
     return s
 
 
@@ -475,7 +475,7 @@ class FxlmsCoreLoop(CoreLoop):
         self.dc_blocker = DCBlocker(STRUTS, self.fs)
         tones = scenario.notch.tone_frequencies_hz
         if not tones:
-            raise ValueError('the scenario has no controller tones (notch.tone_frequencies_hz)')
+            raise ValueError("the scenario has no controller tones (notch.tone_frequencies_hz)")
         self.tones_hz = tuple(tones)
         self.mu = validate_mu(mu)
         self.path_taps = int(path_taps)
@@ -486,9 +486,9 @@ class FxlmsCoreLoop(CoreLoop):
         id_s = STRUTS * (id_settle_s + id_measure_s)
         if scenario.identify_at_s + id_s > scenario.control_on_s - scenario.window_s + 1e-9:
             raise ValueError(
-                f'FxLMS identification ({id_s:g} s from {scenario.identify_at_s:g} s) would '
-                f'overlap the uncontrolled window starting at '
-                f'{scenario.control_on_s - scenario.window_s:g} s')
+                f"FxLMS identification ({id_s:g} s from {scenario.identify_at_s:g} s) would "
+                f"overlap the uncontrolled window starting at "
+                f"{scenario.control_on_s - scenario.window_s:g} s")
         self.path_identifier: SecondaryPathIdentifier | None = None
         self.fxlms: FilteredXLMSController | None = None
         self.secondary_paths: np.ndarray | None = None
@@ -518,6 +518,6 @@ class FxlmsCoreLoop(CoreLoop):
         self.fxlms.set_enabled(False)
         record.plant_response = fir_frequency_response(self.secondary_paths, self.tones_hz,
                                                        self.fs)
-        record.notes.append(f'FxLMS: {STRUTS}x{STRUTS} secondary paths, L={self.path_taps} '
-                            f'taps, one reference per tone ({len(self.tones_hz)}), '
-                            f'N={self.control_taps} control taps, mu={self.mu:g}')
+        record.notes.append(f"FxLMS: {STRUTS}x{STRUTS} secondary paths, L={self.path_taps} "
+                            f"taps, one reference per tone ({len(self.tones_hz)}), "
+                            f"N={self.control_taps} control taps, mu={self.mu:g}")

@@ -63,8 +63,8 @@ def compiled_equivalence(samples: int = EQUIVALENCE_SAMPLES) -> dict[str, float]
     from hexapod_vibration.baseline.compiled_kernels import CompiledFxlms, CompiledNotch
 
     errors = 0.01 * np.random.default_rng(1).standard_normal((samples, STRUTS))
-    pairs = {'notch_6x8': (make_notch(STRUTS, RATIO_NOTCH_TONES, False), CompiledNotch),
-             'fxlms_L64': (make_fxlms(DEFAULT_PATH_TAPS, DEFAULT_CONTROL_TAPS),
+    pairs = {"notch_6x8": (make_notch(STRUTS, RATIO_NOTCH_TONES, False), CompiledNotch),
+             "fxlms_L64": (make_fxlms(DEFAULT_PATH_TAPS, DEFAULT_CONTROL_TAPS),
                            CompiledFxlms)}
     result = {}
     for name, (controller, compiled) in pairs.items():
@@ -85,39 +85,39 @@ def measure_compiled_costs(timing: TimingSettings) -> dict[str, Any]:
 
         from hexapod_vibration.baseline import compiled_kernels
     except ModuleNotFoundError as exc:
-        if exc.name != 'numba':
+        if exc.name != "numba":
             raise
-        return {'compiled': {'skipped': 'numba is not installed'}}
+        return {"compiled": {"skipped": "numba is not installed"}}
     t0 = time.perf_counter()
     same_tones = tuple(tone_frequencies(FXLMS_SAME_TONES))
     kernels: dict[str, BlockKernel] = {
-        f'notch_6x{t}': compiled_kernels.CompiledNotch(make_notch(STRUTS, t, False))
+        f"notch_6x{t}": compiled_kernels.CompiledNotch(make_notch(STRUTS, t, False))
         for t in COMPILED_NOTCH_TONES}
     for n in COMPILED_FXLMS_PATH_TAPS:
-        kernels[f'fxlms_L{n}'] = compiled_kernels.CompiledFxlms(
+        kernels[f"fxlms_L{n}"] = compiled_kernels.CompiledFxlms(
             make_fxlms(n, DEFAULT_CONTROL_TAPS))
-        kernels[f'fxlms_L{n}_{FXLMS_SAME_TONES}tones'] = compiled_kernels.CompiledFxlms(
+        kernels[f"fxlms_L{n}_{FXLMS_SAME_TONES}tones"] = compiled_kernels.CompiledFxlms(
             make_fxlms(n, DEFAULT_CONTROL_TAPS, tones_hz=same_tones))
     equivalence = compiled_equivalence()                     # also compiles both kernels
     compile_s = time.perf_counter() - t0
     raw = time_blocks_us(kernels, timing)
-    med = {name: v['median'] for name, v in raw.items()}
-    notch = {f'6x{t}': med[f'notch_6x{t}'] for t in COMPILED_NOTCH_TONES}
-    fx = {str(n): med[f'fxlms_L{n}'] for n in COMPILED_FXLMS_PATH_TAPS}
-    fx_same = {str(n): med[f'fxlms_L{n}_{FXLMS_SAME_TONES}tones']
+    med = {name: v["median"] for name, v in raw.items()}
+    notch = {f"6x{t}": med[f"notch_6x{t}"] for t in COMPILED_NOTCH_TONES}
+    fx = {str(n): med[f"fxlms_L{n}"] for n in COMPILED_FXLMS_PATH_TAPS}
+    fx_same = {str(n): med[f"fxlms_L{n}_{FXLMS_SAME_TONES}tones"]
                for n in COMPILED_FXLMS_PATH_TAPS}
-    notch_68 = notch[f'6x{RATIO_NOTCH_TONES}']
-    return {'compiled': {
-        'engine': f'numba {numba.__version__} (LLVM, fastmath), one call per '
-                  f'{timing.number}-sample block',
-        'notch_us_per_sample': notch,
-        'fxlms_us_per_sample': fx,
-        f'fxlms_{FXLMS_SAME_TONES}tones_us_per_sample': fx_same,
-        'cost_ratio_fxlms_over_notch_6x8': fx[str(DEFAULT_PATH_TAPS)] / notch_68,
-        'cost_ratio_same_tones_6x8': fx_same[str(DEFAULT_PATH_TAPS)] / notch_68,
-        'cost_ratio_fxlms_over_notch_6x8_of_minima': (
-            raw[f'fxlms_L{DEFAULT_PATH_TAPS}']['min'] / raw['notch_6x8']['min']),
-        'max_relative_difference_vs_numpy': equivalence,
-        'setup_and_compile_s': compile_s,
-        'timings_us_per_sample': raw,
+    notch_68 = notch[f"6x{RATIO_NOTCH_TONES}"]
+    return {"compiled": {
+        "engine": f"numba {numba.__version__} (LLVM, fastmath), one call per "
+                  f"{timing.number}-sample block",
+        "notch_us_per_sample": notch,
+        "fxlms_us_per_sample": fx,
+        f"fxlms_{FXLMS_SAME_TONES}tones_us_per_sample": fx_same,
+        "cost_ratio_fxlms_over_notch_6x8": fx[str(DEFAULT_PATH_TAPS)] / notch_68,
+        "cost_ratio_same_tones_6x8": fx_same[str(DEFAULT_PATH_TAPS)] / notch_68,
+        "cost_ratio_fxlms_over_notch_6x8_of_minima": (
+            raw[f"fxlms_L{DEFAULT_PATH_TAPS}"]["min"] / raw["notch_6x8"]["min"]),
+        "max_relative_difference_vs_numpy": equivalence,
+        "setup_and_compile_s": compile_s,
+        "timings_us_per_sample": raw,
     }}

@@ -57,16 +57,16 @@ def make_tracking_supervisor(n_tones: int, mode: str) -> Step:
     the phase detector runs).
     """
     tones = tone_frequencies(n_tones).tolist()
-    changes = {'tone_frequencies_hz': tones, 'adaptation': 'raw', 'mu': 1e-3,
-               'frequency_tracking': mode == 'tracking'}
-    if mode == 'reference':
-        changes['reference_harmonics'] = [f / tones[0] for f in tones]
+    changes = {"tone_frequencies_hz": tones, "adaptation": "raw", "mu": 1e-3,
+               "frequency_tracking": mode == "tracking"}
+    if mode == "reference":
+        changes["reference_harmonics"] = [f / tones[0] for f in tones]
     sup = NotchSupervisor(NotchConfig().replaced(changes), FS_HZ, STRUTS)
     # a plant response for the phase detector (raw mode has no identification); the cost
     # does not depend on its values
     sup.plant_response = -2.0 * np.broadcast_to(np.eye(STRUTS, dtype=complex),
                                                 (n_tones, STRUTS, STRUTS)).copy()
-    reference = mode == 'reference'
+    reference = mode == "reference"
 
     def step(error: np.ndarray, out: np.ndarray) -> np.ndarray:
         if reference:

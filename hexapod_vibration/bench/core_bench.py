@@ -48,23 +48,23 @@ def efficiency_targets(results: dict[str, Any]) -> dict[str, Any]:
     ``cost_ratio_met`` is the targets' measurement (both controllers in vectorized NumPy);
     ``compiled_cost_ratio_met`` the same comparison of the compiled kernels (arithmetic).
     """
-    notch_us = results['notch_us_per_sample'][f'6x{RATIO_NOTCH_TONES}']
-    ratio = results['cost_ratio_fxlms_over_notch_6x8']
-    equal = bool(results['equal_attenuation'])
-    compiled = results.get('compiled', {}).get('cost_ratio_fxlms_over_notch_6x8')
+    notch_us = results["notch_us_per_sample"][f"6x{RATIO_NOTCH_TONES}"]
+    ratio = results["cost_ratio_fxlms_over_notch_6x8"]
+    equal = bool(results["equal_attenuation"])
+    compiled = results.get("compiled", {}).get("cost_ratio_fxlms_over_notch_6x8")
     return {
-        'notch_6x8_us': notch_us, 'notch_6x8_target_us': NOTCH_TARGET_US,
-        'notch_6x8_met': bool(notch_us < NOTCH_TARGET_US),
-        'cost_ratio_6x8': ratio, 'cost_ratio_target': COST_RATIO_TARGET,
-        'fxlms_equal_attenuation': equal,
-        'cost_ratio_met': bool(ratio >= COST_RATIO_TARGET and equal),
-        'numpy_floor_us': results['numpy_floor_us_per_sample'],
-        'numpy_cost_ratio_bound': results['numpy_cost_ratio_bound'],
-        'compiled_cost_ratio_6x8': compiled,
-        'compiled_cost_ratio_met': bool(compiled is not None
+        "notch_6x8_us": notch_us, "notch_6x8_target_us": NOTCH_TARGET_US,
+        "notch_6x8_met": bool(notch_us < NOTCH_TARGET_US),
+        "cost_ratio_6x8": ratio, "cost_ratio_target": COST_RATIO_TARGET,
+        "fxlms_equal_attenuation": equal,
+        "cost_ratio_met": bool(ratio >= COST_RATIO_TARGET and equal),
+        "numpy_floor_us": results["numpy_floor_us_per_sample"],
+        "numpy_cost_ratio_bound": results["numpy_cost_ratio_bound"],
+        "compiled_cost_ratio_6x8": compiled,
+        "compiled_cost_ratio_met": bool(compiled is not None
                                         and compiled >= COST_RATIO_TARGET and equal),
-        'multiply_add_ratio_6x8': results['multiply_adds_per_sample'][
-            'ratio_fxlms_over_notch_6x8'],
+        "multiply_add_ratio_6x8": results["multiply_adds_per_sample"][
+            "ratio_fxlms_over_notch_6x8"],
     }
 
 
@@ -72,13 +72,13 @@ def run_core_benchmarks(quick: bool) -> dict[str, Any]:
     """Everything but the ROS loop: machine, costs, scaling, Table 1 on the core loop."""
     timing = QUICK_TIMING if quick else FULL_TIMING
     details = machine_info()
-    results: dict[str, Any] = {'quick': quick, 'machine': machine_summary(details),
-                               'machine_details': details,
-                               'timing': dataclasses.asdict(timing)}
+    results: dict[str, Any] = {"quick": quick, "machine": machine_summary(details),
+                               "machine_details": details,
+                               "timing": dataclasses.asdict(timing)}
     results.update(measure_costs(timing, quick))
     results.update(measure_compiled_costs(timing))
     results.update(measure_table1(quick))
-    results['targets'] = efficiency_targets(results)
+    results["targets"] = efficiency_targets(results)
     return results
 
 
@@ -89,10 +89,10 @@ def run(args: Any) -> int:
         try:
             from hexapod_vibration.bench.ros_bench import ros_loop_benchmark
         except ModuleNotFoundError as exc:
-            if exc.name != 'hexapod_vibration.bench.ros_bench':
+            if exc.name != "hexapod_vibration.bench.ros_bench":
                 raise
-            print('hexapod_bench: error: the ROS loop benchmark is not available; run with '
-                  '--skip-ros', file=sys.stderr)
+            print("hexapod_bench: error: the ROS loop benchmark is not available; run with "
+                  "--skip-ros", file=sys.stderr)
             return 2
     results = run_core_benchmarks(args.quick)
     if not args.skip_sweep:

@@ -11,12 +11,12 @@ import numpy as np
 
 def machine_info() -> dict[str, Any]:
     """Processor, CPU model, cores, load, Python and numpy versions of this machine."""
-    model = ''
+    model = ""
     try:
-        with open('/proc/cpuinfo', encoding='utf-8') as stream:
+        with open("/proc/cpuinfo", encoding="utf-8") as stream:
             for line in stream:
-                if line.lower().startswith('model name'):
-                    model = line.split(':', 1)[1].strip()
+                if line.lower().startswith("model name"):
+                    model = line.split(":", 1)[1].strip()
                     break
     except OSError:
         pass
@@ -32,15 +32,15 @@ def machine_info() -> dict[str, Any]:
     import scipy
 
     return {
-        'processor': platform.processor() or uname.machine,
-        'uname': f'{uname.system} {uname.release} {uname.machine}',
-        'cpu_model': model or 'unknown',
-        'cpu_count': os.cpu_count() or 0,
-        'cpu_usable': usable,
-        'load_average_1_5_15': load,
-        'python': platform.python_version(),
-        'numpy': np.__version__,
-        'scipy': scipy.__version__,
+        "processor": platform.processor() or uname.machine,
+        "uname": f"{uname.system} {uname.release} {uname.machine}",
+        "cpu_model": model or "unknown",
+        "cpu_count": os.cpu_count() or 0,
+        "cpu_usable": usable,
+        "load_average_1_5_15": load,
+        "python": platform.python_version(),
+        "numpy": np.__version__,
+        "scipy": scipy.__version__,
     }
 
 

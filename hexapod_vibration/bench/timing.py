@@ -91,5 +91,5 @@ def round_robin_us(runners: dict[str, Callable[[], None]], samples_per_run: int,
     finally:
         if was_enabled:
             gc.enable()
-    return {name: {'median': float(np.median(r)), 'min': float(np.min(r))}
+    return {name: {"median": float(np.median(r)), "min": float(np.min(r))}
             for name, r in runs.items()}

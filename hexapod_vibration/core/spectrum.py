@@ -27,7 +27,7 @@ from scipy import ndimage, signal, stats
 
 G0 = 9.80665
 DEFAULT_SEGMENT_S = 10.0
-DEFAULT_WINDOW = 'blackmanharris'
+DEFAULT_WINDOW = "blackmanharris"
 DEFAULT_BAND_HZ = 2.0
 MIN_FLOOR_BINS = 8
 LINE_FACTOR = 20.0
@@ -60,18 +60,18 @@ def main_lobe_half_width_bins(window: str) -> int:
     mag = np.abs(np.fft.rfft(w, n * zoom))[: 16 * zoom]
     minima = np.flatnonzero((mag[1:-1] <= mag[:-2]) & (mag[1:-1] <= mag[2:])) + 1
     if minima.size == 0:
-        raise ValueError(f'cannot find the main lobe of window {window!r}')
+        raise ValueError(f"cannot find the main lobe of window {window!r}")
     return int(np.ceil(minima[0] / zoom - 0.05))
 
 
 def _segment_samples(n_samples: int, fs: float, segment_s: float) -> int:
     nperseg = int(round(segment_s * fs))
     if nperseg < 1:
-        raise ValueError(f'segment_s={segment_s} is shorter than one sample')
+        raise ValueError(f"segment_s={segment_s} is shorter than one sample")
     if n_samples < nperseg:
         warnings.warn(
-            f'signal of {n_samples / fs:.3g} s is shorter than one {segment_s:g} s segment: '
-            'analysed as one segment (coarser resolution)', ShortSignalWarning, stacklevel=3)
+            f"signal of {n_samples / fs:.3g} s is shorter than one {segment_s:g} s segment: "
+            "analysed as one segment (coarser resolution)", ShortSignalWarning, stacklevel=3)
         nperseg = n_samples
     return nperseg
 
@@ -81,12 +81,12 @@ def _welch(x: np.ndarray, fs: float, segment_s: float, window: str
     """Welch PSD plus the segment length actually used (samples)."""
     x = np.asarray(x, dtype=float).reshape(-1)
     if x.size < 8:
-        raise ValueError(f'signal too short for a spectrum ({x.size} samples)')
+        raise ValueError(f"signal too short for a spectrum ({x.size} samples)")
     if not np.all(np.isfinite(x)):
-        raise ValueError('signal contains non-finite values')
+        raise ValueError("signal contains non-finite values")
     nperseg = _segment_samples(x.size, fs, segment_s)
     f, psd = signal.welch(x, fs=fs, window=window, nperseg=nperseg, noverlap=nperseg // 2,
-                          detrend='constant', scaling='density', return_onesided=True)
+                          detrend="constant", scaling="density", return_onesided=True)
     return f, psd, nperseg
 
 
@@ -135,15 +135,15 @@ class _Lines:
         tones were asked for.
         """
         size = max(3, 2 * int(round(0.5 * LINE_MEDIAN_HZ / self.df)) + 1)
-        local = ndimage.median_filter(self.psd, size=size, mode='nearest') / self.bias
-        peak = ndimage.maximum_filter(self.psd, size=3, mode='nearest') == self.psd
+        local = ndimage.median_filter(self.psd, size=size, mode="nearest") / self.bias
+        peak = ndimage.maximum_filter(self.psd, size=3, mode="nearest") == self.psd
         lines = np.flatnonzero(peak & (self.psd > LINE_FACTOR * local))
         return lines[lines > 0]
 
     def bin_of(self, freqs_hz: Sequence[float] | np.ndarray) -> np.ndarray:
         f = np.asarray(freqs_hz, dtype=float).reshape(-1)
         if np.any(~np.isfinite(f)) or np.any(f <= 0.0) or np.any(f >= 0.5 * self.fs):
-            raise ValueError(f'tone frequencies must be in (0, fs/2), got {f.tolist()}')
+            raise ValueError(f"tone frequencies must be in (0, fs/2), got {f.tolist()}")
         return np.rint(f / self.df).astype(int)
 
     def lobe(self, k: int) -> np.ndarray:
@@ -264,7 +264,7 @@ def third_octave_bands_hz(low_hz: float, high_hz: float) -> np.ndarray:
         (B, 3) array of ``[centre, lower edge, upper edge]`` (Hz).
     """
     if not 0.0 < low_hz <= high_hz:
-        raise ValueError(f'need 0 < low_hz <= high_hz, got {low_hz}, {high_hz}')
+        raise ValueError(f"need 0 < low_hz <= high_hz, got {low_hz}, {high_hz}")
     k = np.arange(np.ceil(10.0 * np.log10(low_hz) - 1e-9),
                   np.floor(10.0 * np.log10(high_hz) + 1e-9) + 1)
     centre = 10.0 ** (k / 10.0)
@@ -301,7 +301,7 @@ def band_levels_db(x: np.ndarray, fs: float, bands_hz: np.ndarray,
         sel = keep & (lines.f >= lo) & (lines.f < hi)
         if np.any(sel):
             power[b] = np.mean(lines.psd[sel]) * (hi - lo)
-    with np.errstate(invalid='ignore'):
+    with np.errstate(invalid="ignore"):
         db = 20.0 * np.log10(np.maximum(np.sqrt(power), TINY_RMS) / G0)
     return np.where(np.isfinite(power), db, np.nan)
 
@@ -327,22 +327,22 @@ def harmonic_distortion(x: np.ndarray, fs: float, fundamental_hz: float,
         "thd_percent": 100 * thd_ratio}``.
     """
     if not fundamental_hz > 0.0:
-        raise ValueError(f'fundamental must be > 0 Hz, got {fundamental_hz}')
+        raise ValueError(f"fundamental must be > 0 Hz, got {fundamental_hz}")
     highest = int(np.ceil(0.5 * fs / fundamental_hz)) if n_harmonics is None else int(n_harmonics)
     k = np.arange(1, highest + 1)
     freqs = fundamental_hz * k
     freqs = freqs[freqs < 0.5 * fs]
     if freqs.size == 0:
-        raise ValueError(f'fundamental {fundamental_hz} Hz is not below fs/2')
+        raise ValueError(f"fundamental {fundamental_hz} Hz is not below fs/2")
     rms = tone_rms(x, fs, freqs, segment_s, window)
     levels = np.asarray(to_db_re_g(rms)).reshape(-1)
     thd = float(np.sqrt(np.sum(rms[1:] ** 2)) / rms[0])
-    return {'frequencies_hz': freqs.tolist(), 'rms_m_s2': rms.tolist(),
-            'levels_db': levels.tolist(), 'relative_db': (levels - levels[0]).tolist(),
-            'harmonics': int(freqs.size - 1), 'thd_ratio': thd, 'thd_percent': 100.0 * thd}
+    return {"frequencies_hz": freqs.tolist(), "rms_m_s2": rms.tolist(),
+            "levels_db": levels.tolist(), "relative_db": (levels - levels[0]).tolist(),
+            "harmonics": int(freqs.size - 1), "thd_ratio": thd, "thd_percent": 100.0 * thd}
 
 
-LEVEL_WINDOW = 'blackmanharris'
+LEVEL_WINDOW = "blackmanharris"
 LEVEL_WINDOW_PER_HZ_S = 4.5
 """Tone level over time: window length (s) times the spacing (Hz) to the nearest other line.
 
@@ -366,7 +366,7 @@ def level_window_s(freq_hz: float, other_hz: Sequence[float] | np.ndarray = ()) 
     others = others[np.abs(others - freq_hz) > 1e-9]
     spacing = min([float(freq_hz), *np.abs(others - freq_hz).tolist()])
     if not np.isfinite(spacing) or spacing <= 0.0:
-        raise ValueError(f'tone frequency must be > 0 Hz, got {freq_hz}')
+        raise ValueError(f"tone frequency must be > 0 Hz, got {freq_hz}")
     return float(np.clip(LEVEL_WINDOW_PER_HZ_S / spacing, LEVEL_WINDOW_MIN_S, LEVEL_WINDOW_MAX_S))
 
 
@@ -396,11 +396,11 @@ def tone_level_over_time(x: np.ndarray, fs: float, freq_hz: float, window_s: flo
     """
     x = np.asarray(x, dtype=float).reshape(-1)
     if not 0.0 < freq_hz < 0.5 * fs:
-        raise ValueError(f'tone frequency must be in (0, fs/2), got {freq_hz}')
+        raise ValueError(f"tone frequency must be in (0, fs/2), got {freq_hz}")
     n_win = max(2, int(round(window_s * fs)))
     idx = np.arange(x.size) if index is None else np.asarray(index, dtype=np.int64)
     if idx.shape != x.shape:
-        raise ValueError('index and x must have the same length')
+        raise ValueError("index and x must have the same length")
     if x.size == 0 or int(idx[-1] - idx[0]) + 1 < n_win:
         return np.zeros(0), np.zeros(0)
     grid = np.zeros(int(idx[-1] - idx[0]) + 1, dtype=complex)
@@ -410,8 +410,8 @@ def tone_level_over_time(x: np.ndarray, fs: float, freq_hz: float, window_s: flo
     present[n] = 1.0
     w = signal.get_window(LEVEL_WINDOW, n_win, fftbins=False)
     step = max(1, int(round(step_s * fs)))
-    avg = signal.fftconvolve(grid, w[::-1], mode='valid')[::step] / w.sum()
-    complete = signal.fftconvolve(present, np.ones(n_win), mode='valid')[::step] > n_win - 0.5
+    avg = signal.fftconvolve(grid, w[::-1], mode="valid")[::step] / w.sum()
+    complete = signal.fftconvolve(present, np.ones(n_win), mode="valid")[::step] > n_win - 0.5
     centre = idx[0] + np.arange(avg.size) * step + 0.5 * (n_win - 1)
     return centre[complete] / fs, np.sqrt(2.0) * np.abs(avg[complete])
 
@@ -442,15 +442,15 @@ def convergence_time_s(t_s: np.ndarray, level_db: np.ndarray, t_on_s: float,
     t = np.asarray(t_s, dtype=float)
     lev = np.asarray(level_db, dtype=float)
     if t.shape != lev.shape or t.ndim != 1:
-        raise ValueError('t_s and level_db must be 1-D arrays of the same length')
+        raise ValueError("t_s and level_db must be 1-D arrays of the same length")
     if t.size == 0:
-        return float('nan')
+        return float("nan")
     final_sel = (t >= t[-1] - final_window_s) & np.isfinite(lev)
     if not np.any(final_sel):
-        return float('nan')
+        return float("nan")
     final = 10.0 * np.log10(np.mean(10.0 ** (lev[final_sel] / 10.0)))
     inside = np.flatnonzero((np.abs(lev - final) <= tolerance_db) & (t >= t_on_s))
-    return float(t[inside[0]] - t_on_s) if inside.size else float('nan')
+    return float(t[inside[0]] - t_on_s) if inside.size else float("nan")
 
 
 def tone_convergence(x: np.ndarray, fs: float, freq_hz: float, on_sample: int,
@@ -471,6 +471,6 @@ def tone_convergence(x: np.ndarray, fs: float, freq_hz: float, on_sample: int,
     conv = convergence_time_s(t, level, on_sample / fs)
     final = t >= (t[-1] - CONVERGENCE_FINAL_WINDOW_S) if t.size else t > 0
     final_db = (float(10.0 * np.log10(np.mean(10.0 ** (level[final] / 10.0))))
-                if np.any(final) else float('nan'))
-    return {'t_s': t, 'level_db': level, 'window_s': window, 'convergence_s': conv,
-            'final_level_db': final_db}
+                if np.any(final) else float("nan"))
+    return {"t_s": t, "level_db": level, "window_s": window, "convergence_s": conv,
+            "final_level_db": final_db}

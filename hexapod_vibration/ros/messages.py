@@ -55,22 +55,22 @@ from hexapod_vibration.ros.qos import LOOP_QOS
 from hexapod_vibration.ros.rclpy_internals import serialized_publish
 
 __all__ = [
-    'ControllerLoopPort',
-    'InvalidStrutMessage',
-    'LoopSample',
-    'StrutArrayPublisher',
-    'StrutSample',
-    'UnsupportedCdr',
-    'create_loop_subscription',
-    'make_strut_array',
-    'make_table_array',
-    'make_vector_array',
-    'make_weights_array',
-    'parse_vector_sample',
-    'parse_strut_array',
-    'parse_strut_sample',
-    'receive_strut_array',
-    'receive_strut_sample',
+    "ControllerLoopPort",
+    "InvalidStrutMessage",
+    "LoopSample",
+    "StrutArrayPublisher",
+    "StrutSample",
+    "UnsupportedCdr",
+    "create_loop_subscription",
+    "make_strut_array",
+    "make_table_array",
+    "make_vector_array",
+    "make_weights_array",
+    "parse_vector_sample",
+    "parse_strut_array",
+    "parse_strut_sample",
+    "receive_strut_array",
+    "receive_strut_sample",
 ]
 
 _FLOAT64 = np.dtype(np.float64)
@@ -99,17 +99,17 @@ def make_strut_array(
     """
     flat = np.ascontiguousarray(values, dtype=_FLOAT64).reshape(-1)
     if flat.shape[0] != STRUT_COUNT:
-        raise ValueError(f'expected {STRUT_COUNT} strut values, got {flat.shape[0]}')
+        raise ValueError(f"expected {STRUT_COUNT} strut values, got {flat.shape[0]}")
     dims = [MultiArrayDimension(label=STRUT_LABEL, size=STRUT_COUNT, stride=STRUT_COUNT)]
     if sample_index is not None:
         dims.append(MultiArrayDimension(label=sample_label(sample_index), size=1, stride=1))
     if run is not None:
         if sample_index is None:
-            raise ValueError('a run needs a sample index')
+            raise ValueError("a run needs a sample index")
         dims.append(MultiArrayDimension(label=run_label(run), size=1, stride=1))
     msg = Float64MultiArray()
     msg.layout.dim = dims
-    msg.data = array.array('d', flat.tobytes())
+    msg.data = array.array("d", flat.tobytes())
     return msg
 
 
@@ -130,9 +130,9 @@ def parse_strut_sample(msg: Float64MultiArray) -> StrutSample:
     """
     data = msg.data
     if len(data) != STRUT_COUNT:
-        raise InvalidStrutMessage(f'expected {STRUT_COUNT} strut values, got {len(data)}')
+        raise InvalidStrutMessage(f"expected {STRUT_COUNT} strut values, got {len(data)}")
     if not all(map(math.isfinite, data)):
-        raise InvalidStrutMessage(f'non-finite strut value in {list(data)}')
+        raise InvalidStrutMessage(f"non-finite strut value in {list(data)}")
     if isinstance(data, array.array):
         values = np.frombuffer(data, dtype=_FLOAT64)
     else:
@@ -208,7 +208,7 @@ def receive_strut_sample(msg: Float64MultiArray | bytes, logger: Any, topic: str
             return decode_strut_cdr(bytes(msg))
         return parse_strut_sample(msg)
     except _DECODE_ERRORS as exc:
-        logger.warn(f'{topic}: rejected message ({exc})', throttle_duration_sec=1.0)
+        logger.warn(f"{topic}: rejected message ({exc})", throttle_duration_sec=1.0)
         return None
 
 
@@ -273,18 +273,18 @@ class ControllerLoopPort:
     @property
     def invalid(self) -> int:
         """Messages refused as malformed or out of range."""
-        return self.counters['malformed'] + self.counters['out_of_range']
+        return self.counters["malformed"] + self.counters["out_of_range"]
 
     def receive(self, msg: Float64MultiArray | bytes) -> LoopSample | None:
         """The sample to act on, or None (refused, repeated, late or unconfirmed)."""
         sample = receive_strut_sample(msg, self.logger, self.topic)
         if sample is None:
-            self.counters['malformed'] += 1
+            self.counters["malformed"] += 1
             return None
         reason = out_of_range(sample.values, self.limit_abs)
         if reason:
-            self.counters['out_of_range'] += 1
-            self.logger.warn(f'{self.topic}: rejected message ({reason})',
+            self.counters["out_of_range"] += 1
+            self.logger.warn(f"{self.topic}: rejected message ({reason})",
                              throttle_duration_sec=1.0)
             return None
         verdict = self.sequence.admit(sample.index, sample.run)
@@ -293,24 +293,24 @@ class ControllerLoopPort:
             return None
         new_run = verdict.admission is Admission.NEW_RUN and self.sequence.runs_adopted > 1
         if new_run:
-            self.counters['new_runs'] += 1
-            self.logger.info(f'{self.topic}: new run {sample.run} from sample {verdict.index}')
+            self.counters["new_runs"] += 1
+            self.logger.info(f"{self.topic}: new run {sample.run} from sample {verdict.index}")
         if self.counts_gaps:
-            self.counters['missed_samples'] += verdict.gap
+            self.counters["missed_samples"] += verdict.gap
         return LoopSample(sample.values, verdict.index, sample.run, verdict.gap, new_run)
 
     def _not_acted(self, admission: Admission, index: int, run: int | None) -> None:
         if admission is Admission.REPEAT:
-            self.counters['repeats'] += 1
+            self.counters["repeats"] += 1
             if self._answer is not None and self._answer[:2] == (run, index):
                 self.publisher.publish_bytes(self._answer[2])
         elif admission is Admission.LATE:
-            self.counters['late'] += 1
+            self.counters["late"] += 1
         else:
-            self.counters['unconfirmed'] += 1
-            self.logger.warn(f'{self.topic}: sample {index} of run {run} does not follow '
-                             f'sample {self.sequence.last} of run {self.sequence.run}: '
-                             'ignored until confirmed', throttle_duration_sec=1.0)
+            self.counters["unconfirmed"] += 1
+            self.logger.warn(f"{self.topic}: sample {index} of run {run} does not follow "
+                             f"sample {self.sequence.last} of run {self.sequence.run}: "
+                             "ignored until confirmed", throttle_duration_sec=1.0)
 
     def answer(self, values: np.ndarray | Sequence[float], sample: LoopSample) -> None:
         """Publish ``values`` as the command for ``sample`` (its index and run)."""
@@ -319,9 +319,9 @@ class ControllerLoopPort:
 
     def diagnostics(self) -> dict[str, int]:
         """Counters for ``/diagnostics``: ``invalid`` and one per reason."""
-        keys = ('malformed', 'out_of_range', 'unconfirmed', 'late', 'repeats', 'new_runs',
-                *(('missed_samples',) if self.counts_gaps else ()))
-        return {'invalid': self.invalid, **{k: self.counters[k] for k in keys}}
+        keys = ("malformed", "out_of_range", "unconfirmed", "late", "repeats", "new_runs",
+                *(("missed_samples",) if self.counts_gaps else ()))
+        return {"invalid": self.invalid, **{k: self.counters[k] for k in keys}}
 
 
 # --------------------------------------------------------------------------- other arrays
@@ -341,7 +341,7 @@ def make_vector_array(values: np.ndarray | Sequence[float], sample_index: int | 
             dims.append(MultiArrayDimension(label=run_label(run), size=1, stride=1))
     msg = Float64MultiArray()
     msg.layout.dim = dims
-    msg.data = array.array('d', flat.tobytes())
+    msg.data = array.array("d", flat.tobytes())
     return msg
 
 
@@ -353,9 +353,9 @@ def make_weights_array(weights: np.ndarray, sample_index: int) -> Float64MultiAr
     """
     tones, struts = weights.shape
     msg = Float64MultiArray()
-    msg.layout.dim = [MultiArrayDimension(label='tone', size=tones, stride=tones * 2 * struts),
-                      MultiArrayDimension(label='strut', size=struts, stride=2 * struts),
-                      MultiArrayDimension(label='a_b', size=2, stride=2),
+    msg.layout.dim = [MultiArrayDimension(label="tone", size=tones, stride=tones * 2 * struts),
+                      MultiArrayDimension(label="strut", size=struts, stride=2 * struts),
+                      MultiArrayDimension(label="a_b", size=2, stride=2),
                       MultiArrayDimension(label=sample_label(sample_index), size=1, stride=1)]
     msg.data = np.stack([weights.real, -weights.imag], axis=-1).ravel().tolist()
     return msg
@@ -372,9 +372,9 @@ def parse_vector_sample(msg: Float64MultiArray, length: int | None = None) -> St
     """
     values = np.asarray(msg.data, dtype=_FLOAT64)
     if length is not None and values.size != length:
-        raise InvalidStrutMessage(f'expected {length} value(s), got {values.size}')
+        raise InvalidStrutMessage(f"expected {length} value(s), got {values.size}")
     if not np.all(np.isfinite(values)):
-        raise InvalidStrutMessage(f'non-finite value in {values.tolist()}')
+        raise InvalidStrutMessage(f"non-finite value in {values.tolist()}")
     index, run = parse_layout_labels([d.label for d in msg.layout.dim[:3]])
     return StrutSample(values, index, run)
 
@@ -390,9 +390,9 @@ def make_table_array(rows: dict[str, np.ndarray], sample_index: int) -> Float64M
     r, f = table.shape
     msg = Float64MultiArray()
     msg.layout.dim = [
-        MultiArrayDimension(label=SENSITIVITY_ROWS_PREFIX + ','.join(names), size=r,
+        MultiArrayDimension(label=SENSITIVITY_ROWS_PREFIX + ",".join(names), size=r,
                             stride=r * f),
-        MultiArrayDimension(label='frequency', size=f, stride=1),
+        MultiArrayDimension(label="frequency", size=f, stride=1),
         MultiArrayDimension(label=sample_label(sample_index), size=1, stride=1)]
-    msg.data = array.array('d', np.ascontiguousarray(table).tobytes())
+    msg.data = array.array("d", np.ascontiguousarray(table).tobytes())
     return msg

@@ -215,7 +215,7 @@ def descriptor(description: str, read_only: bool = False) -> ParameterDescriptor
 
 
 def _descriptor(
-    param_type: int, description: str, read_only: bool, additional_constraints: str = ''
+    param_type: int, description: str, read_only: bool, additional_constraints: str = ""
 ) -> ParameterDescriptor:
     """Build a descriptor with the fields common to all parameter kinds."""
     return ParameterDescriptor(
@@ -230,8 +230,8 @@ def _float_range(min_value: float | None, max_value: float | None) -> list[Float
     """A ``FloatingPointRange`` list (empty when unbounded; open ends become +-inf)."""
     if min_value is None and max_value is None:
         return []
-    low = float('-inf') if min_value is None else float(min_value)
-    high = float('inf') if max_value is None else float(max_value)
+    low = float("-inf") if min_value is None else float(min_value)
+    high = float("inf") if max_value is None else float(max_value)
     return [FloatingPointRange(from_value=low, to_value=high, step=0.0)]
 
 
@@ -350,7 +350,7 @@ def _declare_array(
     if value is None:
         result = node.set_parameters([Parameter(name, array_type, [])])[0]
         if not result.successful:
-            raise ValueError(f'{name}: cannot set an empty array ({result.reason})')
+            raise ValueError(f"{name}: cannot set an empty array ({result.reason})")
         value = []
     if descriptor.read_only:
         node.set_descriptor(name, descriptor)
@@ -387,7 +387,7 @@ def declare_string(
     Raises:
         ValueError: The start-up value is not one of ``choices``.
     """
-    constraints = f'one of: {", ".join(choices)}' if choices else ''
+    constraints = f'one of: {", ".join(choices)}' if choices else ""
     descriptor = _descriptor(ParameterType.PARAMETER_STRING, description, read_only, constraints)
     value = str(node.declare_parameter(name, str(default), descriptor).value)
     reason = check_choice(name, value, choices)
@@ -399,10 +399,10 @@ def declare_string(
 def _bounds_text(min_value: float | None, max_value: float | None) -> str:
     """Human-readable element bounds for ``additional_constraints``."""
     if min_value is None and max_value is None:
-        return ''
-    low = '-inf' if min_value is None else f'{min_value:g}'
-    high = 'inf' if max_value is None else f'{max_value:g}'
-    return f'every element in [{low}, {high}]'
+        return ""
+    low = "-inf" if min_value is None else f"{min_value:g}"
+    high = "inf" if max_value is None else f"{max_value:g}"
+    return f"every element in [{low}, {high}]"
 
 
 def check_float_array(
@@ -411,22 +411,22 @@ def check_float_array(
     """Return why ``values`` violates the element bounds, or ``''`` when it does not."""
     for i, value in enumerate(values):
         if min_value is not None and value < min_value:
-            return f'{name}[{i}] = {value:g} is below the minimum {min_value:g}'
+            return f"{name}[{i}] = {value:g} is below the minimum {min_value:g}"
         if max_value is not None and value > max_value:
-            return f'{name}[{i}] = {value:g} is above the maximum {max_value:g}'
-    return ''
+            return f"{name}[{i}] = {value:g} is above the maximum {max_value:g}"
+    return ""
 
 
 def check_choice(name: str, value: str, choices: Sequence[str] | None) -> str:
     """Return why ``value`` is not one of ``choices``, or ``''`` when it is (or no choices)."""
     if choices and value not in choices:
         return f'{name} = {value!r} is not one of: {", ".join(choices)}'
-    return ''
+    return ""
 
 
 def accept() -> SetParametersResult:
     """Result accepting a set-parameters request."""
-    return SetParametersResult(successful=True, reason='')
+    return SetParametersResult(successful=True, reason="")
 
 
 def reject(reason: str) -> SetParametersResult:
@@ -441,7 +441,7 @@ def parameter_value(node: Node, name: str) -> Any:
     raising (the array helpers above never leave one unset: they read as ``[]``).
     """
     if not node.has_parameter(name):
-        raise KeyError(f'parameter {name!r} is not declared')
+        raise KeyError(f"parameter {name!r} is not declared")
     try:
         return node.get_parameter(name).value
     except ParameterUninitializedException:

@@ -74,7 +74,7 @@ def build_parser() -> argparse.ArgumentParser:
                               description="set one parameter (as ros2 param set)")
     put.add_argument("node", type=node_name, metavar="NODE")
     put.add_argument("name", metavar="NAME")
-    put.add_argument("value", metavar="VALUE", help="YAML, e.g. 0.002, true, \"[40.0, 80.0]\"")
+    put.add_argument("value", metavar="VALUE", help='YAML, e.g. 0.002, true, "[40.0, 80.0]"')
     load = commands.add_parser("load", help="set every parameter of a params file (read-only "
                                "ones are skipped)", description="set every parameter of a "
                                "params file for this node (read-only ones are skipped)")

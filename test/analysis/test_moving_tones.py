@@ -102,57 +102,57 @@ def _drift_bag(tmp_path, sensitivity: bool, notch_tones=(40.0,)):
     n = np.arange(END)
     gain = np.where(n < ON, 1.0, np.maximum(np.exp(-(n - ON) / 500.0), 1e-3))
     z = G0 + gain * x + 1e-6 * rng.standard_normal(END)
-    statuses = [(s, notch_status(s, 'adapting' if s >= ON else 'disabled', list(notch_tones),
+    statuses = [(s, notch_status(s, "adapting" if s >= ON else "disabled", list(notch_tones),
                                  ON if s >= ON else -1, (500, 1500))) for s in range(0, END, 1000)]
     topics = {
-        '/pph/disturbance_frequencies': [(s, frequencies_cdr([25.0, track[s]], s))
+        "/pph/disturbance_frequencies": [(s, frequencies_cdr([25.0, track[s]], s))
                                          for s in range(0, END, 10)],
-        '/pph/notch_frequencies': [(s, frequencies_cdr([40.0 + 0.9 * (track[s] - 40.0)], s))
+        "/pph/notch_frequencies": [(s, frequencies_cdr([40.0 + 0.9 * (track[s] - 40.0)], s))
                                    for s in range(0, END, 10)]}
     if sensitivity:
         grid = np.linspace(0.0, 500.0, 5001)
         predicted = np.where(np.abs(grid - 40.0) < 0.5, -20.0, 0.0)
-        topics['/pph/notch_sensitivity'] = [(1600, array_cdr(
+        topics["/pph/notch_sensitivity"] = [(1600, array_cdr(
             np.vstack([grid, predicted, predicted + 0.5]),
-            [('rows:frequency_hz,sigma_max_db,output_db', 3, 3 * grid.size),
-             ('frequency', grid.size, 1), ('sample:1600', 1, 1)]))]
-    record = RunRecord(scenario='drift_test', report_tones_hz=[40.0], notch_tones_hz=[40.0],
+            [("rows:frequency_hz,sigma_max_db,output_db", 3, 3 * grid.size),
+             ("frequency", grid.size, 1), ("sample:1600", 1, 1)]))]
+    record = RunRecord(scenario="drift_test", report_tones_hz=[40.0], notch_tones_hz=[40.0],
                        window_s=10.0, samples=END, control_on_sample=ON,
                        identify_at_sample=500, identification_samples=1000)
-    return write_bag(tmp_path / 'bag', struts_from_z(z), statuses=statuses,
+    return write_bag(tmp_path / "bag", struts_from_z(z), statuses=statuses,
                      run_record=record.to_json(), topics=topics)
 
 
 def test_report_follows_the_drifting_tone_from_the_true_frequency(tmp_path, capsys):
     bag = _drift_bag(tmp_path, sensitivity=False)
-    assert analyze.main([str(bag), '--out', str(tmp_path / 'out'), '--no-plots']) == 0
-    assert 'bands following the tones' in capsys.readouterr().out
-    report = json.loads((tmp_path / 'out' / 'report.json').read_text())
-    fixed = report['tones'][0]
-    row, = report['following_tones']
-    assert row['source'] == '/pph/disturbance_frequencies'
-    assert row['uncontrolled_db'] == pytest.approx(LEVEL_DB, abs=0.3)
-    assert row['reduction_db'] == pytest.approx(60.0, abs=0.5)
-    assert fixed['uncontrolled_db'] < LEVEL_DB - 3.0     # the fixed band misses most of it
+    assert analyze.main([str(bag), "--out", str(tmp_path / "out"), "--no-plots"]) == 0
+    assert "bands following the tones" in capsys.readouterr().out
+    report = json.loads((tmp_path / "out" / "report.json").read_text())
+    fixed = report["tones"][0]
+    row, = report["following_tones"]
+    assert row["source"] == "/pph/disturbance_frequencies"
+    assert row["uncontrolled_db"] == pytest.approx(LEVEL_DB, abs=0.3)
+    assert row["reduction_db"] == pytest.approx(60.0, abs=0.5)
+    assert fixed["uncontrolled_db"] < LEVEL_DB - 3.0     # the fixed band misses most of it
     _, track = drifting_tone(LEVEL_DB, 40.0, 1.0, 20.0, END)
     window = track[ON - 9999:ON]                  # the report's (after the identification)
-    assert row['frequency_span_hz']['uncontrolled'] == pytest.approx(
+    assert row["frequency_span_hz"]["uncontrolled"] == pytest.approx(
         [window.min(), window.max()], abs=1e-3)
-    assert 'sensitivity' not in report
+    assert "sensitivity" not in report
 
 
 def test_report_compares_the_recorded_prediction_and_plots_both(tmp_path):
     bag = _drift_bag(tmp_path, sensitivity=True)
-    assert analyze.main([str(bag), '--out', str(tmp_path / 'out')]) == 0
-    report = json.loads((tmp_path / 'out' / 'report.json').read_text())
-    sens = report['sensitivity']
-    assert sens['view'] == 'output' and sens['prediction_sample'] == 1600
-    assert sens['predicted_rise_db'] == pytest.approx(0.5)
+    assert analyze.main([str(bag), "--out", str(tmp_path / "out")]) == 0
+    report = json.loads((tmp_path / "out" / "report.json").read_text())
+    sens = report["sensitivity"]
+    assert sens["view"] == "output" and sens["prediction_sample"] == 1600
+    assert sens["predicted_rise_db"] == pytest.approx(0.5)
     # the tone drifted +-1 Hz over the windows: a fixed-tone prediction is not compared
-    assert sens['near_tones_points'] == 0 and sens['near_tones_rms_difference_db'] is None
-    assert sens['not_compared'].startswith('the notch ran up to 0.9')
-    for png in ('frequencies.png', 'sensitivity.png'):
-        assert (tmp_path / 'out' / png).stat().st_size > 10_000
+    assert sens["near_tones_points"] == 0 and sens["near_tones_rms_difference_db"] is None
+    assert sens["not_compared"].startswith("the notch ran up to 0.9")
+    for png in ("frequencies.png", "sensitivity.png"):
+        assert (tmp_path / "out" / png).stat().st_size > 10_000
 
 
 def test_a_tracked_notch_tone_is_its_reported_tone_and_keeps_its_nominal_label(tmp_path):
@@ -161,7 +161,7 @@ def test_a_tracked_notch_tone_is_its_reported_tone_and_keeps_its_nominal_label(t
 
     assert snap_to_tones([40.398966, 80.0, 55.0], [40.4, 80.02, 60.0]) == [40.4, 80.02, 55.0]
     bag = _drift_bag(tmp_path, sensitivity=False, notch_tones=(39.9831,))
-    assert analyze.main([str(bag), '--out', str(tmp_path / 'out'), '--no-plots']) == 0
-    report = json.loads((tmp_path / 'out' / 'report.json').read_text())
-    assert report['tones'][0]['controlled'] is True
-    assert report['following_tones'][0]['frequency_hz'] == 40.0       # the run record's
+    assert analyze.main([str(bag), "--out", str(tmp_path / "out"), "--no-plots"]) == 0
+    report = json.loads((tmp_path / "out" / "report.json").read_text())
+    assert report["tones"][0]["controlled"] is True
+    assert report["following_tones"][0]["frequency_hz"] == 40.0       # the run record's

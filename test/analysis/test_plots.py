@@ -12,7 +12,7 @@ from hexapod_vibration.analysis.run_record import RunRecord
 from hexapod_vibration.core.model.config import load_model_config
 from hexapod_vibration.paths import config_path
 
-MODEL = load_model_config(config_path('pph_model.yaml'))
+MODEL = load_model_config(config_path("pph_model.yaml"))
 END, ON = 12_000, 6_000
 
 
@@ -25,13 +25,13 @@ def _bag(tmp_path, name, notch_hz, true_hz, harmonics_of_hz=0.0):
     if notch_hz:
         n = np.arange(END)
         z[ON:] -= (1 - np.exp(-(n[ON:] - ON) / 500.0)) * tone(-31.0, 40.0, END)[ON:]
-    statuses = [(s, notch_status(s, 'adapting' if s >= ON else 'disabled', notch_hz,
+    statuses = [(s, notch_status(s, "adapting" if s >= ON else "disabled", notch_hz,
                                  ON if s >= ON else -1, (500, 1500)))
                 for s in range(0, END, 1000)] if notch_hz else []
-    topics = {'/pph/disturbance_frequencies': [(s, frequencies_cdr([true_hz(s), 80.0], s))
+    topics = {"/pph/disturbance_frequencies": [(s, frequencies_cdr([true_hz(s), 80.0], s))
                                                for s in range(0, END, 100)]}
     if notch_hz:
-        topics['/pph/notch_frequencies'] = [(s, frequencies_cdr(notch_hz, s))
+        topics["/pph/notch_frequencies"] = [(s, frequencies_cdr(notch_hz, s))
                                             for s in range(0, END, 100)]
     record = RunRecord(name, [40.0, 80.0], notch_hz, 4.0, END, ON if notch_hz else -1,
                        500 if notch_hz else -1, 1000 if notch_hz else 0,
@@ -41,41 +41,41 @@ def _bag(tmp_path, name, notch_hz, true_hz, harmonics_of_hz=0.0):
 
 
 def _figures(tmp_path, bag):
-    out = tmp_path / f'{bag.name}_out'
+    out = tmp_path / f"{bag.name}_out"
     result = analyze_bag(bag, out, MODEL)
-    names = sorted(p.name for p in out.glob('*.png'))
-    assert names == sorted(n for n in result.details['plots'] if n.endswith('.png'))
+    names = sorted(p.name for p in out.glob("*.png"))
+    assert names == sorted(n for n in result.details["plots"] if n.endswith(".png"))
     return names
 
 
 def test_fixed_tones_have_no_frequencies_and_no_plant_response_figure(tmp_path):
     """Two fixed tones (a fundamental fitted to their mix, flat frequency lines: nothing)."""
-    bag = _bag(tmp_path, 'fixed', [40.0, 80.0], lambda s: 40.0)
-    assert _figures(tmp_path, bag) == ['convergence.png', 'spectra.png']
+    bag = _bag(tmp_path, "fixed", [40.0, 80.0], lambda s: 40.0)
+    assert _figures(tmp_path, bag) == ["convergence.png", "spectra.png"]
 
 
 def test_a_moving_tone_has_its_frequencies_figure(tmp_path):
-    bag = _bag(tmp_path, 'drift', [40.0], lambda s: 40.0 + 0.5 * np.sin(2 * np.pi * s / 8000))
-    assert _figures(tmp_path, bag) == ['convergence.png', 'frequencies.png', 'spectra.png']
+    bag = _bag(tmp_path, "drift", [40.0], lambda s: 40.0 + 0.5 * np.sin(2 * np.pi * s / 8000))
+    assert _figures(tmp_path, bag) == ["convergence.png", "frequencies.png", "spectra.png"]
 
 
 def test_the_plant_response_figure_is_for_the_distortion_analysis(tmp_path):
-    bag = _bag(tmp_path, 'fig4', [], lambda s: 40.0, harmonics_of_hz=40.0)
-    assert _figures(tmp_path, bag) == ['plant_response.png', 'spectra.png']
+    bag = _bag(tmp_path, "fig4", [], lambda s: 40.0, harmonics_of_hz=40.0)
+    assert _figures(tmp_path, bag) == ["plant_response.png", "spectra.png"]
 
 
-@pytest.mark.parametrize('tracks, moving', [
+@pytest.mark.parametrize("tracks, moving", [
     ({}, False),
-    ({'truth': (np.arange(3), np.array([[39.0, 40.0], [39.0, 40.0], [39.0, 40.0]]))}, False),
-    ({'truth': (np.arange(3), np.array([[40.0], [40.005], [np.nan]]))}, False),
-    ({'estimate': (np.arange(3), np.array([[40.0], [40.0], [40.4]]))}, True),
-    ({'tachometer': (np.arange(2), np.array([30.0, 50.0]))}, True),
+    ({"truth": (np.arange(3), np.array([[39.0, 40.0], [39.0, 40.0], [39.0, 40.0]]))}, False),
+    ({"truth": (np.arange(3), np.array([[40.0], [40.005], [np.nan]]))}, False),
+    ({"estimate": (np.arange(3), np.array([[40.0], [40.0], [40.4]]))}, True),
+    ({"tachometer": (np.arange(2), np.array([30.0, 50.0]))}, True),
 ])
 def test_frequencies_move(tracks, moving):
     assert plots.frequencies_move(tracks) is moving
 
 
-@pytest.mark.parametrize('curves, limits', [
+@pytest.mark.parametrize("curves, limits", [
     # a deep measured notch (-88 dB) and the prediction's exact zero: clipped at -40 dB
     ([np.array([-88.0, -3.0, 0.0, 7.2]), np.array([-190.0, 0.5])], (-40.0, 10.0)),
     # a quiet loop: the never-worse line still shows

@@ -22,7 +22,7 @@ from hexapod_vibration.core.spectrum import G0
 from hexapod_vibration.tools import analyze
 
 CLOSE = [37.0, 38.0, 39.0, 40.0, 41.0, 42.0]
-PAPER = {'37': -8.0, '38': -11.6, '39': 60.1, '40': 59.1, '41': -1.0, '42': -4.8}
+PAPER = {"37": -8.0, "38": -11.6, "39": 60.1, "40": 59.1, "41": -1.0, "42": -4.8}
 ON, END, TAU_S = 16000, 36000, 0.5
 
 
@@ -36,7 +36,7 @@ def close_tones_z(seed: int = 1) -> np.ndarray:
 
 
 def record(**changes) -> str:
-    base = dict(scenario='close_tones', report_tones_hz=CLOSE, notch_tones_hz=[39.0, 40.0],
+    base = dict(scenario="close_tones", report_tones_hz=CLOSE, notch_tones_hz=[39.0, 40.0],
                 window_s=10.0, samples=END, control_on_sample=ON, identify_at_sample=1000,
                 identification_samples=3200, paper_reduction_db=PAPER)
     base.update(changes)
@@ -47,8 +47,8 @@ def statuses(tones=(39.0, 40.0), ident=(1000, 4199), keys=True):
     """Notch statuses every second, with the identification as the controller reports it."""
     out = []
     for sample in range(0, END, 1000):
-        state = ('identifying' if ident[0] <= sample <= ident[1] else
-                 'adapting' if sample >= ON else 'disabled')
+        state = ("identifying" if ident[0] <= sample <= ident[1] else
+                 "adapting" if sample >= ON else "disabled")
         out.append((sample, notch_status(sample, state, list(tones),
                                          ON if sample >= ON else -1,
                                          ident if keys and sample >= ident[0] else
@@ -57,132 +57,132 @@ def statuses(tones=(39.0, 40.0), ident=(1000, 4199), keys=True):
 
 
 def run_analyze(bag, out, *args):
-    code = analyze.main([str(bag), '--out', str(out), '--no-plots', *args])
-    report = json.loads((out / 'report.json').read_text()) if code == 0 else None
-    details = json.loads((out / 'details.json').read_text()) if code == 0 else None
+    code = analyze.main([str(bag), "--out", str(out), "--no-plots", *args])
+    report = json.loads((out / "report.json").read_text()) if code == 0 else None
+    details = json.loads((out / "details.json").read_text()) if code == 0 else None
     return code, report, details
 
 
 # ---------------------------------------------------------------- level over time
 def test_convergence_is_not_fooled_by_gravity_and_matches_the_known_decay(tmp_path):
     """A 0.5 s boxcar envelope would let 1 g leak into 39 Hz (a 'convergence' in 0.01 s)."""
-    bag = write_bag(tmp_path / 'bag', struts_from_z(close_tones_z()), statuses=statuses(),
+    bag = write_bag(tmp_path / "bag", struts_from_z(close_tones_z()), statuses=statuses(),
                     run_record=record())
-    code, report, details = run_analyze(bag, tmp_path / 'out')
+    code, report, details = run_analyze(bag, tmp_path / "out")
     assert code == 0
     # exp(-t/tau) from -37 dB to the floor: within 3 dB of the final level (mean power of
     # the last 2 s) at about tau ln(amplitude ratio); the 4.5 s level window (1 Hz
     # neighbours) averages a decaying tone, which delays that by at most a second.
-    final = {f: details['convergence'][f]['final_level_db'] for f in ('39', '40')}
-    for f in ('39', '40'):
+    final = {f: details["convergence"][f]["final_level_db"] for f in ("39", "40")}
+    for f in ("39", "40"):
         expected = TAU_S * np.log(10 ** ((-37.0 - final[f] - 3.0) / 20.0))
-        got = details['convergence'][f]['convergence_s']
+        got = details["convergence"][f]["convergence_s"]
         assert expected - 0.3 <= got <= expected + 1.2, (f, got, expected)
         assert final[f] < -100.0
-    assert report['convergence_s'] == pytest.approx(
-        max(details['convergence'][f]['convergence_s'] for f in ('39', '40')), abs=1e-6)
+    assert report["convergence_s"] == pytest.approx(
+        max(details["convergence"][f]["convergence_s"] for f in ("39", "40")), abs=1e-6)
 
 
 def test_the_benchmark_uses_the_same_convergence_definition():
     z = close_tones_z()
     ours = spectrum.tone_convergence(z, FS, 40.0, ON, other_hz=CLOSE)
     bench = table1.tone_convergence_s(z, FS, 40.0, ON / FS, CLOSE)
-    assert bench['convergence_s'] == ours['convergence_s']
-    assert bench['final_level_db'] == ours['final_level_db']
+    assert bench["convergence_s"] == ours["convergence_s"]
+    assert bench["final_level_db"] == ours["final_level_db"]
 
 
 # ---------------------------------------------------------------- the run record
 def test_analyze_reports_what_the_run_recorded(tmp_path, capsys):
-    bag = write_bag(tmp_path / 'bag', struts_from_z(close_tones_z()), statuses=statuses(),
+    bag = write_bag(tmp_path / "bag", struts_from_z(close_tones_z()), statuses=statuses(),
                     run_record=record())
-    code, report, details = run_analyze(bag, tmp_path / 'out')
+    code, report, details = run_analyze(bag, tmp_path / "out")
     assert code == 0
-    assert report['scenario'] == 'close_tones'
-    assert [r['frequency_hz'] for r in report['tones']] == CLOSE
-    assert details['windows']['uncontrolled']['first_sample'] == ON - 10000
+    assert report["scenario"] == "close_tones"
+    assert [r["frequency_hz"] for r in report["tones"]] == CLOSE
+    assert details["windows"]["uncontrolled"]["first_sample"] == ON - 10000
     out = capsys.readouterr().out
-    assert 'paper reduction' in out and '60.1' in out
+    assert "paper reduction" in out and "60.1" in out
     # the floor (and so every level) does not depend on which other tones are asked for
-    code, alone, _ = run_analyze(bag, tmp_path / 'alone', '--tones', '39', '40')
+    code, alone, _ = run_analyze(bag, tmp_path / "alone", "--tones", "39", "40")
     assert code == 0
-    rows = {r['frequency_hz']: r for r in report['tones']}
-    for row in alone['tones']:
-        assert row == rows[row['frequency_hz']]
+    rows = {r["frequency_hz"]: r for r in report["tones"]}
+    for row in alone["tones"]:
+        assert row == rows[row["frequency_hz"]]
 
 
 # ---------------------------------------------------------------- identification
-@pytest.mark.parametrize('keys', [True, False], ids=['identification keys', 'older bag'])
+@pytest.mark.parametrize("keys", [True, False], ids=["identification keys", "older bag"])
 def test_windows_leave_out_the_identification(tmp_path, keys):
     """A 16 s window reaches into the identification's 80 Hz test tones: left out."""
     z = G0 + tone(-31.0, 40.0, END) + tone(-68.0, 80.0, END, 0.3)
     z[1000:4200] += tone(-40.0, 80.0, 3200)          # the identification's test tones
-    bag = write_bag(tmp_path / 'bag', struts_from_z(z),
+    bag = write_bag(tmp_path / "bag", struts_from_z(z),
                     statuses=statuses(tones=(40.0, 80.0), keys=keys))
-    code, report, details = run_analyze(bag, tmp_path / 'out', '--tones', '40', '80',
-                                        '--window', '16')
+    code, report, details = run_analyze(bag, tmp_path / "out", "--tones", "40", "80",
+                                        "--window", "16")
     assert code == 0
-    rows = {r['frequency_hz']: r for r in report['tones']}
-    assert rows[80.0]['uncontrolled_db'] == pytest.approx(-68.0, abs=0.3)
-    assert any('identification' in n for n in details['notes'])
-    assert details['windows']['uncontrolled']['first_sample'] >= 4200
+    rows = {r["frequency_hz"]: r for r in report["tones"]}
+    assert rows[80.0]["uncontrolled_db"] == pytest.approx(-68.0, abs=0.3)
+    assert any("identification" in n for n in details["notes"])
+    assert details["windows"]["uncontrolled"]["first_sample"] >= 4200
 
 
 def test_a_window_left_too_short_is_refused_in_one_line(tmp_path, capsys):
     z = G0 + tone(-37.0, 39.0, END) + tone(-37.0, 40.0, END, 0.7)
-    bag = write_bag(tmp_path / 'bag', struts_from_z(z), statuses=statuses())
-    code = analyze.main([str(bag), '--out', str(tmp_path / 'out'), '--tones', '39', '40',
-                         '--control-on', '6.0', '--no-plots'])
+    bag = write_bag(tmp_path / "bag", struts_from_z(z), statuses=statuses())
+    code = analyze.main([str(bag), "--out", str(tmp_path / "out"), "--tones", "39", "40",
+                         "--control-on", "6.0", "--no-plots"])
     err = capsys.readouterr().err
     assert code == 2
-    assert err.count('\n') == 1 and 'needs 9 s' in err and 'identification' in err
-    assert not (tmp_path / 'out').exists()
+    assert err.count("\n") == 1 and "needs 9 s" in err and "identification" in err
+    assert not (tmp_path / "out").exists()
 
 
 # ---------------------------------------------------------------- counted from 0
 def test_samples_are_counted_from_the_runs_sample_0(tmp_path):
     z = G0 + tone(-31.0, 40.0, END)
     index = np.arange(243, END)                      # the first 243 samples never arrived
-    bag = write_bag(tmp_path / 'bag', struts_from_z(z[243:]), index=index,
+    bag = write_bag(tmp_path / "bag", struts_from_z(z[243:]), index=index,
                     statuses=statuses(tones=(40.0,)))
-    code, report, details = run_analyze(bag, tmp_path / 'out', '--tones', '40')
+    code, report, details = run_analyze(bag, tmp_path / "out", "--tones", "40")
     assert code == 0
-    assert details['topics']['/pph/accel']['missing_samples'] == 243
-    assert details['topics']['/pph/accel']['first_sample'] == 243
-    assert report['loop']['samples'] == END
-    assert report['loop']['missed_samples'] == 243
+    assert details["topics"]["/pph/accel"]["missing_samples"] == 243
+    assert details["topics"]["/pph/accel"]["first_sample"] == 243
+    assert report["loop"]["samples"] == END
+    assert report["loop"]["missed_samples"] == 243
 
 
 # ---------------------------------------------------------------- floor flags
 def test_at_noise_floor_is_in_the_report_and_the_table(tmp_path, capsys):
-    bag = write_bag(tmp_path / 'bag', struts_from_z(close_tones_z()), statuses=statuses(),
+    bag = write_bag(tmp_path / "bag", struts_from_z(close_tones_z()), statuses=statuses(),
                     run_record=record())
-    code, report, details = run_analyze(bag, tmp_path / 'out')
+    code, report, details = run_analyze(bag, tmp_path / "out")
     assert code == 0
-    rows = {r['frequency_hz']: r for r in report['tones']}
-    assert rows[40.0]['at_noise_floor'] == {'uncontrolled': False, 'controlled': True}
-    flags = details['levels_db_re_1g']
+    rows = {r["frequency_hz"]: r for r in report["tones"]}
+    assert rows[40.0]["at_noise_floor"] == {"uncontrolled": False, "controlled": True}
+    flags = details["levels_db_re_1g"]
     table = capsys.readouterr().out.splitlines()
     for k, f in enumerate(CLOSE):
-        floor = rows[f]['at_noise_floor']
-        assert floor['uncontrolled'] == flags['uncontrolled']['at_noise_floor'][k]
-        assert floor['controlled'] == flags['controlled']['at_noise_floor'][k]
-        line = next(x for x in table if x.strip().startswith(f'{f:.1f}Hz'))
-        assert line.count('(floor)') == floor['uncontrolled'] + floor['controlled']
+        floor = rows[f]["at_noise_floor"]
+        assert floor["uncontrolled"] == flags["uncontrolled"]["at_noise_floor"][k]
+        assert floor["controlled"] == flags["controlled"]["at_noise_floor"][k]
+        line = next(x for x in table if x.strip().startswith(f"{f:.1f}Hz"))
+        assert line.count("(floor)") == floor["uncontrolled"] + floor["controlled"]
         # '>=': a lower bound only when the controlled level, not the uncontrolled, is floor
-        assert ('>=' in line) == (floor['controlled'] and not floor['uncontrolled'])
+        assert (">=" in line) == (floor["controlled"] and not floor["uncontrolled"])
 
 
 # ---------------------------------------------------------------- bad messages
 def test_one_undecodable_message_is_skipped_and_counted(tmp_path):
     z = G0 + tone(-31.0, 40.0, 24000)
     good = strut_cdr(np.zeros(6), 5000)
-    bad = [('/pph/accel', 5000, good[:-8]), ('/pph/accel', 7000, b'\xff' * 40),
-           ('/pph/accel', 9000, good[:12])]
-    bag = write_bag(tmp_path / 'bag', struts_from_z(z), extra=bad)
-    code, report, details = run_analyze(bag, tmp_path / 'out', '--tones', '40')
+    bad = [("/pph/accel", 5000, good[:-8]), ("/pph/accel", 7000, b"\xff" * 40),
+           ("/pph/accel", 9000, good[:12])]
+    bag = write_bag(tmp_path / "bag", struts_from_z(z), extra=bad)
+    code, report, details = run_analyze(bag, tmp_path / "out", "--tones", "40")
     assert code == 0
-    assert details['topics']['/pph/accel']['invalid_messages'] == 3
-    assert report['tones'][0]['uncontrolled_db'] == pytest.approx(-31.0, abs=0.3)
+    assert details["topics"]["/pph/accel"]["invalid_messages"] == 3
+    assert report["tones"][0]["uncontrolled_db"] == pytest.approx(-31.0, abs=0.3)
 
 
 def test_a_few_invalid_messages_do_not_give_wrong_levels_with_exit_0(tmp_path, capsys):
@@ -190,14 +190,14 @@ def test_a_few_invalid_messages_do_not_give_wrong_levels_with_exit_0(tmp_path, c
     z = G0 + tone(-37.0, 39.0, 24000) + tone(-37.0, 40.0, 24000, 0.7)
     index = np.arange(24000)
     keep = index % 100 != 50
-    five = [('/pph/accel', int(n) - 1, strut_cdr(np.zeros(6), int(n))[:-8])
+    five = [("/pph/accel", int(n) - 1, strut_cdr(np.zeros(6), int(n))[:-8])
             for n in index[~keep]]
-    bag = write_bag(tmp_path / 'bag', struts_from_z(z)[keep], index=index[keep], extra=five)
-    code = analyze.main([str(bag), '--out', str(tmp_path / 'out'), '--tones', '39', '40',
-                         '--no-plots'])
+    bag = write_bag(tmp_path / "bag", struts_from_z(z)[keep], index=index[keep], extra=five)
+    code = analyze.main([str(bag), "--out", str(tmp_path / "out"), "--tones", "39", "40",
+                         "--no-plots"])
     err = capsys.readouterr().err
-    assert code == 2 and err.count('\n') == 1
-    assert 'usable run is 0.099 s' in err
+    assert code == 2 and err.count("\n") == 1
+    assert "usable run is 0.099 s" in err
 
 
 def test_memory_does_not_grow_with_the_messages_of_a_long_bag(tmp_path):
@@ -219,23 +219,23 @@ def test_memory_does_not_grow_with_the_messages_of_a_long_bag(tmp_path):
 
     n = 20_000
     accel = struts_from_z(G0 + tone(-31.0, 40.0, n))
-    with Writer(tmp_path / 'bag', version=BAG_VERSION, storage_plugin=StoragePlugin.MCAP) as w:
+    with Writer(tmp_path / "bag", version=BAG_VERSION, storage_plugin=StoragePlugin.MCAP) as w:
         conns = [w.add_connection(t, STRUT_MSGTYPE, typestore=store()) for t in STRUT_TOPICS]
         for k in range(n):
             raw = strut_cdr(accel[k], k)
             for conn in conns:
                 w.write(conn, k * 10**6, raw)
-    model = load_model_config(config_path('pph_model.yaml'))
+    model = load_model_config(config_path("pph_model.yaml"))
     tracemalloc.start()
     try:
-        signals = load_signals(tmp_path / 'bag', model)
+        signals = load_signals(tmp_path / "bag", model)
         result = analyze_signals(signals, Request(tones=[40.0]))
         peak = tracemalloc.get_traced_memory()[1]
     finally:
         tracemalloc.stop()
-    assert result.report['tones'][0]['uncontrolled_db'] == pytest.approx(-31.0, abs=0.2)
+    assert result.report["tones"][0]["uncontrolled_db"] == pytest.approx(-31.0, abs=0.2)
     assert all(len(s) == n for s in signals.series.values())
-    assert peak < 10e6, f'{peak / 1e6:.1f} MB'
+    assert peak < 10e6, f"{peak / 1e6:.1f} MB"
 
 
 def test_the_following_table_lists_a_tone_that_moved_between_the_windows():

@@ -73,7 +73,7 @@ def _record(name: str, on: int, tones: tuple[float, ...] = (40.0, 80.0)) -> str:
 
 
 def _statuses(on: int) -> list[tuple[int, dict[str, str]]]:
-    return [(s, notch_status(s, 'adapting' if 0 <= on <= s else 'disabled', [40.0],
+    return [(s, notch_status(s, "adapting" if 0 <= on <= s else "disabled", [40.0],
                              on if 0 <= on <= s else -1, (500, 1500)))
             for s in range(0, END, 1000)]
 
@@ -82,10 +82,10 @@ def _prediction(b, a) -> dict[str, list[tuple[int, bytes]]]:
     grid = np.linspace(0.0, 500.0, 5001)
     predicted = response_db(b, a, grid[1:])
     predicted = np.concatenate([[predicted[0]], predicted])
-    return {'/pph/notch_sensitivity': [(1600, array_cdr(
+    return {"/pph/notch_sensitivity": [(1600, array_cdr(
         np.vstack([grid, predicted, predicted]),
-        [('rows:frequency_hz,sigma_max_db,output_db', 3, 3 * grid.size),
-         ('frequency', grid.size, 1), ('sample:1600', 1, 1)]))]}
+        [("rows:frequency_hz,sigma_max_db,output_db", 3, 3 * grid.size),
+         ("frequency", grid.size, 1), ("sample:1600", 1, 1)]))]}
 
 
 def _lti_pair(tmp_path, twin_seed: int = 3, twin_end: int = END,
@@ -108,13 +108,13 @@ def _lti_pair(tmp_path, twin_seed: int = 3, twin_end: int = END,
     if track_span_hz is not None:
         track = 40.0 + track_span_hz * np.clip((np.arange(END) - (END - 10_000)) / 10_000,
                                                0.0, 1.0)
-        topics['/pph/notch_frequencies'] = [(s, frequencies_cdr([track[s]], s))
+        topics["/pph/notch_frequencies"] = [(s, frequencies_cdr([track[s]], s))
                                             for s in range(0, END, 10)]
-    run = write_bag(tmp_path / 'bag', struts_from_z(G0 + y), statuses=_statuses(ON),
-                    run_record=_record('lti', ON), topics=topics)
-    twin_bag = write_bag(tmp_path / 'twin', struts_from_z(G0 + x[:twin_end]),
+    run = write_bag(tmp_path / "bag", struts_from_z(G0 + y), statuses=_statuses(ON),
+                    run_record=_record("lti", ON), topics=topics)
+    twin_bag = write_bag(tmp_path / "twin", struts_from_z(G0 + x[:twin_end]),
                          statuses=_statuses(-1)[:twin_end // 1000],
-                         run_record=_record('lti', -1), topics=topics)
+                         run_record=_record("lti", -1), topics=topics)
     return run, twin_bag
 
 
@@ -131,12 +131,12 @@ def _decaying_pair(tmp_path, name: str, x: np.ndarray, tracks: np.ndarray,
     noise = 1e-6 * np.random.default_rng(seed).standard_normal(END)
     gain = np.where(n < ON, 1.0, np.maximum(np.exp(-(n - ON) / 500.0), residual))
     added = np.zeros(END) if burst is None else burst
-    topics = {'/pph/disturbance_frequencies': [(s, frequencies_cdr(list(tracks[s]), s))
+    topics = {"/pph/disturbance_frequencies": [(s, frequencies_cdr(list(tracks[s]), s))
                                                for s in range(0, END, 10)]}
-    run = write_bag(tmp_path / 'bag', struts_from_z(G0 + gain * x + noise + added),
+    run = write_bag(tmp_path / "bag", struts_from_z(G0 + gain * x + noise + added),
                     statuses=_statuses(ON), run_record=_record(name, ON, tones),
                     topics=topics)
-    other = write_bag(tmp_path / 'twin', struts_from_z(G0 + x + noise),
+    other = write_bag(tmp_path / "twin", struts_from_z(G0 + x + noise),
                       statuses=_statuses(-1), run_record=_record(name, -1, tones),
                       topics=topics)
     return run, other
@@ -144,63 +144,63 @@ def _decaying_pair(tmp_path, name: str, x: np.ndarray, tracks: np.ndarray,
 
 def test_analyze_against_the_twin_measures_the_filter(tmp_path, capsys):
     run, twin_bag = _lti_pair(tmp_path)
-    out = tmp_path / 'out'
-    assert analyze.main([str(run), '--twin', str(twin_bag), '--out', str(out)]) == 0
+    out = tmp_path / "out"
+    assert analyze.main([str(run), "--twin", str(twin_bag), "--out", str(out)]) == 0
     printed = capsys.readouterr().out
-    assert 'against its twin' in printed and 'never worse than off: yes' in printed
-    report = json.loads((out / 'report.json').read_text())
-    assert {'scenario', 'tones', 'convergence_s', 'loop', 'sensitivity'} <= set(report)
-    section = report['twin']
-    assert section['window'] == {'first_sample': END - 10_000, 'samples': 10_000}
-    rows = {r['frequency_hz']: r for r in section['tones']}
-    assert rows[40.0]['band'] == 'fixed' and rows[40.0]['twin_db'] == pytest.approx(-40, abs=.3)
-    assert rows[40.0]['reduction_db'] > 40.0               # the notch's zero is at 40 Hz
+    assert "against its twin" in printed and "never worse than off: yes" in printed
+    report = json.loads((out / "report.json").read_text())
+    assert {"scenario", "tones", "convergence_s", "loop", "sensitivity"} <= set(report)
+    section = report["twin"]
+    assert section["window"] == {"first_sample": END - 10_000, "samples": 10_000}
+    rows = {r["frequency_hz"]: r for r in section["tones"]}
+    assert rows[40.0]["band"] == "fixed" and rows[40.0]["twin_db"] == pytest.approx(-40, abs=.3)
+    assert rows[40.0]["reduction_db"] > 40.0               # the notch's zero is at 40 Hz
     expected_80 = -response_db(*notch_filter(), np.array([80.0]))[0]
-    assert rows[80.0]['reduction_db'] == pytest.approx(expected_80, abs=0.2)
-    assert section['bands']['never_worse'] is True
-    assert section['bands']['largest_rise_db'] < 0.2
-    sens = section['sensitivity']
-    assert sens['near_tones_points'] > 20
-    assert sens['near_tones_rms_difference_db'] < 0.5       # the twin removes the scatter
-    assert sens['near_tones_max_difference_db'] < 1.0
-    assert section['following_over_time'] == []            # no frequency track recorded
-    assert (out / 'sensitivity.png').stat().st_size > 10_000
+    assert rows[80.0]["reduction_db"] == pytest.approx(expected_80, abs=0.2)
+    assert section["bands"]["never_worse"] is True
+    assert section["bands"]["largest_rise_db"] < 0.2
+    sens = section["sensitivity"]
+    assert sens["near_tones_points"] > 20
+    assert sens["near_tones_rms_difference_db"] < 0.5       # the twin removes the scatter
+    assert sens["near_tones_max_difference_db"] < 1.0
+    assert section["following_over_time"] == []            # no frequency track recorded
+    assert (out / "sensitivity.png").stat().st_size > 10_000
 
 
-@pytest.mark.parametrize('what', ['other_noise', 'shorter'])
+@pytest.mark.parametrize("what", ["other_noise", "shorter"])
 def test_a_bag_that_is_not_the_twin_is_refused_in_one_line(tmp_path, capsys, what):
-    run, other = _lti_pair(tmp_path, **({'twin_seed': 4} if what == 'other_noise'
-                                         else {'twin_end': END - 1000}))
-    out = tmp_path / 'out'
-    assert analyze.main([str(run), '--twin', str(other), '--out', str(out),
-                         '--no-plots']) == 2
+    run, other = _lti_pair(tmp_path, **({"twin_seed": 4} if what == "other_noise"
+                                         else {"twin_end": END - 1000}))
+    out = tmp_path / "out"
+    assert analyze.main([str(run), "--twin", str(other), "--out", str(out),
+                         "--no-plots"]) == 2
     err = capsys.readouterr().err.strip()
-    assert err.count('\n') == 0 and "is not this run's twin" in err, err
-    assert ('differs' if what == 'other_noise' else 'samples') in err
+    assert err.count("\n") == 0 and "is not this run's twin" in err, err
+    assert ("differs" if what == "other_noise" else "samples") in err
     assert not out.exists()
 
 
 def test_a_drifting_tone_is_followed_over_time_against_the_twin(tmp_path, capsys):
     """40 Hz drifting +-1 Hz (20 s period); the run's tone decays 60 dB from control-on."""
     x, track = _drifting_40_hz()
-    run, other = _decaying_pair(tmp_path, 'drift', x, track[:, None], [40.0], seed=5)
-    out = tmp_path / 'out'
-    assert analyze.main([str(run), '--twin', str(other), '--out', str(out), '--no-plots',
-                         '--twin-segment', '2']) == 0
+    run, other = _decaying_pair(tmp_path, "drift", x, track[:, None], [40.0], seed=5)
+    out = tmp_path / "out"
+    assert analyze.main([str(run), "--twin", str(other), "--out", str(out), "--no-plots",
+                         "--twin-segment", "2"]) == 0
     printed = capsys.readouterr().out
-    assert 'following 40 Hz over 2 s windows' in printed
-    section = json.loads((out / 'report.json').read_text())['twin']
-    row, = section['tones']
-    assert row['band'] == 'following' and row['source'] == '/pph/disturbance_frequencies'
-    assert row['twin_db'] == pytest.approx(-37.0, abs=0.3)
-    assert row['reduction_db'] == pytest.approx(60.0, abs=0.5)
-    over, = section['following_over_time']
-    starts = [p[0] for p in over['reduction_db']]
+    assert "following 40 Hz over 2 s windows" in printed
+    section = json.loads((out / "report.json").read_text())["twin"]
+    row, = section["tones"]
+    assert row["band"] == "following" and row["source"] == "/pph/disturbance_frequencies"
+    assert row["twin_db"] == pytest.approx(-37.0, abs=0.3)
+    assert row["reduction_db"] == pytest.approx(60.0, abs=0.5)
+    over, = section["following_over_time"]
+    starts = [p[0] for p in over["reduction_db"]]
     assert starts == [12.0, 14.0, 16.0, 18.0, 20.0, 22.0]
-    assert over['reduction_db'][0][1] < 40.0                 # the decay at control-on
-    assert over['reduction_db'][-1][1] == pytest.approx(60.0, abs=0.5)
-    assert over['median_reduction_db'] == pytest.approx(60.0, abs=0.5)
-    assert over['min_reduction_db'] == over['reduction_db'][0][1]
+    assert over["reduction_db"][0][1] < 40.0                 # the decay at control-on
+    assert over["reduction_db"][-1][1] == pytest.approx(60.0, abs=0.5)
+    assert over["median_reduction_db"] == pytest.approx(60.0, abs=0.5)
+    assert over["min_reduction_db"] == over["reduction_db"][0][1]
 
 
 def _drifting_40_hz() -> tuple[np.ndarray, np.ndarray]:
@@ -220,20 +220,20 @@ def test_windows_at_the_noise_floor_are_flagged_and_their_reduction_is_a_bound(t
     floor lies below the line.
     """
     x, track = _drifting_40_hz()
-    run, other = _decaying_pair(tmp_path, 'drift', x, track[:, None], [40.0], seed=5,
+    run, other = _decaying_pair(tmp_path, "drift", x, track[:, None], [40.0], seed=5,
                                 residual=0.0)
-    out = tmp_path / 'out'
-    assert analyze.main([str(run), '--twin', str(other), '--out', str(out), '--no-plots',
-                         '--twin-segment', '2']) == 0
+    out = tmp_path / "out"
+    assert analyze.main([str(run), "--twin", str(other), "--out", str(out), "--no-plots",
+                         "--twin-segment", "2"]) == 0
     printed = capsys.readouterr().out
-    over, = json.loads((out / 'report.json').read_text())['twin']['following_over_time']
-    floor = over['at_noise_floor']
-    assert floor['twin'] == [False] * 6
-    assert floor['controlled'][:2] == [False, False] and floor['controlled'][-1] is True
-    assert over['windows_at_floor'] == sum(floor['controlled']) >= 1
-    first = over['reduction_db'][0][1]
-    assert over['min_measured_reduction_db'] == first < 40.0
-    assert all(p[1] > 100.0 for p, at in zip(over['reduction_db'], floor['controlled'],
+    over, = json.loads((out / "report.json").read_text())["twin"]["following_over_time"]
+    floor = over["at_noise_floor"]
+    assert floor["twin"] == [False] * 6
+    assert floor["controlled"][:2] == [False, False] and floor["controlled"][-1] is True
+    assert over["windows_at_floor"] == sum(floor["controlled"]) >= 1
+    first = over["reduction_db"][0][1]
+    assert over["min_measured_reduction_db"] == first < 40.0
+    assert all(p[1] > 100.0 for p, at in zip(over["reduction_db"], floor["controlled"],
                                              strict=True) if at)
     assert (f"{over['windows_at_floor']} at the noise floor; above it: min {first:.1f} dB"
             in printed)
@@ -241,20 +241,20 @@ def test_windows_at_the_noise_floor_are_flagged_and_their_reduction_is_a_bound(t
 
 def test_a_minimum_at_the_noise_floor_is_printed_as_a_bound():
     """The console line of a tone whose smallest reduction is a floor-limited bound."""
-    tone = {'frequency_hz': 90.0, 'segment_s': 1.0,
-            'reduction_db': [[13.0, 11.4], [14.0, 27.0], [15.0, 44.0]],
-            'at_noise_floor': {'controlled': [False, True, True], 'twin': [False] * 3},
-            'min_reduction_db': 11.4, 'median_reduction_db': 27.0,
-            'min_measured_reduction_db': 11.4, 'windows_at_floor': 2}
+    tone = {"frequency_hz": 90.0, "segment_s": 1.0,
+            "reduction_db": [[13.0, 11.4], [14.0, 27.0], [15.0, 44.0]],
+            "at_noise_floor": {"controlled": [False, True, True], "twin": [False] * 3},
+            "min_reduction_db": 11.4, "median_reduction_db": 27.0,
+            "min_measured_reduction_db": 11.4, "windows_at_floor": 2}
     line = twin._over_time_line(tone)
-    assert line == ('following 90 Hz over 1 s windows from control-on: min 11.4 dB, median '
-                    '27.0 dB (3 windows, 2 at the noise floor; above it: min 11.4 dB)')
-    tone['reduction_db'][0][1] = tone['min_reduction_db'] = 30.0
-    tone['at_noise_floor']['controlled'][0] = True
+    assert line == ("following 90 Hz over 1 s windows from control-on: min 11.4 dB, median "
+                    "27.0 dB (3 windows, 2 at the noise floor; above it: min 11.4 dB)")
+    tone["reduction_db"][0][1] = tone["min_reduction_db"] = 30.0
+    tone["at_noise_floor"]["controlled"][0] = True
     tone.update(min_measured_reduction_db=None, windows_at_floor=3)
-    tone['reduction_db'][1][1] = tone['min_reduction_db'] = 27.0
+    tone["reduction_db"][1][1] = tone["min_reduction_db"] = 27.0
     assert twin._over_time_line(tone).endswith(
-        'min >= 27.0 dB, median 27.0 dB (3 windows, 3 at the noise floor; above it: none)')
+        "min >= 27.0 dB, median 27.0 dB (3 windows, 3 at the noise floor; above it: none)")
 
 
 def test_never_worse_is_judged_in_every_window_from_control_on(tmp_path, capsys):
@@ -267,36 +267,36 @@ def test_never_worse_is_judged_in_every_window_from_control_on(tmp_path, capsys)
     n = np.arange(END)
     burst = np.where((n >= ON + 500) & (n < ON + 1000),
                      1e-4 * np.random.default_rng(9).standard_normal(END), 0.0)
-    run, other = _decaying_pair(tmp_path, 'drift', x, track[:, None], [40.0], seed=5,
+    run, other = _decaying_pair(tmp_path, "drift", x, track[:, None], [40.0], seed=5,
                                 burst=burst)
-    out = tmp_path / 'out'
-    assert analyze.main([str(run), '--twin', str(other), '--out', str(out), '--no-plots']) == 0
+    out = tmp_path / "out"
+    assert analyze.main([str(run), "--twin", str(other), "--out", str(out), "--no-plots"]) == 0
     printed = capsys.readouterr().out
-    section = json.loads((out / 'report.json').read_text())['twin']
-    assert section['bands']['never_worse'] is True
-    sliding = section['bands_over_time']
-    assert sliding['window_s'] == 10.0 and sliding['start_s'] == [12.0, 13.0, 14.0]
-    assert sliding['worst_start_s'] == 12.0 and sliding['worst_rise_db'] > 10.0
-    assert sliding['never_worse'] is False
-    assert sliding['largest_rise_db'][2] == section['bands']['largest_rise_db']
-    assert 'in every 10 s window from control-on (step 1 s): worst' in printed
-    assert '12-22 s (never worse than off: NO)' in printed
+    section = json.loads((out / "report.json").read_text())["twin"]
+    assert section["bands"]["never_worse"] is True
+    sliding = section["bands_over_time"]
+    assert sliding["window_s"] == 10.0 and sliding["start_s"] == [12.0, 13.0, 14.0]
+    assert sliding["worst_start_s"] == 12.0 and sliding["worst_rise_db"] > 10.0
+    assert sliding["never_worse"] is False
+    assert sliding["largest_rise_db"][2] == section["bands"]["largest_rise_db"]
+    assert "in every 10 s window from control-on (step 1 s): worst" in printed
+    assert "12-22 s (never worse than off: NO)" in printed
 
 
 def test_a_moving_tone_is_not_compared_with_a_fixed_tone_prediction(tmp_path, capsys):
     """The LTI pair with a recorded frequency track: fixed, compared; drifting, not."""
     for span_hz, compared in ((0.0, True), (1.5, False)):
-        run, twin_bag = _lti_pair(tmp_path / f'span{span_hz}', track_span_hz=span_hz)
-        out = tmp_path / f'out{span_hz}'
-        assert analyze.main([str(run), '--twin', str(twin_bag), '--out', str(out),
-                             '--no-plots']) == 0
+        run, twin_bag = _lti_pair(tmp_path / f"span{span_hz}", track_span_hz=span_hz)
+        out = tmp_path / f"out{span_hz}"
+        assert analyze.main([str(run), "--twin", str(twin_bag), "--out", str(out),
+                             "--no-plots"]) == 0
         printed = capsys.readouterr().out
-        sens = json.loads((out / 'report.json').read_text())['twin']['sensitivity']
-        assert (sens['near_tones_points'] > 20) is compared
-        assert ('not_compared' in sens) is not compared
-        assert ('H1 not compared' in printed) is not compared
+        sens = json.loads((out / "report.json").read_text())["twin"]["sensitivity"]
+        assert (sens["near_tones_points"] > 20) is compared
+        assert ("not_compared" in sens) is not compared
+        assert ("H1 not compared" in printed) is not compared
         if not compared:
-            assert sens['not_compared'].startswith('the notch ran up to 1.50 Hz from the tones')
+            assert sens["not_compared"].startswith("the notch ran up to 1.50 Hz from the tones")
 
 
 def _ramp_40_to_43_hz() -> np.ndarray:
@@ -312,13 +312,13 @@ def test_a_tone_held_away_from_its_report_tone_is_measured_where_it_is(tmp_path)
     """
     track = _ramp_40_to_43_hz()
     x = np.sqrt(2) * G0 * 10 ** (-37 / 20) * np.sin(2 * np.pi * np.cumsum(track) / FS)
-    run, other = _decaying_pair(tmp_path, 'held', x, track[:, None], [40.0], seed=6)
-    out = tmp_path / 'out'
-    assert analyze.main([str(run), '--twin', str(other), '--out', str(out), '--no-plots']) == 0
-    row, = json.loads((out / 'report.json').read_text())['twin']['tones']
-    assert row['band'] == 'following' and row['frequency_span_hz'] == [43.0, 43.0]
-    assert row['twin_db'] == pytest.approx(-37.0, abs=0.3)
-    assert row['reduction_db'] == pytest.approx(60.0, abs=0.5)
+    run, other = _decaying_pair(tmp_path, "held", x, track[:, None], [40.0], seed=6)
+    out = tmp_path / "out"
+    assert analyze.main([str(run), "--twin", str(other), "--out", str(out), "--no-plots"]) == 0
+    row, = json.loads((out / "report.json").read_text())["twin"]["tones"]
+    assert row["band"] == "following" and row["frequency_span_hz"] == [43.0, 43.0]
+    assert row["twin_db"] == pytest.approx(-37.0, abs=0.3)
+    assert row["reduction_db"] == pytest.approx(60.0, abs=0.5)
 
 
 def test_a_second_line_that_started_on_a_report_tone_is_followed_there(tmp_path):
@@ -326,14 +326,14 @@ def test_a_second_line_that_started_on_a_report_tone_is_followed_there(tmp_path)
     track = _ramp_40_to_43_hz()
     phase = 2 * np.pi * np.cumsum(track) / FS
     x = np.sqrt(2) * G0 * 10 ** (-37 / 20) * (np.sin(phase) + 0.5 * np.sin(2 * phase))
-    run, other = _decaying_pair(tmp_path, 'orders', x, np.column_stack([track, 2 * track]),
+    run, other = _decaying_pair(tmp_path, "orders", x, np.column_stack([track, 2 * track]),
                                 [40.0, 80.0], seed=7)
-    out = tmp_path / 'out'
-    assert analyze.main([str(run), '--twin', str(other), '--out', str(out), '--no-plots']) == 0
-    rows = {r['frequency_hz']: r for r in json.loads((out / 'report.json').read_text())[
-        'twin']['tones']}
+    out = tmp_path / "out"
+    assert analyze.main([str(run), "--twin", str(other), "--out", str(out), "--no-plots"]) == 0
+    rows = {r["frequency_hz"]: r for r in json.loads((out / "report.json").read_text())[
+        "twin"]["tones"]}
     assert set(rows) == {40.0, 80.0}
-    assert rows[80.0]['band'] == 'following' and rows[80.0]['frequency_span_hz'] == [86.0, 86.0]
-    assert rows[80.0]['controlled'] is False                 # not a notch tone
-    assert rows[80.0]['twin_db'] == pytest.approx(-37.0 - 6.02, abs=0.3)
-    assert rows[80.0]['reduction_db'] == pytest.approx(60.0, abs=0.5)
+    assert rows[80.0]["band"] == "following" and rows[80.0]["frequency_span_hz"] == [86.0, 86.0]
+    assert rows[80.0]["controlled"] is False                 # not a notch tone
+    assert rows[80.0]["twin_db"] == pytest.approx(-37.0 - 6.02, abs=0.3)
+    assert rows[80.0]["reduction_db"] == pytest.approx(60.0, abs=0.5)

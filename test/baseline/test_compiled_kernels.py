@@ -34,7 +34,7 @@ def _compiled_commands(kernel, errors: np.ndarray, split: int) -> np.ndarray:
     return out
 
 
-@pytest.mark.parametrize(('channels', 'tones'), [(6, 1), (6, 8), (3, 16)])
+@pytest.mark.parametrize(("channels", "tones"), [(6, 1), (6, 8), (3, 16)])
 def test_compiled_notch_gives_the_numpy_notch_commands(channels, tones):
     notch = make_notch(channels, tones, centralized=False, seed=tones)
     errors = _errors(channels)
@@ -47,7 +47,7 @@ def test_compiled_notch_gives_the_numpy_notch_commands(channels, tones):
     np.testing.assert_allclose(got, expected, rtol=0, atol=1e-12 * np.max(np.abs(expected)))
 
 
-@pytest.mark.parametrize(('path_taps', 'tones'), [(32, 1), (64, 2), (128, 3)])
+@pytest.mark.parametrize(("path_taps", "tones"), [(32, 1), (64, 2), (128, 3)])
 def test_compiled_fxlms_gives_the_numpy_fxlms_commands(path_taps, tones):
     freqs = tuple(tone_frequencies(tones)) if tones > 1 else (40.0,)
     fxlms = make_fxlms(path_taps, 32, tones_hz=freqs, seed=path_taps)
@@ -74,40 +74,40 @@ def test_compiling_copies_the_controller_state():
 
 
 def test_compiled_notch_refuses_states_it_does_not_model():
-    with pytest.raises(ValueError, match='diagonal P'):
+    with pytest.raises(ValueError, match="diagonal P"):
         CompiledNotch(make_notch(6, 2, centralized=True))
     disabled = make_notch(6, 2, centralized=False)
     disabled.set_enabled(False)
-    with pytest.raises(ValueError, match='enabled'):
+    with pytest.raises(ValueError, match="enabled"):
         CompiledNotch(disabled)
     fading = make_notch(6, 2, centralized=False)
     fading.set_tone_frequencies([40.0])
-    with pytest.raises(ValueError, match='fading'):
+    with pytest.raises(ValueError, match="fading"):
         CompiledNotch(fading)
     lowpassed = make_notch(6, 2, centralized=False)
     lowpassed.set_update_lowpass(10.0)
-    with pytest.raises(ValueError, match='no update low-pass'):
+    with pytest.raises(ValueError, match="no update low-pass"):
         CompiledNotch(lowpassed)
     type_2 = make_notch(6, 2, centralized=False)
     type_2.set_integral_ratio(0.5)
-    with pytest.raises(ValueError, match='first-order update'):
+    with pytest.raises(ValueError, match="first-order update"):
         CompiledNotch(type_2)
 
 
 def test_compiled_fxlms_refuses_a_used_or_frozen_controller():
     used = make_fxlms(32, 32)
     used.step(np.zeros(6))
-    with pytest.raises(ValueError, match='fresh'):
+    with pytest.raises(ValueError, match="fresh"):
         CompiledFxlms(used)
     frozen = make_fxlms(32, 32)
     frozen.set_frozen(True)
-    with pytest.raises(ValueError, match='fresh'):
+    with pytest.raises(ValueError, match="fresh"):
         CompiledFxlms(frozen)
 
 
 def test_bench_skips_the_compiled_comparison_without_numba(monkeypatch):
-    monkeypatch.setitem(sys.modules, 'numba', None)
+    monkeypatch.setitem(sys.modules, "numba", None)
     result = measure_compiled_costs(QUICK_TIMING)
-    assert result == {'compiled': {'skipped': 'numba is not installed'}}
+    assert result == {"compiled": {"skipped": "numba is not installed"}}
     lines = _summary_compiled(result)
-    assert 'not measured (numba is not installed)' in lines[0]
+    assert "not measured (numba is not installed)" in lines[0]

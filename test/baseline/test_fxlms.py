@@ -49,7 +49,7 @@ class FIRPlant:
         self.past = np.zeros((h.shape[2] - 1, h.shape[1]))   # u_{n-1}, u_{n-2}, ...
 
     def output(self):
-        return np.einsum('ijl,lj->i', self.h, self.past)
+        return np.einsum("ijl,lj->i", self.h, self.past)
 
     def push(self, u):
         self.past[1:] = self.past[:-1]
@@ -103,14 +103,14 @@ def test_identification_recovers_fir_plant_despite_disturbance_tone():
 
 
 def test_identification_rejects_bad_arguments():
-    with pytest.raises(ValueError, match='n_taps'):
+    with pytest.raises(ValueError, match="n_taps"):
         SecondaryPathIdentifier(C, FS, n_taps=16)
-    with pytest.raises(ValueError, match='measure_s'):
+    with pytest.raises(ValueError, match="measure_s"):
         SecondaryPathIdentifier(C, FS, n_taps=64, measure_s=0.1)
     ident = SecondaryPathIdentifier(C, FS, n_taps=32)
-    with pytest.raises(RuntimeError, match='not finished'):
+    with pytest.raises(RuntimeError, match="not finished"):
         ident.result()
-    with pytest.raises(ValueError, match='shape'):
+    with pytest.raises(ValueError, match="shape"):
         ident.step(np.zeros(3))
 
 
@@ -182,7 +182,7 @@ def test_step_interface_warmup_disable_and_validation():
         ctl.step(np.zeros(5))
     with pytest.raises(ValueError):
         ctl.set_mu(-1.0)
-    with pytest.raises(ValueError, match='length L'):
+    with pytest.raises(ValueError, match="length L"):
         FilteredXLMSController(np.zeros((C, C, 16)), [40.0], FS)
     with pytest.raises(ValueError):
         FilteredXLMSController(h, [600.0], FS)
@@ -268,33 +268,33 @@ def test_vectorized_step_matches_explicit_loops_across_history_wraps():
 
 def test_core_loop_rejects_identification_overlapping_the_uncontrolled_window():
     sc = table1.table1_scenario(quick=True)
-    config = load_model_config(config_path('pph_model.yaml'), sc.model_overrides)
-    with pytest.raises(ValueError, match='overlap'):
+    config = load_model_config(config_path("pph_model.yaml"), sc.model_overrides)
+    with pytest.raises(ValueError, match="overlap"):
         FxlmsCoreLoop(config, dataclasses.replace(sc, control_on_s=6.5, window_s=2.0))
 
 
 # ----------------------------------------------------------------------------- benchmark
 def _report(*tones):
     """A suppression report with (attenuation dB, floor-limited) at 40 and 80 Hz."""
-    return {'tones': {f: {'attenuation_db': a, 'floor_limited': fl}
-                      for f, (a, fl) in zip(('40', '80'), tones, strict=True)}}
+    return {"tones": {f: {"attenuation_db": a, "floor_limited": fl}
+                      for f, (a, fl) in zip(("40", "80"), tones, strict=True)}}
 
 
 def test_equal_attenuation_counts_floor_limited_tones_as_equal():
     notch = _report((80.0, True), (50.0, True))
-    assert table1.equal_attenuation(notch, _report((70.0, True), (45.0, True)), ['40', '80'])
-    assert table1.equal_attenuation(notch, _report((78.0, False), (49.0, False)), ['40', '80'])
+    assert table1.equal_attenuation(notch, _report((70.0, True), (45.0, True)), ["40", "80"])
+    assert table1.equal_attenuation(notch, _report((78.0, False), (49.0, False)), ["40", "80"])
     assert not table1.equal_attenuation(notch, _report((76.0, False), (50.0, True)),
-                                       ['40', '80'])
+                                       ["40", "80"])
     assert not table1.equal_attenuation(notch, _report((90.0, True), (20.0, False)),
-                                       ['40', '80'])
+                                       ["40", "80"])
 
 
 def test_linear_fit_exact_line():
     fit = costs.linear_fit([1, 2, 4, 8], [3.0, 5.0, 9.0, 17.0])
-    assert fit['slope'] == pytest.approx(2.0)
-    assert fit['intercept'] == pytest.approx(1.0)
-    assert fit['r2'] == pytest.approx(1.0)
+    assert fit["slope"] == pytest.approx(2.0)
+    assert fit["intercept"] == pytest.approx(1.0)
+    assert fit["r2"] == pytest.approx(1.0)
 
 
 def _positive_finite(x):
@@ -303,53 +303,53 @@ def _positive_finite(x):
 
 def test_bench_quick_writes_positive_finite_numbers(tmp_path, capsys):
     # --skip-sweep: the sweep's Dask cluster (~15 s here) is exercised by test/sweep
-    assert cli.main(['--out', str(tmp_path), '--quick', '--skip-ros', '--skip-sweep']) == 0
-    results = json.loads((tmp_path / 'results.json').read_text())
-    assert 'sweep_throughput' not in results
-    summary = (tmp_path / 'summary.md').read_text()
+    assert cli.main(["--out", str(tmp_path), "--quick", "--skip-ros", "--skip-sweep"]) == 0
+    results = json.loads((tmp_path / "results.json").read_text())
+    assert "sweep_throughput" not in results
+    summary = (tmp_path / "summary.md").read_text()
     assert summary in capsys.readouterr().out
-    assert 'realtime' not in results and 'lockstep_speedup' not in results
-    for key in ('notch_us_per_sample', 'notch_centralized_us_per_sample'):
-        assert set(results[key]) == {'6x1', '6x2', '6x4', '6x8', '6x16'}
+    assert "realtime" not in results and "lockstep_speedup" not in results
+    for key in ("notch_us_per_sample", "notch_centralized_us_per_sample"):
+        assert set(results[key]) == {"6x1", "6x2", "6x4", "6x8", "6x16"}
         assert all(_positive_finite(v) for v in results[key].values())
-    for key in ('fxlms_us_per_sample', 'cost_ratio_fxlms_over_notch_6x8',
-                'cost_ratio_fxlms_over_notch_6x2'):
+    for key in ("fxlms_us_per_sample", "cost_ratio_fxlms_over_notch_6x8",
+                "cost_ratio_fxlms_over_notch_6x2"):
         assert _positive_finite(results[key])
-    assert isinstance(results['equal_attenuation'], bool)
-    targets = results['targets']
-    assert targets['cost_ratio_6x8'] == results['cost_ratio_fxlms_over_notch_6x8']
-    assert targets['cost_ratio_met'] == (targets['cost_ratio_6x8'] >= 10.0
-                                         and results['equal_attenuation'])
-    assert '## Issue targets' in summary
-    floor = results['numpy_floor_us_per_sample']
+    assert isinstance(results["equal_attenuation"], bool)
+    targets = results["targets"]
+    assert targets["cost_ratio_6x8"] == results["cost_ratio_fxlms_over_notch_6x8"]
+    assert targets["cost_ratio_met"] == (targets["cost_ratio_6x8"] >= 10.0
+                                         and results["equal_attenuation"])
+    assert "## Issue targets" in summary
+    floor = results["numpy_floor_us_per_sample"]
     assert _positive_finite(floor)
-    assert targets['numpy_cost_ratio_bound'] == pytest.approx(max(
-        *results['scaling']['fxlms_vs_path_taps']['us_per_sample'].values(),
-        *results['fxlms_8tones_us_per_sample'].values()) / floor)
-    compiled = results['compiled']
-    assert set(compiled['notch_us_per_sample']) == {'6x1', '6x2', '6x4', '6x8', '6x16'}
-    for key in ('fxlms_us_per_sample', 'fxlms_8tones_us_per_sample'):
-        assert set(compiled[key]) == {'32', '64', '128'}
+    assert targets["numpy_cost_ratio_bound"] == pytest.approx(max(
+        *results["scaling"]["fxlms_vs_path_taps"]["us_per_sample"].values(),
+        *results["fxlms_8tones_us_per_sample"].values()) / floor)
+    compiled = results["compiled"]
+    assert set(compiled["notch_us_per_sample"]) == {"6x1", "6x2", "6x4", "6x8", "6x16"}
+    for key in ("fxlms_us_per_sample", "fxlms_8tones_us_per_sample"):
+        assert set(compiled[key]) == {"32", "64", "128"}
         assert all(_positive_finite(v) for v in compiled[key].values())
-    assert compiled['cost_ratio_fxlms_over_notch_6x8'] == pytest.approx(
-        compiled['fxlms_us_per_sample']['64'] / compiled['notch_us_per_sample']['6x8'])
-    assert all(d < 1e-12 for d in compiled['max_relative_difference_vs_numpy'].values())
-    assert targets['compiled_cost_ratio_met'] == (
-        compiled['cost_ratio_fxlms_over_notch_6x8'] >= 10.0 and results['equal_attenuation'])
-    assert '## Controller cost per sample, compiled' in summary
-    for name in ('notch', 'fxlms'):
-        assert set(results['attenuation_db'][name]) == {'40', '80'}
-        assert all(_positive_finite(v) for v in results['attenuation_db'][name].values())
-        assert _positive_finite(results['convergence_s'][name])
-    scaling = results['scaling']
-    assert set(scaling['notch_vs_channels']['us_per_sample']) == {'1', '2', '3', '6', '12'}
-    assert set(scaling['fxlms_vs_path_taps']['us_per_sample']) == {'32', '64', '128'}
-    for sweep in ('notch_vs_tones', 'notch_vs_tones_large', 'notch_vs_channels',
-                  'fxlms_vs_path_taps'):
-        assert all(_positive_finite(v) for v in scaling[sweep]['us_per_sample'].values())
-        fit = next(v for k, v in scaling[sweep].items() if k.startswith('fit_'))
-        assert set(fit) == {'slope', 'intercept', 'r2'}
+    assert compiled["cost_ratio_fxlms_over_notch_6x8"] == pytest.approx(
+        compiled["fxlms_us_per_sample"]["64"] / compiled["notch_us_per_sample"]["6x8"])
+    assert all(d < 1e-12 for d in compiled["max_relative_difference_vs_numpy"].values())
+    assert targets["compiled_cost_ratio_met"] == (
+        compiled["cost_ratio_fxlms_over_notch_6x8"] >= 10.0 and results["equal_attenuation"])
+    assert "## Controller cost per sample, compiled" in summary
+    for name in ("notch", "fxlms"):
+        assert set(results["attenuation_db"][name]) == {"40", "80"}
+        assert all(_positive_finite(v) for v in results["attenuation_db"][name].values())
+        assert _positive_finite(results["convergence_s"][name])
+    scaling = results["scaling"]
+    assert set(scaling["notch_vs_channels"]["us_per_sample"]) == {"1", "2", "3", "6", "12"}
+    assert set(scaling["fxlms_vs_path_taps"]["us_per_sample"]) == {"32", "64", "128"}
+    for sweep in ("notch_vs_tones", "notch_vs_tones_large", "notch_vs_channels",
+                  "fxlms_vs_path_taps"):
+        assert all(_positive_finite(v) for v in scaling[sweep]["us_per_sample"].values())
+        fit = next(v for k, v in scaling[sweep].items() if k.startswith("fit_"))
+        assert set(fit) == {"slope", "intercept", "r2"}
         assert all(math.isfinite(v) for v in fit.values())
-    machine = results['machine_details']
-    assert machine['cpu_count'] >= 1 and machine['python'] and machine['numpy']
-    assert isinstance(results['machine'], str) and machine['python'] in results['machine']
+    machine = results["machine_details"]
+    assert machine["cpu_count"] >= 1 and machine["python"] and machine["numpy"]
+    assert isinstance(results["machine"], str) and machine["python"] in results["machine"]

@@ -10,7 +10,7 @@ from hexapod_vibration.core.model.actuation import ActuatedPlant
 from hexapod_vibration.core.model.config import load_model_config
 from hexapod_vibration.core.model.plant import PPHPlant, saturate_commands
 
-CFG = load_model_config(Path(__file__).resolve().parents[2] / 'config' / 'pph_model.yaml')
+CFG = load_model_config(Path(__file__).resolve().parents[2] / "config" / "pph_model.yaml")
 
 
 def test_apply_holds_the_saturated_sum_and_steps_the_plant():

@@ -97,7 +97,7 @@ def _raw_pure_gain_loop(gain, f, mu, n=4000):
     return err
 
 
-@pytest.mark.parametrize('f, gain', [(40.0, -1.0), (300.0, 1.0)])
+@pytest.mark.parametrize("f, gain", [(40.0, -1.0), (300.0, 1.0)])
 def test_raw_mu_real_signal_boundary_is_exact_lti_not_averaged(f, gain):
     """For real signals the loop is exactly LTI; its bound differs from eq. (18).
 
@@ -167,28 +167,28 @@ def test_mu_bound_closed_form_matches_numpy_roots():
 
 def test_normalized_coefficients_modes():
     g = frequency_response(coupled_plant(), TONES)
-    lam = ad.weight_loop_eigenvalues(g, ad.normalized_coefficients(g, 'centralized'))
+    lam = ad.weight_loop_eigenvalues(g, ad.normalized_coefficients(g, "centralized"))
     assert lam.shape == (3, 6) and np.allclose(lam, 1.0)
-    p_dec = ad.normalized_coefficients(g, 'decentralized')
+    p_dec = ad.normalized_coefficients(g, "decentralized")
     assert np.allclose(p_dec, np.stack([np.diag(-2 / np.diag(m)) for m in g]))
     lam_dec = ad.weight_loop_eigenvalues(g, p_dec)
     assert np.allclose(lam_dec.sum(axis=1), 6.0) and np.all(lam_dec.real > 0.5)
-    assert np.array_equal(ad.normalized_coefficients(g, 'raw'), np.broadcast_to(np.eye(6),
+    assert np.array_equal(ad.normalized_coefficients(g, "raw"), np.broadcast_to(np.eye(6),
                                                                                 (3, 6, 6)))
     bad = g.copy()
     bad[1] = np.outer(np.arange(1, 7), np.ones(6))        # rank one
-    with pytest.raises(ValueError, match='ill-conditioned'):
-        ad.normalized_coefficients(bad, 'centralized')
+    with pytest.raises(ValueError, match="ill-conditioned"):
+        ad.normalized_coefficients(bad, "centralized")
     with pytest.raises(ValueError):
-        ad.normalized_coefficients(g, 'optimal')
+        ad.normalized_coefficients(g, "optimal")
     zero_diag = g.copy()
     zero_diag[0, 2, 2] = 0.0
     with pytest.raises(ValueError):
-        ad.normalized_coefficients(zero_diag, 'decentralized')
+        ad.normalized_coefficients(zero_diag, "decentralized")
 
 
 # ----------------------------------------------------------------------------- coupled 6x6
-@pytest.mark.parametrize('mode', ['centralized', 'decentralized'])
+@pytest.mark.parametrize("mode", ["centralized", "decentralized"])
 def test_normalized_p_reduces_tones_by_60db_on_coupled_plant(mode):
     plant = coupled_plant()
     g = frequency_response(plant, TONES)
@@ -206,7 +206,7 @@ def test_normalized_p_reduces_tones_by_60db_on_coupled_plant(mode):
 def test_convergence_rate_matches_convergence_factor():
     plant = coupled_plant()
     g = frequency_response(plant, TONES)
-    p = ad.normalized_coefficients(g, 'decentralized')
+    p = ad.normalized_coefficients(g, "decentralized")
     mu = 0.01
     dist = shaker_disturbance(3000, TONES, 6, seed=2)
     n = np.arange(dist.shape[0])
@@ -241,7 +241,7 @@ def _growth(plant, tones, p, mu, n=4000):
     return err[-500:].max() / err[:500].max()
 
 
-@pytest.mark.parametrize('mode', ['centralized', 'decentralized'])
+@pytest.mark.parametrize("mode", ["centralized", "decentralized"])
 def test_mu_bound_separates_stable_from_unstable_where_averaging_holds(mode):
     """Coupled 6x6 pure-delay plant (d = 10) and one tone at 250 Hz: averaging holds."""
     rng = np.random.default_rng(3)
@@ -256,7 +256,7 @@ def test_mu_bound_separates_stable_from_unstable_where_averaging_holds(mode):
     assert _growth(plant, tones, p, 1.1 * bound) > 1e3
 
 
-@pytest.mark.parametrize('mode', ['centralized', 'decentralized'])
+@pytest.mark.parametrize("mode", ["centralized", "decentralized"])
 def test_exact_bound_on_resonant_plant_and_averaged_overestimate(mode):
     """Resonant coupled plant, 3 tones: the canceller's skirt meets the 55-75 Hz modes.
 
@@ -321,7 +321,7 @@ def test_the_tone_identification_leaves_missing_samples_out_of_its_fits():
     missing = np.random.default_rng(7).random(n) < 0.02
     simulate_with_gaps(plant, ident, dist, missing)
     assert ident.done and 0 < ident.missing <= np.count_nonzero(missing)
-    assert ident.missing_refusal() == ''
+    assert ident.missing_refusal() == ""
     exact = frequency_response(plant, [40.0, 80.0])
     error = np.linalg.norm(ident.result() - exact, axis=(1, 2)) / np.linalg.norm(exact,
                                                                                   axis=(1, 2))

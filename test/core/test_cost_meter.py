@@ -18,8 +18,8 @@ class FakeClock:
 def test_laps_charge_each_stage_and_a_window_closes_every_window_samples():
     thread, process = FakeClock(), FakeClock()
     meter = LoopCostMeter(thread, process)
-    wait, work = meter.stage('wait'), meter.stage('work')
-    assert meter.stage('wait') == wait                     # registered once
+    wait, work = meter.stage("wait"), meter.stage("work")
+    assert meter.stage("wait") == wait                     # registered once
     for _ in range(WINDOW_SAMPLES):
         thread.t += 30e-6
         meter.lap(wait)
@@ -29,39 +29,39 @@ def test_laps_charge_each_stage_and_a_window_closes_every_window_samples():
         assert meter.last_window() == {}                   # not closed before the end
         meter.count()
     window = meter.last_window()
-    assert window['wait'] == pytest.approx(30.0)
-    assert window['work'] == pytest.approx(70.0)
-    assert window['main thread'] == pytest.approx(100.0)
-    assert window['process'] == pytest.approx(150.0)
-    assert window['other threads'] == pytest.approx(50.0)
-    assert meter.report()['cpu_us_per_sample work'] == pytest.approx(70.0)
+    assert window["wait"] == pytest.approx(30.0)
+    assert window["work"] == pytest.approx(70.0)
+    assert window["main thread"] == pytest.approx(100.0)
+    assert window["process"] == pytest.approx(150.0)
+    assert window["other threads"] == pytest.approx(50.0)
+    assert meter.report()["cpu_us_per_sample work"] == pytest.approx(70.0)
     for _ in range(WINDOW_SAMPLES):                        # the next window stands alone
         thread.t += 10e-6
         meter.lap(work)
         process.t += 10e-6
         meter.count()
-    assert meter.last_window()['work'] == pytest.approx(10.0)
-    assert meter.last_window()['wait'] == pytest.approx(0.0)
+    assert meter.last_window()["work"] == pytest.approx(10.0)
+    assert meter.last_window()["wait"] == pytest.approx(0.0)
 
 
 def test_a_stage_registered_in_the_middle_of_a_window_counts_from_then():
     thread, process = FakeClock(), FakeClock()
     meter = LoopCostMeter(thread, process)
-    first = meter.stage('first')
+    first = meter.stage("first")
     for k in range(WINDOW_SAMPLES):
         if k == WINDOW_SAMPLES // 2:
-            late = meter.stage('late')
+            late = meter.stage("late")
         thread.t += 1e-6
         meter.lap(first if k < WINDOW_SAMPLES // 2 else late)
         meter.count()
-    assert meter.last_window()['first'] == pytest.approx(0.5)
-    assert meter.last_window()['late'] == pytest.approx(0.5)
+    assert meter.last_window()["first"] == pytest.approx(0.5)
+    assert meter.last_window()["late"] == pytest.approx(0.5)
 
 
 def test_only_the_first_owner_counts_the_samples_of_a_process():
     meter = LoopCostMeter(FakeClock(), FakeClock())
-    driver, notch = meter.counter('pph_driver'), meter.counter('notch_controller')
-    assert meter.counter('pph_driver') == meter.count      # the same owner again
+    driver, notch = meter.counter("pph_driver"), meter.counter("notch_controller")
+    assert meter.counter("pph_driver") == meter.count      # the same owner again
     driver()
     notch()
     notch()

@@ -312,7 +312,7 @@ def test_a_moved_tone_takes_p_from_the_broadband_response_and_keeps_cancelling()
 
     samples = START + 16700
     residual, _ = run(sup, lambda n: [speed(n)], [0.05], START_S, samples, reference=reference)
-    p_start = adaptation.normalized_coefficients(response.at(np.array([30.0])), 'decentralized')
+    p_start = adaptation.normalized_coefficients(response.at(np.array([30.0])), "decentralized")
     g = sup.plant_frequency_response.at(sup.canceller.tone_frequencies_hz)
     p_expected = adaptation.normalized_coefficients(g, "decentralized")
     assert sup.canceller.tone_frequencies_hz[0] == pytest.approx(speed(samples - 1), abs=0.02)

@@ -18,8 +18,8 @@ from hexapod_vibration.core.sim.closed_loop import CoreLoop
 from hexapod_vibration.core.sim.scenario import load_scenario
 
 ROOT = Path(__file__).resolve().parents[2]
-SCENARIO = load_scenario(ROOT / 'config' / 'scenarios' / 'harmonic_rise.yaml')
-CFG = load_model_config(ROOT / 'config' / 'pph_model.yaml', SCENARIO.model_overrides)
+SCENARIO = load_scenario(ROOT / "config" / "scenarios" / "harmonic_rise.yaml")
+CFG = load_model_config(ROOT / "config" / "pph_model.yaml", SCENARIO.model_overrides)
 HARMONICS = tuple(40.0 * k for k in range(1, 13))
 BETWEEN = [100.0, 140.0]                  # uncontrolled lines between the harmonics
 
@@ -34,25 +34,25 @@ def _levels(scenario):
     return dict(zip(tones, levels, strict=True)), loop, record
 
 
-@pytest.fixture(scope='module')
+@pytest.fixture(scope="module")
 def runs():
     off = dataclasses.replace(SCENARIO, control_on_s=SCENARIO.duration_s)
     harm = dataclasses.replace(SCENARIO, notch=dataclasses.replace(   # notch parameter
         SCENARIO.notch, tone_frequencies_hz=(40.0,),                   # harmonics: 11
-        settings={**SCENARIO.notch.settings, 'harmonics': len(HARMONICS) - 1}))
+        settings={**SCENARIO.notch.settings, "harmonics": len(HARMONICS) - 1}))
     return {name: _levels(sc) for name, sc in
-            (('off', off), ('notch', SCENARIO), ('harmonics', harm))}
+            (("off", off), ("notch", SCENARIO), ("harmonics", harm))}
 
 
 def test_without_control_the_joints_stay_closed_with_control_they_open(runs):
-    assert runs['off'][1].plant.fallback_samples == 0
-    assert runs['notch'][1].plant.fallback_samples > 1000        # free-play crossings
-    force = np.abs(runs['notch'][2].notch_command_n[-10_000:]).max()
+    assert runs["off"][1].plant.fallback_samples == 0
+    assert runs["notch"][1].plant.fallback_samples > 1000        # free-play crossings
+    force = np.abs(runs["notch"][2].notch_command_n[-10_000:]).max()
     assert 25.0 < force < CFG.strut.force_limit_dynamic_n       # near the rating, unclipped
 
 
 def test_uncontrolled_harmonics_rise_under_control(runs):
-    off, notch = runs['off'][0], runs['notch'][0]
+    off, notch = runs["off"][0], runs["notch"][0]
     assert notch[40.0] < off[40.0] - 60.0
     assert notch[80.0] < off[80.0] + 3.0                          # both at the floor
     rises = [notch[f] - off[f] for f in HARMONICS[2:]]            # 120..480 Hz
@@ -61,7 +61,7 @@ def test_uncontrolled_harmonics_rise_under_control(runs):
 
 
 def test_cancelling_the_harmonics_removes_the_rise(runs):
-    off, notch, harm = runs['off'][0], runs['notch'][0], runs['harmonics'][0]
+    off, notch, harm = runs["off"][0], runs["notch"][0], runs["harmonics"][0]
     for f in HARMONICS[2:10]:                                     # 120..400 Hz
         assert harm[f] <= notch[f] - 30.0, f
     for f in BETWEEN:                                             # uncontrolled lines

@@ -28,7 +28,7 @@ def _cancel(line_hz: float, samples: int, monitor: LineOffsetMonitor) -> np.ndar
     return np.array(errors)
 
 
-@pytest.mark.parametrize('offset_hz', [-0.6, -0.3, 0.0, 0.3, 1.0])
+@pytest.mark.parametrize("offset_hz", [-0.6, -0.3, 0.0, 0.3, 1.0])
 def test_a_real_canceller_s_weights_turn_at_the_line_s_offset_eq_21(offset_hz):
     monitor = LineOffsetMonitor(1, FS)
     errors = _cancel(TONE + offset_hz, 15000, monitor)
@@ -67,9 +67,9 @@ def test_weights_that_wander_are_incoherent():
     assert monitor.ready and monitor.coherence[0] < MIN_COHERENCE
 
 
-@pytest.mark.parametrize('block, tau', [(0, 0.5), (50, 0.0), (50, float('nan'))])
+@pytest.mark.parametrize("block, tau", [(0, 0.5), (50, 0.0), (50, float("nan"))])
 def test_bad_settings_are_refused(block, tau):
-    with pytest.raises(ValueError, match='block_samples'):
+    with pytest.raises(ValueError, match="block_samples"):
         LineOffsetMonitor(1, FS, block, tau)
 
 

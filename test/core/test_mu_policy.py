@@ -26,26 +26,26 @@ def _far_field_plant():
 
 
 def _rise(g, tones, p, rates):
-    return sen.predict_sensitivity(g, tones, FS, p, rates).largest_rise('sigma_max')[0]
+    return sen.predict_sensitivity(g, tones, FS, p, rates).largest_rise("sigma_max")[0]
 
 
 def test_manual_keeps_mu_and_warns_when_the_prediction_breaks_the_limit():
     _, g = _far_field_plant()
     tones = [39.0, 40.0]
-    p = ad.normalized_coefficients(g(tones), 'centralized')
-    high = mu_policy.choose_tone_rates(g, tones, FS, p, 0.0008, 'manual', 1.0)
+    p = ad.normalized_coefficients(g(tones), "centralized")
+    high = mu_policy.choose_tone_rates(g, tones, FS, p, 0.0008, "manual", 1.0)
     assert np.all(high.tone_mu == 0.0008)
     assert high.predicted_rise_db > 1.0
-    assert 'predicts a rise' in high.warning and 'max_rise_db=1' in high.warning
-    low = mu_policy.choose_tone_rates(g, tones, FS, p, 1e-5, 'manual', 1.0)
+    assert "predicts a rise" in high.warning and "max_rise_db=1" in high.warning
+    low = mu_policy.choose_tone_rates(g, tones, FS, p, 1e-5, "manual", 1.0)
     assert low.warning is None and low.within_limit
 
 
 def test_auto_takes_the_largest_rates_within_the_limit():
     _, g = _far_field_plant()
     tones = [39.0, 40.0, 80.0]
-    p = ad.normalized_coefficients(g(tones), 'centralized')
-    choice = mu_policy.choose_tone_rates(g, tones, FS, p, 0.0008, 'auto', 1.0)
+    p = ad.normalized_coefficients(g(tones), "centralized")
+    choice = mu_policy.choose_tone_rates(g, tones, FS, p, 0.0008, "auto", 1.0)
     assert choice.warning is None
     assert choice.predicted_rise_db <= 1.0 + 1e-9
     assert np.all(choice.tone_mu <= 0.0008) and np.any(choice.tone_mu < 0.0008)
@@ -61,10 +61,10 @@ def test_auto_says_so_when_no_rate_helps():
     """A coefficient 60 deg off gives +6 dB beside the notch at any rate."""
     plant = resonance_bank(300.0, 0.5, 1.0)
     g = lambda f: frequency_response(plant, f)  # noqa: E731
-    p = ad.normalized_coefficients(g([40.0]), 'centralized') * np.exp(1j * np.pi / 3)
-    choice = mu_policy.choose_tone_rates(g, [40.0], FS, p, 0.002, 'auto', 3.0)
+    p = ad.normalized_coefficients(g([40.0]), "centralized") * np.exp(1j * np.pi / 3)
+    choice = mu_policy.choose_tone_rates(g, [40.0], FS, p, 0.002, "auto", 3.0)
     assert np.all(choice.tone_mu == 0.002)
-    assert 'remain at any rate' in choice.warning
+    assert "remain at any rate" in choice.warning
 
 
 def test_auto_still_bounds_the_far_rise_when_the_notch_floor_breaks_the_limit():
@@ -75,34 +75,34 @@ def test_auto_still_bounds_the_far_rise_when_the_notch_floor_breaks_the_limit():
     """
     _, g = _far_field_plant()
     tones = [39.0, 40.0]
-    p = ad.normalized_coefficients(g(tones), 'centralized') * np.exp(1j * np.pi / 6)
+    p = ad.normalized_coefficients(g(tones), "centralized") * np.exp(1j * np.pi / 6)
     assert _rise(g, tones, p, np.full(2, 0.0008)) > 8.0
     floor = _rise(g, tones, p, np.full(2, 0.0008 * mu_policy.SMALLEST_SCALE))
-    choice = mu_policy.choose_tone_rates(g, tones, FS, p, 0.0008, 'auto', 0.5)
+    choice = mu_policy.choose_tone_rates(g, tones, FS, p, 0.0008, "auto", 0.5)
     assert np.all(choice.tone_mu < 0.0008)
     assert floor < choice.predicted_rise_db <= floor + mu_policy.FLOOR_MARGIN_DB + 1e-9
-    assert 'remain at any rate' in choice.warning and 'rates bounded' in choice.warning
+    assert "remain at any rate" in choice.warning and "rates bounded" in choice.warning
 
 
 def test_unstable_loop_is_reported():
     plant = resonance_bank(60.0, 0.02, 1.0)
     g = lambda f: frequency_response(plant, f)  # noqa: E731
-    p = ad.normalized_coefficients(g([40.0]), 'decentralized')
+    p = ad.normalized_coefficients(g([40.0]), "decentralized")
     exact = ad.exact_mu_bound(plant, [40.0], FS, p)
-    manual = mu_policy.choose_tone_rates(g, [40.0], FS, p, 1.5 * exact, 'manual')
-    assert manual.predicted_rise_db == float('inf') and 'unstable' in manual.warning
-    auto = mu_policy.choose_tone_rates(g, [40.0], FS, p, 1.5 * exact, 'auto')
+    manual = mu_policy.choose_tone_rates(g, [40.0], FS, p, 1.5 * exact, "manual")
+    assert manual.predicted_rise_db == float("inf") and "unstable" in manual.warning
+    auto = mu_policy.choose_tone_rates(g, [40.0], FS, p, 1.5 * exact, "auto")
     assert auto.tone_mu[0] < exact and auto.within_limit
 
 
 def test_bad_settings_are_refused():
     _, g = _far_field_plant()
-    p = ad.normalized_coefficients(g([40.0]), 'centralized')
-    with pytest.raises(ValueError, match='mu_policy'):
-        mu_policy.choose_tone_rates(g, [40.0], FS, p, 0.002, 'fast')
-    with pytest.raises(ValueError, match='max_rise_db'):
-        mu_policy.choose_tone_rates(g, [40.0], FS, p, 0.002, 'auto', 0.0)
-    with pytest.raises(ValueError, match='metric'):
-        mu_policy.choose_tone_rates(g, [40.0], FS, p, 0.002, 'auto', metric='mean')
-    with pytest.raises(ValueError, match='output_weights'):
-        mu_policy.choose_tone_rates(g, [40.0], FS, p, 0.002, 'auto', metric='output')
+    p = ad.normalized_coefficients(g([40.0]), "centralized")
+    with pytest.raises(ValueError, match="mu_policy"):
+        mu_policy.choose_tone_rates(g, [40.0], FS, p, 0.002, "fast")
+    with pytest.raises(ValueError, match="max_rise_db"):
+        mu_policy.choose_tone_rates(g, [40.0], FS, p, 0.002, "auto", 0.0)
+    with pytest.raises(ValueError, match="metric"):
+        mu_policy.choose_tone_rates(g, [40.0], FS, p, 0.002, "auto", metric="mean")
+    with pytest.raises(ValueError, match="output_weights"):
+        mu_policy.choose_tone_rates(g, [40.0], FS, p, 0.002, "auto", metric="output")

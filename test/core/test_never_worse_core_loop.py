@@ -38,7 +38,7 @@ def _twins(name: str):
 
     The start of control and a fade lie before the report's window: hence every window.
     """
-    scenario = load_scenario(ROOT / 'config' / 'scenarios' / f'{name}.yaml')
+    scenario = load_scenario(ROOT / "config" / "scenarios" / f"{name}.yaml")
     loop, z_on, z_off = _run_with_twin(scenario)
     bands = third_octave_bands_hz(5.0, 450.0)[:, 1:]
     bands = np.vstack([bands, [[36.0, 44.0]]])
@@ -47,34 +47,34 @@ def _twins(name: str):
     return loop, rise, _worst_window_rise(scenario, z_on, z_off, bands)
 
 
-@pytest.mark.parametrize('name', ['mismatch', 'drift', 'drift_tracking',
-                                  'single_tone_harmonic'])
+@pytest.mark.parametrize("name", ["mismatch", "drift", "drift_tracking",
+                                  "single_tone_harmonic"])
 def test_every_band_stays_within_1db_of_its_level_without_control(name):
     loop, rise, worst = _twins(name)
     assert np.max(rise) < 1.0, rise
     assert worst < 1.0, worst          # in every window from control-on, too
     status = loop.notch.status()
     assert loop.notch.plant_frequency_response is not None       # identified with the line
-    assert status['identification_confidence'] > 0.9
-    if name == 'drift_tracking':
-        assert status['guard'] == 'watching' and rise[-1] < -30.0, rise[-1]
-    elif name == 'single_tone_harmonic':
+    assert status["identification_confidence"] > 0.9
+    if name == "drift_tracking":
+        assert status["guard"] == "watching" and rise[-1] < -30.0, rise[-1]
+    elif name == "single_tone_harmonic":
         # Table 1 at the paper's mu 0.002: the update low-pass keeps the 18.7 Hz loop mode
         # down (the paper's update: 20 Hz third octave +1.74 dB), the 40 Hz band at the floor
-        assert loop.notch.config.update_lowpass_hz > 0.0 and status['tone_mu'] == [0.002] * 2
-        assert status['guard'] == 'watching' and rise[-1] < -60.0, rise[-1]
-    elif name == 'mismatch':
-        assert status['guard'] == 'watching' and rise[-1] < -1.0  # control helps its band
-        assert status['predicted_rise_db'] <= 0.7 + 1e-6
+        assert loop.notch.config.update_lowpass_hz > 0.0 and status["tone_mu"] == [0.002] * 2
+        assert status["guard"] == "watching" and rise[-1] < -60.0, rise[-1]
+    elif name == "mismatch":
+        assert status["guard"] == "watching" and rise[-1] < -1.0  # control helps its band
+        assert status["predicted_rise_db"] <= 0.7 + 1e-6
         # the line located from the weights' turning: 40.4 Hz, where control still helps
-        assert status['line_offset_hz'] == [pytest.approx(0.4, abs=0.01)]
+        assert status["line_offset_hz"] == [pytest.approx(0.4, abs=0.01)]
     else:
         # the drifting line located off the notch (> 0.6 Hz, where control would gain
         # less than the 1 dB margin) before any band rose: faded out, saying where it is
-        assert status['guard'] == 'off' and status['state'] == 'refused'
-        assert 'line off the notch' in status['refusal'], status['refusal']
-        at_hz = float(status['guard_action'].split('its line is at ')[1].split(' Hz')[0])
-        assert 40.6 < at_hz <= 41.0, status['guard_action']
+        assert status["guard"] == "off" and status["state"] == "refused"
+        assert "line off the notch" in status["refusal"], status["refusal"]
+        at_hz = float(status["guard_action"].split("its line is at ")[1].split(" Hz")[0])
+        assert 40.6 < at_hz <= 41.0, status["guard_action"]
         # mu fell to 0 before the weights froze (no kink of the output's phase), then the
         # output faded; the oscillator stayed on the told tone
         assert loop.notch.canceller.output_gain == 0.0 and loop.notch.canceller.mu == 0.0
@@ -96,8 +96,8 @@ def _following_db(z: np.ndarray, track_hz: np.ndarray, window: int = 1000) -> np
 
 def _spin_up_runs(name: str):
     """(loop, z with control, z of the twin, rotor speed per sample Hz) of a spin-up file."""
-    scenario = load_scenario(ROOT / 'config' / 'scenarios' / f'{name}.yaml')
-    assert scenario.notch.settings['update_lowpass_hz'] > 0.0
+    scenario = load_scenario(ROOT / "config" / "scenarios" / f"{name}.yaml")
+    assert scenario.notch.settings["update_lowpass_hz"] > 0.0
     loop, z_on, z_off = _run_with_twin(scenario)
     speed = scenario.rotor.rotor().speed_hz(np.arange(z_on.size) / FS)
     return scenario, loop, z_on, z_off, speed
@@ -113,7 +113,7 @@ def test_spin_up_tracked_meets_the_ramp_and_steady_targets_and_is_never_worse():
     dB; with the paper's update the ramp min was 38 / 32 / 14 dB at the rates the policy
     then allowed.)
     """
-    scenario, loop, z_on, z_off, speed = _spin_up_runs('spin_up')
+    scenario, loop, z_on, z_off, speed = _spin_up_runs("spin_up")
     start_s = np.arange(z_on.size // 1000)
     ramp, steady = (start_s >= 17) & (start_s < 36), (start_s >= 38) & (start_s < 50)
     for order in scenario.rotor.orders:
@@ -125,7 +125,7 @@ def test_spin_up_tracked_meets_the_ramp_and_steady_targets_and_is_never_worse():
         span = slice(lo * 1000, hi * 1000)
         rise = _band_db(z_on[span], bands) - _band_db(z_off[span], bands)
         assert np.max(rise) < 1.0, (lo, hi, np.round(rise, 2))
-    assert loop.notch.status()['guard'] == 'watching'
+    assert loop.notch.status()["guard"] == "watching"
 
 
 def test_spin_up_on_the_tachometer_meets_every_order_from_the_ramp_start():
@@ -140,7 +140,7 @@ def test_spin_up_on_the_tachometer_meets_every_order_from_the_ramp_start():
     24.5 dB. With the 0.012 ceiling it gets 0.0114 (orders 1 and 2 keep theirs): 52.2 dB.
     (Measured: ramp min 42.2 / 35.2 / 51.7 dB, worst 12 s window +0.79 dB.)
     """
-    scenario, loop, z_on, z_off, speed = _spin_up_runs('spin_up_tachometer')
+    scenario, loop, z_on, z_off, speed = _spin_up_runs("spin_up_tachometer")
     start_s = np.arange(z_on.size // 1000)
     ramp = (start_s >= 16) & (start_s < 36)
     steady = slice(38000, 50000)
@@ -154,5 +154,5 @@ def test_spin_up_on_the_tachometer_meets_every_order_from_the_ramp_start():
     worst = _worst_window_rise(scenario, z_on, z_off, third_octave_bands_hz(5.0, 450.0)[:, 1:])
     assert worst < 1.0, worst
     status = loop.notch.status()
-    assert status['guard'] == 'watching' and status['reference'] == 'following'
-    assert status['tone_mu'][2] > 0.01 > max(status['tone_mu'][:2]), status['tone_mu']
+    assert status["guard"] == "watching" and status["reference"] == "following"
+    assert status["tone_mu"][2] > 0.01 > max(status["tone_mu"][:2]), status["tone_mu"]

@@ -204,15 +204,15 @@ def _same(s1, s2):
     return all(np.array_equal(a, b) for a, b in zip(s1, s2, strict=True))
 
 
-@pytest.mark.parametrize('bad_call', [
+@pytest.mark.parametrize("bad_call", [
     lambda a: a.set_mu(-0.1),
-    lambda a: a.set_mu(float('nan')),
-    lambda a: a.set_mu('fast'),
+    lambda a: a.set_mu(float("nan")),
+    lambda a: a.set_mu("fast"),
     lambda a: a.set_tone_frequencies([40.0, 500.0]),
     lambda a: a.set_tone_frequencies([0.0]),
     lambda a: a.set_tone_frequencies([-5.0]),
     lambda a: a.set_tone_frequencies([40.0, 40.0]),
-    lambda a: a.set_tone_frequencies([float('inf')]),
+    lambda a: a.set_tone_frequencies([float("inf")]),
     lambda a: a.set_tone_frequencies([50.0, 60.0], coefficients=np.ones((3, 2, 2))),
     lambda a: a.set_coefficients(np.ones((2, 3, 3))),
     lambda a: a.set_coefficients(np.full((2, 2, 2), np.nan)),
@@ -260,7 +260,7 @@ def test_advance_equals_steps_with_zero_error():
     np.testing.assert_allclose(skipped.step(np.zeros(6)), stepped.step(np.zeros(6)), atol=1e-9)
 
 
-@pytest.mark.parametrize('centralized,integral,lowpass', [
+@pytest.mark.parametrize("centralized,integral,lowpass", [
     (False, False, False), (True, False, False), (False, True, False), (True, True, False),
     (False, True, True), (True, False, True)])
 def test_step_does_not_allocate_arrays_across_phasor_resyncs(centralized, integral, lowpass):
@@ -379,7 +379,7 @@ def test_type_2_state_is_kept_cleared_and_validated():
     anc.set_weights(np.full((2, 2), 100.0))
     assert anc.limit_weights(1.0) and not np.any(anc.weight_rates)      # anti-windup
     for bad in (-0.1, [0.5], np.nan):
-        with pytest.raises(ValueError, match='integral ratio'):
+        with pytest.raises(ValueError, match="integral ratio"):
             anc.set_integral_ratio(bad)
     assert anc.integral_ratio.tolist() == [0.5, 0.5]
 
@@ -399,7 +399,7 @@ def _measured_canceller_response(anc, freq_hz, channel, seconds=20.0):
     return 2.0 * (w * np.exp(-2j * np.pi * freq_hz * n / FS)) @ u / w.sum()
 
 
-@pytest.mark.parametrize('corner_hz', [0.0, 10.0])
+@pytest.mark.parametrize("corner_hz", [0.0, 10.0])
 def test_update_lowpass_shapes_k_as_the_closed_form_says(corner_hz):
     """K measured on the canceller (full P, two tones) equals the closed form.
 
@@ -444,7 +444,7 @@ def test_update_lowpass_keeps_the_notch_and_is_validated():
     for e in np.random.default_rng(0).standard_normal((300, 2)):
         np.testing.assert_array_equal(off.step(e), plain.step(e))
     for bad in (-1.0, np.nan, 500.0):
-        with pytest.raises(ValueError, match='update_lowpass_hz'):
+        with pytest.raises(ValueError, match="update_lowpass_hz"):
             off.set_update_lowpass(bad)
     assert off.update_lowpass_hz == 0.0
 

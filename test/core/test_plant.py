@@ -226,21 +226,21 @@ def test_model_config_rejects_bad_values_clearly():
 def test_shaker_can_push_on_the_top_plate_and_bad_bodies_are_refused():
     from hexapod_vibration.core.model.plant import IN_SHAKER, LinearHexapodModel
 
-    top = load_model_config(MODEL_PATH, {'shaker': {'mounted_on': 'top_plate'}})
+    top = load_model_config(MODEL_PATH, {"shaker": {"mounted_on": "top_plate"}})
     for config, pushed, free in ((CFG, slice(6, 12), slice(0, 6)),
                                  (top, slice(0, 6), slice(6, 12))):
         column = LinearHexapodModel(config).input_map[:, IN_SHAKER]
         assert column[pushed][2] == 1.0 and not np.any(column[free])
-    with pytest.raises(ValueError, match='mounted_on'):
-        load_model_config(MODEL_PATH, {'shaker': {'mounted_on': 'table'}})
+    with pytest.raises(ValueError, match="mounted_on"):
+        load_model_config(MODEL_PATH, {"shaker": {"mounted_on": "table"}})
 
 
 def test_a_model_file_without_the_shaker_body_keeps_the_bottom_plate():
     import yaml
 
     data = yaml.safe_load(MODEL_PATH.read_text())
-    del data['shaker']['mounted_on']
-    assert model_config_from_dict(data).shaker.mounted_on == 'bottom_plate'
-    del data['shaker']['force_limit_n']
-    with pytest.raises(ValueError, match='force_limit_n'):
+    del data["shaker"]["mounted_on"]
+    assert model_config_from_dict(data).shaker.mounted_on == "bottom_plate"
+    del data["shaker"]["force_limit_n"]
+    with pytest.raises(ValueError, match="force_limit_n"):
         model_config_from_dict(data)

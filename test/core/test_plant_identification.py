@@ -45,17 +45,17 @@ def test_design_excites_odd_bins_once_each_with_the_asked_rms():
 
 
 def test_bad_designs_are_refused():
-    with pytest.raises(ValueError, match='n_channels'):
+    with pytest.raises(ValueError, match="n_channels"):
         zippered_odd_multisine(0, FS)
-    with pytest.raises(ValueError, match='period_s'):
+    with pytest.raises(ValueError, match="period_s"):
         zippered_odd_multisine(6, FS, period_s=0.0105)
-    with pytest.raises(ValueError, match='amplitude_rms_n'):
+    with pytest.raises(ValueError, match="amplitude_rms_n"):
         zippered_odd_multisine(6, FS, amplitude_rms_n=-1.0)
-    with pytest.raises(ValueError, match='fewer than 2 lines'):
+    with pytest.raises(ValueError, match="fewer than 2 lines"):
         zippered_odd_multisine(6, FS, period_s=1.0, min_frequency_hz=490.0)
 
 
-@pytest.fixture(scope='module')
+@pytest.fixture(scope="module")
 def coupled_run():
     """The coupled plant under noise, a tone on the even grid and one off it."""
     plant = _coupled_plant()
@@ -114,9 +114,9 @@ def test_disturbance_spectrum_measures_the_noise_and_leaves_the_lines_out():
 def test_result_before_the_end_is_refused():
     ident = BroadbandIdentifier(2, FS, period_s=1.0, settle_s=0.0)
     ident.step(np.zeros(2))
-    with pytest.raises(RuntimeError, match='not finished'):
+    with pytest.raises(RuntimeError, match="not finished"):
         ident.result()
-    with pytest.raises(ValueError, match='shape'):
+    with pytest.raises(ValueError, match="shape"):
         ident.step(np.zeros(3))
 
 
@@ -129,18 +129,18 @@ def test_pph_loop_response_matches_its_impulse_response():
     from hexapod_vibration.core.sim.scenario import ShakerSettings, load_scenario
 
     root = Path(__file__).resolve().parents[2]
-    scenario = load_scenario(root / 'config' / 'scenarios' / 'close_tones.yaml')
+    scenario = load_scenario(root / "config" / "scenarios" / "close_tones.yaml")
     scenario = dataclasses.replace(scenario, nonlinear=False, identify_at_s=6.0,
                                    window_s=0.5)
-    quiet = load_model_config(root / 'config' / 'pph_model.yaml', {
-        'accelerometer': {'noise_density_g_per_sqrt_hz': 0.0, 'bits': 24},
-        'eddy': {'noise_rms_m': 0.0}})
+    quiet = load_model_config(root / "config" / "pph_model.yaml", {
+        "accelerometer": {"noise_density_g_per_sqrt_hz": 0.0, "bits": 24},
+        "eddy": {"noise_rms_m": 0.0}})
     impulse = ImpulseIdentifier(record_s=10.0)
     end = 6.0 + impulse.duration_s + 0.5
     ImpulseLoop(quiet, dataclasses.replace(scenario, shaker=ShakerSettings(),
                                            duration_s=end, control_on_s=end), impulse).run()
     f_ref, g_ref = impulse.result()
-    running = IdentifyingLoop(load_model_config(root / 'config' / 'pph_model.yaml'),
+    running = IdentifyingLoop(load_model_config(root / "config" / "pph_model.yaml"),
                               dataclasses.replace(scenario, duration_s=17.0,
                                                   control_on_s=17.0),
                               enable_control=False)
@@ -226,10 +226,10 @@ def test_missing_samples_are_left_out_of_the_broadband_record():
         assert ident.done and ident.missing == np.count_nonzero(measured)
         if worst is None:
             assert ident.missing_refusal() == (
-                f'{ident.missing} of its 8000 measured samples '
-                f'({100 * ident.missing / 8000:.1f} %) missing (> 5 %)')
+                f"{ident.missing} of its 8000 measured samples "
+                f"({100 * ident.missing / 8000:.1f} %) missing (> 5 %)")
             continue
-        assert ident.missing_refusal() == ''
+        assert ident.missing_refusal() == ""
         got = ident.result().at(np.arange(20.0, 300.0, 0.37))
         error = np.linalg.norm(got - exact, axis=(1, 2)) / np.linalg.norm(exact, axis=(1, 2))
         assert np.median(error) < 0.01 and np.max(error) < worst

@@ -66,23 +66,23 @@ def test_per_tone_rates_fold_into_the_coefficients():
     k_folded = sen.canceller_frequency_response([39.0, 40.0], FS, folded, 0.004, f)
     k_rates = sen.canceller_frequency_response([39.0, 40.0], FS, p, [0.001, 0.004], f)
     assert np.allclose(k_folded, k_rates, rtol=1e-12, atol=0)
-    with pytest.raises(ValueError, match='mu must be > 0'):
+    with pytest.raises(ValueError, match="mu must be > 0"):
         sen.per_tone_coefficients(p, 0.0, [0.001, 0.004])
-    with pytest.raises(ValueError, match='per-tone rates'):
+    with pytest.raises(ValueError, match="per-tone rates"):
         sen.per_tone_coefficients(p, 0.004, [0.001])
 
 
 def test_sensitivity_is_zero_at_the_tones_and_one_far_away():
     plant = _coupled_plant()
     g = _exact(plant)
-    p = ad.normalized_coefficients(g(TONES), 'centralized')
+    p = ad.normalized_coefficients(g(TONES), "centralized")
     pred = sen.predict_sensitivity(g, TONES, FS, p, 0.002, frequencies_hz=[39.0, 40.0, 300.0])
     assert np.all(pred.sigma_max[:2] < 1e-6)
     assert abs(pred.sigma_max[2] - 1.0) < 0.01
     assert pred.stable
 
 
-@pytest.mark.parametrize('mode', ['centralized', 'decentralized'])
+@pytest.mark.parametrize("mode", ["centralized", "decentralized"])
 def test_prediction_matches_the_simulated_loop(mode):
     """Same noise with and without the canceller: the ratio of the spectra is |S|^2.
 
@@ -95,15 +95,15 @@ def test_prediction_matches_the_simulated_loop(mode):
     n, mu = 200_000, 0.002
     dist = 0.01 * np.random.default_rng(4).normal(size=(n, 3))
     errors = simulate(plant, AdaptiveNotchCanceller(3, TONES, FS, mu, p), dist)
-    f, p_on = signal.welch(errors[20_000:], FS, window='hann', nperseg=4000, axis=0)
-    _, p_off = signal.welch(dist[20_000:], FS, window='hann', nperseg=4000, axis=0)
+    f, p_on = signal.welch(errors[20_000:], FS, window="hann", nperseg=4000, axis=0)
+    _, p_off = signal.welch(dist[20_000:], FS, window="hann", nperseg=4000, axis=0)
     measured = 10 * np.log10(p_on / p_off)                        # (F, 3)
     grid = sen.prediction_grid(TONES, FS, mu)
     s = sen.sensitivity_matrix(g(grid), sen.canceller_frequency_response(TONES, FS, p, mu,
                                                                           grid))
     power = np.sum(np.abs(s) ** 2, axis=2)                        # white, equal noise
     near = np.flatnonzero((f > 34.0) & (f < 45.0))
-    win = signal.get_window('hann', 4000)
+    win = signal.get_window("hann", 4000)
     expected = np.empty((near.size, 3))
     for m, k in enumerate(near):
         sel = np.abs(grid - f[k]) < 3.0
@@ -116,7 +116,7 @@ def test_prediction_matches_the_simulated_loop(mode):
     assert np.sqrt(np.mean(error ** 2)) < 0.3
     assert np.max(np.abs(error)) < 1.0
     assert np.min(expected) < -6.0                                # the notches are resolved
-    if mode == 'decentralized':                                   # and the coupling's rise
+    if mode == "decentralized":                                   # and the coupling's rise
         assert np.max(expected) > 0.3
 
 
@@ -125,7 +125,7 @@ def test_nyquist_test_agrees_with_the_exact_bound():
                          (resonance_bank(60.0, 0.02, 1.0), [100.0]),
                          (_coupled_plant(), TONES)):
         g = _exact(plant)
-        p = ad.normalized_coefficients(g(tones), 'decentralized')
+        p = ad.normalized_coefficients(g(tones), "decentralized")
         exact = ad.exact_mu_bound(plant, tones, FS, p)
         assert sen.closed_loop_is_stable(g, tones, FS, p, 0.95 * exact)
         assert not sen.closed_loop_is_stable(g, tones, FS, p, 1.05 * exact)
@@ -137,9 +137,9 @@ def test_largest_rise_is_where_the_weight_loop_turns():
     """A coefficient off by 60 deg: |S| peaks at 1/cos(60 deg) (+6 dB) beside the notch."""
     plant = resonance_bank(300.0, 0.5, 1.0)                       # flat near 40 Hz
     g = _exact(plant)
-    p = ad.normalized_coefficients(g([40.0]), 'centralized') * np.exp(1j * np.pi / 3)
+    p = ad.normalized_coefficients(g([40.0]), "centralized") * np.exp(1j * np.pi / 3)
     for mu in (0.0005, 0.002):
-        rise, at_hz = sen.predict_sensitivity(g, [40.0], FS, p, mu).largest_rise('sigma_max')
+        rise, at_hz = sen.predict_sensitivity(g, [40.0], FS, p, mu).largest_rise("sigma_max")
         assert abs(rise - 20 * np.log10(2.0)) < 0.3
         assert 0.0 < abs(at_hz - 40.0) < 4 * mu * FS / (2 * np.pi)
 
@@ -147,7 +147,7 @@ def test_largest_rise_is_where_the_weight_loop_turns():
 def test_output_view_weights_the_disturbance():
     plant = _coupled_plant()
     g = _exact(plant)
-    p = ad.normalized_coefficients(g(TONES), 'decentralized')
+    p = ad.normalized_coefficients(g(TONES), "decentralized")
     f = np.array([38.5, 41.0])
     s = sen.sensitivity_matrix(g(f), sen.canceller_frequency_response(TONES, FS, p, 0.002, f))
     c = np.array([1.0, 0.0, 0.0])

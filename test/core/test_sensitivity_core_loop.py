@@ -29,11 +29,11 @@ from sensitivity_loop import (  # noqa: E402
 )
 
 ROOT = Path(__file__).resolve().parents[2]
-CFG = load_model_config(ROOT / 'config' / 'pph_model.yaml')
+CFG = load_model_config(ROOT / "config" / "pph_model.yaml")
 
 
 def _scenario(name):
-    return load_scenario(ROOT / 'config' / 'scenarios' / f'{name}.yaml')
+    return load_scenario(ROOT / "config" / "scenarios" / f"{name}.yaml")
 
 
 def _twins(scenario, config=CFG, **kwargs):
@@ -59,10 +59,10 @@ def _compare(loops, records, seconds, window, exclude_hz=()):
     return f[near], measured[near], predicted
 
 
-@pytest.fixture(scope='module')
+@pytest.fixture(scope="module")
 def noise_only():
     """Linear PPH, broadband shaker noise only, notch at 39 and 40 Hz (mu 0.002)."""
-    sc = _scenario('close_tones')
+    sc = _scenario("close_tones")
     sc = dataclasses.replace(sc, nonlinear=False, shaker=ShakerSettings(noise_rms_n=2.0),
                              control_on_s=15.0, duration_s=85.0, window_s=1.0)
     return _twins(sc)
@@ -70,7 +70,7 @@ def noise_only():
 
 def test_linear_plant_measured_sensitivity_is_the_predicted_one_within_1db(noise_only):
     loops, records = noise_only
-    f, measured, predicted = _compare(loops, records, 60.0, 'hann')
+    f, measured, predicted = _compare(loops, records, 60.0, "hann")
     outside = predicted > -6.0                  # inside the notches: checked below
     assert np.max(np.abs(measured[outside] - predicted[outside])) < 1.0
     assert np.sqrt(np.mean((measured - predicted) ** 2)) < 0.4
@@ -78,15 +78,15 @@ def test_linear_plant_measured_sensitivity_is_the_predicted_one_within_1db(noise
     assert np.max(predicted) > 0.5              # there is a rise to predict (36 Hz, +1 dB)
 
 
-@pytest.fixture(scope='module')
+@pytest.fixture(scope="module")
 def close_tones_nonlinear():
-    sc = _scenario('close_tones').with_timeline(duration_s=75.0, control_on_s=25.0)
+    sc = _scenario("close_tones").with_timeline(duration_s=75.0, control_on_s=25.0)
     return _twins(sc)
 
 
 def test_nonlinear_close_tones_measured_sensitivity_within_3db(close_tones_nonlinear):
     loops, records = close_tones_nonlinear
-    f, measured, predicted = _compare(loops, records, 40.0, 'blackmanharris',
+    f, measured, predicted = _compare(loops, records, 40.0, "blackmanharris",
                                       exclude_hz=(39.0, 40.0))
     assert np.max(np.abs(measured - predicted)) < 3.0
     assert np.sqrt(np.mean((measured - predicted) ** 2)) < 1.0
@@ -97,9 +97,9 @@ def test_the_largest_rise_is_far_from_the_tones_and_predicted(close_tones_nonlin
     loops, records = close_tones_nonlinear
     n = int(40.0 * FS)
     f, measured = welch_ratio_db(z_axis(CFG, records[True])[-n:],
-                                 z_axis(CFG, records[False])[-n:], window='blackmanharris')
+                                 z_axis(CFG, records[False])[-n:], window="blackmanharris")
     band = (f > 15.0) & (f < 25.0)
-    rise_db, rise_hz = loops[True].predict().largest_rise('output')
+    rise_db, rise_hz = loops[True].predict().largest_rise("output")
     assert 17.5 < rise_hz < 20.0 and rise_db > 3.0
     assert abs(np.max(measured[band]) - rise_db) < 1.5
     assert 17.5 < f[band][np.argmax(measured[band])] < 20.0
@@ -116,7 +116,7 @@ def test_auto_policy_keeps_the_predicted_rise_within_3db(close_tones_nonlinear):
     sc = loops[True].scenario
     auto = mu_policy.choose_tone_rates(
         loops[True].response.at, sc.notch.tone_frequencies_hz, FS,
-        loops[True].record_coefficients, sc.notch.mu, 'auto', max_rise_db=3.0,
+        loops[True].record_coefficients, sc.notch.mu, "auto", max_rise_db=3.0,
         output_weights=loops[True].z_row, disturbance_csd=loops[True].disturbance.at)
     assert auto.warning is None and auto.predicted_rise_db <= 3.0
     assert np.all(auto.tone_mu < sc.notch.mu) and np.all(auto.tone_mu > 0.5 * sc.notch.mu)
@@ -132,10 +132,10 @@ def test_nyquist_limit_from_the_identified_plant_is_the_simulated_one(close_tone
     growth = []
     for mu in (0.8 * limit, 1.3 * limit):
         run = dataclasses.replace(
-            _scenario('close_tones'), nonlinear=False, duration_s=40.0, control_on_s=6.0,
+            _scenario("close_tones"), nonlinear=False, duration_s=40.0, control_on_s=6.0,
             window_s=1.0, notch=dataclasses.replace(sc.notch, mu=mu, settings={
-                **sc.notch.settings, 'identification': 'tones', 'mu_policy': 'manual',
-                'divergence_guard': False, 'weight_limit_n': 1000.0}))  # bare: no guard
+                **sc.notch.settings, "identification": "tones", "mu_policy": "manual",
+                "divergence_guard": False, "weight_limit_n": 1000.0}))  # bare: no guard
         weights = np.abs(CoreLoop(CFG, run).run().weights).max(axis=(1, 2))
         growth.append(weights)
     stable, unstable = growth

@@ -8,7 +8,7 @@ from hexapod_vibration.core.model.plant import PPHPlant
 from hexapod_vibration.core.model.sensors import AccelerometerBank
 from hexapod_vibration.paths import config_path
 
-MODEL = load_model_config(config_path('pph_model.yaml'))
+MODEL = load_model_config(config_path("pph_model.yaml"))
 RANGES = SignalRanges.from_model(MODEL)
 
 
@@ -40,6 +40,6 @@ def test_eddy_gaps_at_full_stroke_are_within_the_range():
 
 
 def test_out_of_range_gives_a_reason():
-    assert out_of_range(np.ones(6), 1.0) == ''
+    assert out_of_range(np.ones(6), 1.0) == ""
     reason = out_of_range(np.array([0, 0, 1e300, 0, 0, 0]), 20.0)
-    assert '1e+300' in reason and '20' in reason
+    assert "1e+300" in reason and "20" in reason

@@ -17,8 +17,8 @@ def test_db_re_g_and_constants():
     assert sp.G0 == 9.80665
     assert sp.to_db_re_g(sp.G0) == pytest.approx(0.0, abs=1e-12)
     assert sp.to_db_re_g(sp.G0 / 10.0) == pytest.approx(-20.0, abs=1e-12)
-    assert sp.main_lobe_half_width_bins('blackmanharris') == 4
-    assert sp.main_lobe_half_width_bins('hann') == 2
+    assert sp.main_lobe_half_width_bins("blackmanharris") == 4
+    assert sp.main_lobe_half_width_bins("hann") == 2
 
 
 def test_tone_levels_on_and_off_bin_within_0p2_db():
@@ -42,7 +42,7 @@ def test_psd_integrates_to_variance():
     assert np.sum(psd) * (f[1] - f[0]) == pytest.approx(np.var(x), rel=0.02)
 
 
-@pytest.mark.parametrize('f_strong', [40.0, 40.05, 40.03, 39.95])
+@pytest.mark.parametrize("f_strong", [40.0, 40.05, 40.03, 39.95])
 def test_tones_1hz_apart_70db_apart_are_separated(f_strong):
     rng = np.random.default_rng(5)
     t = np.arange(int(60 * FS)) / FS
@@ -62,7 +62,7 @@ def test_noise_floor_matches_white_noise_in_tone_bandwidth():
     sigma = 0.01
     x = sigma * rng.standard_normal(int(120 * FS)) + 0.2 * np.cos(2 * np.pi * 100.0
                                                                   * np.arange(120000) / FS)
-    bins = 2 * sp.main_lobe_half_width_bins('blackmanharris') + 1
+    bins = 2 * sp.main_lobe_half_width_bins("blackmanharris") + 1
     expected_rms = np.sqrt(sigma ** 2 / (FS / 2) * bins / sp.DEFAULT_SEGMENT_S)
     floor = sp.noise_floor_db(x, FS, 100.0)
     # 2 Hz band: ~12 floor bins, std 0.3 dB (30 seeds: bias -0.07 dB); 10 Hz band: 0.17 dB
@@ -91,20 +91,20 @@ def test_harmonic_distortion_of_clipped_sine():
     hd = sp.harmonic_distortion(x, fs, f0, n_harmonics=5)
     ref = amp * _clipped_sine_harmonics(clip, 5)
     ref_thd = np.sqrt(np.sum(ref[1:] ** 2)) / ref[0]
-    assert hd['frequencies_hz'] == pytest.approx([f0 * k for k in range(1, 6)])
+    assert hd["frequencies_hz"] == pytest.approx([f0 * k for k in range(1, 6)])
     odd = [0, 2, 4]
-    assert np.allclose(np.array(hd['levels_db'])[odd], sp.to_db_re_g(ref[odd] / np.sqrt(2)),
+    assert np.allclose(np.array(hd["levels_db"])[odd], sp.to_db_re_g(ref[odd] / np.sqrt(2)),
                        atol=0.2)
-    assert np.all(np.array(hd['levels_db'])[[1, 3]] < hd['levels_db'][0] - 100)
-    assert hd['thd_ratio'] == pytest.approx(ref_thd, rel=0.01)
-    assert hd['thd_percent'] == pytest.approx(100 * ref_thd, rel=0.01)
-    assert 0.15 < hd['thd_ratio'] < 0.30   # a sine clipped at half amplitude: ~21 %
+    assert np.all(np.array(hd["levels_db"])[[1, 3]] < hd["levels_db"][0] - 100)
+    assert hd["thd_ratio"] == pytest.approx(ref_thd, rel=0.01)
+    assert hd["thd_percent"] == pytest.approx(100 * ref_thd, rel=0.01)
+    assert 0.15 < hd["thd_ratio"] < 0.30   # a sine clipped at half amplitude: ~21 %
 
 
 def test_harmonics_above_nyquist_are_dropped():
     x = np.cos(2 * np.pi * 150.0 * np.arange(20000) / FS)
     hd = sp.harmonic_distortion(x, FS, 150.0, n_harmonics=5)
-    assert hd['frequencies_hz'] == [150.0, 300.0, 450.0]
+    assert hd["frequencies_hz"] == [150.0, 300.0, 450.0]
 
 
 def test_tone_level_over_time_follows_amplitude_step():
@@ -176,16 +176,16 @@ def test_tone_convergence_is_the_one_definition():
     amp = np.where(t < 5.0, 1.0, np.exp(-(t - 5.0) / tau) + 1e-4)
     x = sp.G0 + amp * np.cos(2 * np.pi * 40.0 * t) + 0.3 * np.cos(2 * np.pi * 80.0 * t)
     result = sp.tone_convergence(x, FS, 40.0, on, other_hz=[80.0])
-    t_lev, rms = sp.tone_level_over_time(x, FS, 40.0, result['window_s'])
-    assert result['window_s'] == pytest.approx(0.2)
-    np.testing.assert_allclose(result['t_s'], t_lev)
+    t_lev, rms = sp.tone_level_over_time(x, FS, 40.0, result["window_s"])
+    assert result["window_s"] == pytest.approx(0.2)
+    np.testing.assert_allclose(result["t_s"], t_lev)
     expected = sp.convergence_time_s(t_lev, sp.to_db_re_g(rms), on / FS)
-    assert result['convergence_s'] == expected
+    assert result["convergence_s"] == expected
     # amplitude exp(-t/tau) + 1e-4 is within 3 dB (x sqrt 2) of 1e-4 after
     # tau ln(1 / (0.414e-4)) = 5.04 s; the 0.2 s window shifts that by less than 0.1 s
-    assert result['convergence_s'] == pytest.approx(0.5 * np.log(1 / (np.sqrt(2) - 1) / 1e-4),
+    assert result["convergence_s"] == pytest.approx(0.5 * np.log(1 / (np.sqrt(2) - 1) / 1e-4),
                                                     abs=0.1)
-    assert result['final_level_db'] == pytest.approx(sp.to_db_re_g(1e-4 / np.sqrt(2)),
+    assert result["final_level_db"] == pytest.approx(sp.to_db_re_g(1e-4 / np.sqrt(2)),
                                                      abs=0.3)
 
 
@@ -205,11 +205,11 @@ def test_harmonic_distortion_counts_every_harmonic_below_nyquist():
     amps = {40.0: 1.0, 80.0: 0.1, 280.0: 0.2, 480.0: 0.05}
     x = sum(a * np.cos(2 * np.pi * f * t) for f, a in amps.items())
     hd = sp.harmonic_distortion(x, FS, 40.0)
-    assert hd['harmonics'] == 11
-    assert hd['frequencies_hz'] == [40.0 * k for k in range(1, 13)]
+    assert hd["harmonics"] == 11
+    assert hd["frequencies_hz"] == [40.0 * k for k in range(1, 13)]
     expected = np.sqrt(0.1 ** 2 + 0.2 ** 2 + 0.05 ** 2)
-    assert hd['thd_ratio'] == pytest.approx(expected, rel=0.01)
-    assert hd['relative_db'][6] == pytest.approx(20 * np.log10(0.2), abs=0.1)
+    assert hd["thd_ratio"] == pytest.approx(expected, rel=0.01)
+    assert hd["relative_db"][6] == pytest.approx(20 * np.log10(0.2), abs=0.1)
 
 
 def test_short_signal_warns_and_uses_one_segment():

@@ -39,12 +39,12 @@ WORST_RISE_DB = 1.0
 
 
 def _shipped(name: str) -> Scenario:
-    return load_scenario(ROOT / 'config' / 'scenarios' / f'{name}.yaml')
+    return load_scenario(ROOT / "config" / "scenarios" / f"{name}.yaml")
 
 
 def _moved(line_hz: float, drift_hz: float = 0.0) -> Scenario:
     """``mismatch_tracking`` (tracked tone told 40 Hz) with its shaker at ``line_hz``."""
-    base = _shipped('mismatch_tracking')
+    base = _shipped("mismatch_tracking")
     shaker = dataclasses.replace(base.shaker, frequencies_hz=(line_hz,), drift_hz=drift_hz,
                                  drift_period_s=20.0)
     return dataclasses.replace(base, shaker=shaker)
@@ -69,37 +69,37 @@ def _never_worse_or_refused(scenario: Scenario, line_hz: float,
     n = int(scenario.window_s * FS)
     band = [[line_hz - 4.0, line_hz + 4.0]]
     reduction = float(band_db(z_off[-n:], band)[0] - band_db(z_on[-n:], band)[0])
-    if status['state'] == NotchState.REFUSED:
-        assert status['refusal'], status                       # says why
+    if status["state"] == NotchState.REFUSED:
+        assert status["refusal"], status                       # says why
     else:
-        assert status['state'] == NotchState.ADAPTING and status['guard'] == 'watching'
+        assert status["state"] == NotchState.ADAPTING and status["guard"] == "watching"
         assert least_db is None or reduction >= least_db, (reduction, status)
-    status['reduction_db'] = reduction
+    status["reduction_db"] = reduction
     return status
 
 
-@pytest.mark.parametrize('line_hz', [39.0, 39.5, 40.4, 40.5, 41.0, 41.5])
+@pytest.mark.parametrize("line_hz", [39.0, 39.5, 40.4, 40.5, 41.0, 41.5])
 def test_a_steady_line_within_the_tracking_range_is_cancelled_and_nothing_rises(line_hz):
     status = _never_worse_or_refused(_moved(line_hz), line_hz)
-    assert status['state'] == NotchState.ADAPTING                 # each is tracked
-    assert status['tone_estimates_hz'] == [pytest.approx(line_hz, abs=0.02)]
+    assert status["state"] == NotchState.ADAPTING                 # each is tracked
+    assert status["tone_estimates_hz"] == [pytest.approx(line_hz, abs=0.02)]
 
 
 def test_a_drifting_line_is_tracked_or_refused_and_nothing_rises():
     """40 +- 1 Hz (``drift_tracking``) is tracked; 41 +- 0.9 Hz is refused with the reason."""
-    tracked = _never_worse_or_refused(_shipped('drift_tracking'), 40.0)
-    assert tracked['state'] == NotchState.ADAPTING
+    tracked = _never_worse_or_refused(_shipped("drift_tracking"), 40.0)
+    assert tracked["state"] == NotchState.ADAPTING
     refused = _never_worse_or_refused(_moved(41.0, drift_hz=0.9), 41.0)
-    assert refused['state'] == NotchState.REFUSED
-    assert refused['refusal'].startswith('identification failed'), refused['refusal']
+    assert refused["state"] == NotchState.REFUSED
+    assert refused["refusal"].startswith("identification failed"), refused["refusal"]
 
 
-@pytest.mark.parametrize('name, notch, line_hz, least_db', [
-    ('single_tone_harmonic', {'tone_frequencies_hz': [40.0, 80.0]}, 40.0, 60.0),
-    ('mismatch', {'tone_frequencies_hz': [40.0]}, 40.4, None),
-    ('mismatch_tracking', {'tone_frequencies_hz': [40.0], 'frequency_tracking': True}, 40.4,
+@pytest.mark.parametrize("name, notch, line_hz, least_db", [
+    ("single_tone_harmonic", {"tone_frequencies_hz": [40.0, 80.0]}, 40.0, 60.0),
+    ("mismatch", {"tone_frequencies_hz": [40.0]}, 40.4, None),
+    ("mismatch_tracking", {"tone_frequencies_hz": [40.0], "frequency_tracking": True}, 40.4,
      LEAST_REDUCTION_DB),
-], ids=['tones', 'tones_off_the_line', 'tones_tracked'])
+], ids=["tones", "tones_off_the_line", "tones_tracked"])
 def test_the_defaults_alone_are_never_worse(name, notch, line_hz, least_db):
     """Only the tones (and tracking) set: every other notch setting at its default.
 
@@ -109,6 +109,6 @@ def test_the_defaults_alone_are_never_worse(name, notch, line_hz, least_db):
     """
     scenario = _with_notch(name, **notch)
     assert scenario.notch.settings == {k: v for k, v in notch.items()
-                                       if k != 'tone_frequencies_hz'}
+                                       if k != "tone_frequencies_hz"}
     status = _never_worse_or_refused(scenario, line_hz, least_db)
-    assert status['mu_policy'] == 'auto' and status['identification'] == 'broadband'
+    assert status["mu_policy"] == "auto" and status["identification"] == "broadband"

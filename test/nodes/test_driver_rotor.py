@@ -42,14 +42,14 @@ class VectorTopic:
 
 def test_tachometer_and_disturbance_frequencies_follow_the_rotor(ros_context, node_processes):
     driver = node_processes.start(
-        'pph_driver', '--ros-args', '-p', 'clock_mode:=realtime', '-p', 'lockstep_controllers:=[]',
-        '-p', 'rotor_orders:=[1.0, 2.0]', '-p', 'rotor_amplitudes_n:=[10.0, 2.0]',
-        '-p', 'rotor_reference_speed_hz:=40.0', '-p', 'rotor_profile_time_s:=[0.0, 4.0]',
-        '-p', 'rotor_profile_speed_hz:=[30.0, 34.0]', '-p', 'rotor_tachometer:=true')
-    node = ros_context.create_node('rotor_listener')
+        "pph_driver", "--ros-args", "-p", "clock_mode:=realtime", "-p", "lockstep_controllers:=[]",
+        "-p", "rotor_orders:=[1.0, 2.0]", "-p", "rotor_amplitudes_n:=[10.0, 2.0]",
+        "-p", "rotor_reference_speed_hz:=40.0", "-p", "rotor_profile_time_s:=[0.0, 4.0]",
+        "-p", "rotor_profile_speed_hz:=[30.0, 34.0]", "-p", "rotor_tachometer:=true")
+    node = ros_context.create_node("rotor_listener")
     reference = VectorTopic(node, REFERENCE_FREQUENCY_TOPIC)
     truth = VectorTopic(node, DISTURBANCE_FREQUENCIES_TOPIC)
-    client = ParameterClient(ros_context, node, 'pph_driver')
+    client = ParameterClient(ros_context, node, "pph_driver")
     assert wait_until(ros_context, lambda: truth.last_index >= 1000
                       and len(reference.by_index) >= 500, HANG_GUARD_S), driver.output()
 
@@ -61,17 +61,17 @@ def test_tachometer_and_disturbance_frequencies_follow_the_rotor(ros_context, no
         assert values == pytest.approx(expected, abs=1e-12), n
 
     # Refused with the reason, nothing changed.
-    for name, bad, word in (('rotor_profile_time_s', [3.0, 1.0], 'increasing'),
-                            ('rotor_orders', [1.0, 20.0], '500'),
-                            ('rotor_reference_speed_hz', 0.0, 'minimum'),
-                            ('rotor_amplitudes_n', [10.0, -1.0], 'minimum')):
+    for name, bad, word in (("rotor_profile_time_s", [3.0, 1.0], "increasing"),
+                            ("rotor_orders", [1.0, 20.0], "500"),
+                            ("rotor_reference_speed_hz", 0.0, "minimum"),
+                            ("rotor_amplitudes_n", [10.0, -1.0], "minimum")):
         before = client.get(name)[name]
         assert_rejected(client.set(name, bad), word)
         assert client.get(name)[name] == before
 
     # The tachometer off: no reading after the change; no rotor: the shaker tone alone.
-    assert client.set('rotor_tachometer', False).successful
-    assert client.set('rotor_orders', []).successful
+    assert client.set("rotor_tachometer", False).successful
+    assert client.set("rotor_orders", []).successful
     mark = truth.last_index
     assert wait_until(ros_context, lambda: truth.last_index > mark + 500, HANG_GUARD_S)
     assert np.all(truth.by_index[truth.last_index] == [40.0])

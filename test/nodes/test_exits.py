@@ -17,21 +17,21 @@ from rosbags.rosbag2 import Reader
 
 HANG_GUARD_S = 90.0
 UP_LINES = {
-    'pph_driver': ('PPH driver up',),
-    'notch_controller': ('notch controller up',),
-    'pointing_controller': ('pointing controller up',),
-    'pph_graph': ('PPH driver up', 'notch controller up', 'pointing controller up'),
-    'pph_recorder': ('recording',),
+    "pph_driver": ("PPH driver up",),
+    "notch_controller": ("notch controller up",),
+    "pointing_controller": ("pointing controller up",),
+    "pph_graph": ("PPH driver up", "notch controller up", "pointing controller up"),
+    "pph_recorder": ("recording",),
 }
-ARGS = {'pph_driver': ['--ros-args', '-p', 'lockstep_controllers:=[]'],
-        'pph_graph': ['--ros-args', '-p', 'pph_driver:lockstep_controllers:=[]']}
+ARGS = {"pph_driver": ["--ros-args", "-p", "lockstep_controllers:=[]"],
+        "pph_graph": ["--ros-args", "-p", "pph_driver:lockstep_controllers:=[]"]}
 
 
 def caught_signals(pid: int) -> int:
     """Bit mask of the signals the process catches (SigCgt), 0 if it is gone."""
     try:
-        for line in Path(f'/proc/{pid}/status').read_text().splitlines():
-            if line.startswith('SigCgt:'):
+        for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+            if line.startswith("SigCgt:"):
                 return int(line.split()[1], 16)
     except OSError:
         pass
@@ -41,35 +41,35 @@ def caught_signals(pid: int) -> int:
 def wait_for(predicate, what: str, process) -> None:
     deadline = time.monotonic() + HANG_GUARD_S
     while not predicate():
-        assert process.running(), f'{what}: exited early\n{process.output()}'
-        assert time.monotonic() < deadline, f'{what}: hang guard\n{process.output()}'
+        assert process.running(), f"{what}: exited early\n{process.output()}"
+        assert time.monotonic() < deadline, f"{what}: hang guard\n{process.output()}"
         time.sleep(0.05)
 
 
 def start(node_processes, name: str, tmp_path: Path):
     args = list(ARGS.get(name, []))
-    if name == 'pph_recorder':
-        args = ['--ros-args', '-p', f'bag_path:={tmp_path / "bag"}']
+    if name == "pph_recorder":
+        args = ["--ros-args", "-p", f'bag_path:={tmp_path / "bag"}']
     return node_processes.start(name, *args)
 
 
-@pytest.mark.parametrize('signum', [signal.SIGINT, signal.SIGTERM], ids=['SIGINT', 'SIGTERM'])
-@pytest.mark.parametrize('name', sorted(UP_LINES))
+@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
+@pytest.mark.parametrize("name", sorted(UP_LINES))
 def test_signal_once_up(node_processes, tmp_path, name, signum):
     process = start(node_processes, name, tmp_path)
     wait_for(lambda: all(line in process.output() for line in UP_LINES[name]), name, process)
     process.process.send_signal(signum)
     code = process.wait(HANG_GUARD_S)
     assert code == 128 + signum, process.output()
-    assert 'Traceback' not in process.output(), process.output()
-    if name == 'pph_recorder':
-        assert (tmp_path / 'bag' / 'metadata.yaml').is_file()
-        with Reader(tmp_path / 'bag') as reader:     # rosbags (what bag_io reads with)
+    assert "Traceback" not in process.output(), process.output()
+    if name == "pph_recorder":
+        assert (tmp_path / "bag" / "metadata.yaml").is_file()
+        with Reader(tmp_path / "bag") as reader:     # rosbags (what bag_io reads with)
             assert reader.message_count >= 0
 
 
-@pytest.mark.parametrize('signum', [signal.SIGINT, signal.SIGTERM], ids=['SIGINT', 'SIGTERM'])
-@pytest.mark.parametrize('name', ['pph_driver', 'notch_controller', 'pph_recorder'])
+@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
+@pytest.mark.parametrize("name", ["pph_driver", "notch_controller", "pph_recorder"])
 def test_signal_during_start_up(node_processes, tmp_path, name, signum):
     process = start(node_processes, name, tmp_path)
     mask = (1 << (signal.SIGINT - 1)) | (1 << (signal.SIGTERM - 1))
@@ -77,4 +77,4 @@ def test_signal_during_start_up(node_processes, tmp_path, name, signum):
     process.process.send_signal(signum)
     code = process.wait(HANG_GUARD_S)
     assert code == 128 + signum, process.output()
-    assert 'Traceback' not in process.output(), process.output()
+    assert "Traceback" not in process.output(), process.output()

@@ -21,11 +21,11 @@ from hexapod_vibration.core.model.config import load_model_config
 from hexapod_vibration.core.model.plant import saturate_commands
 from hexapod_vibration.paths import config_path
 
-STRUT = load_model_config(config_path('pph_model.yaml')).strut
+STRUT = load_model_config(config_path("pph_model.yaml")).strut
 FLOOD_MESSAGES = 20000
 AFTER_SAMPLES = 1000
 
-FLOODER = f'''
+FLOODER = f"""
 import time
 import rclpy
 from rclpy.qos import QoSProfile, ReliabilityPolicy
@@ -46,28 +46,28 @@ for _ in range({FLOOD_MESSAGES}):
 print(f'sent {FLOOD_MESSAGES} in {{time.monotonic() - start:.3f}} s', flush=True)
 node.destroy_node()
 rclpy.shutdown()
-'''
+"""
 
 
 def test_flood_of_invalid_commands_loses_no_lockstep_command(ros_context, node_processes,
                                                             ros_env):
-    driver = node_processes.start('pph_driver', '--ros-args',
-                                  '-p', 'lockstep_controllers:=[pointing]')
-    pointing = node_processes.start('pointing_controller')
-    node = ros_context.create_node('flood_listener')
-    commands = StrutTopic(node, '/pph/pointing_command')
-    force = StrutTopic(node, '/pph/actuator_force')
+    driver = node_processes.start("pph_driver", "--ros-args",
+                                  "-p", "lockstep_controllers:=[pointing]")
+    pointing = node_processes.start("pointing_controller")
+    node = ros_context.create_node("flood_listener")
+    commands = StrutTopic(node, "/pph/pointing_command")
+    force = StrutTopic(node, "/pph/actuator_force")
     diagnostics = Diagnostics(node)
 
     def logs() -> str:
-        return '\n'.join(p.output() for p in (driver, pointing))
+        return "\n".join(p.output() for p in (driver, pointing))
 
     assert wait_until(ros_context, lambda: force.last_index > 200
                       and DRIVER_STATUS in diagnostics.latest), logs()
-    run = diagnostics.value(DRIVER_STATUS, 'run')
+    run = diagnostics.value(DRIVER_STATUS, "run")
     run = int(run) if run else None       # a driver without runs (older code)
     flood_start = force.last_index
-    flooder = subprocess.Popen([sys.executable, '-c', FLOODER], env=ros_env,
+    flooder = subprocess.Popen([sys.executable, "-c", FLOODER], env=ros_env,
                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         assert wait_until(ros_context, lambda: flooder.poll() is not None, HANG_GUARD_S)
@@ -81,16 +81,16 @@ def test_flood_of_invalid_commands_loses_no_lockstep_command(ros_context, node_p
 
     def reported_after() -> dict[str, str] | None:
         later = [v for v in diagnostics.history_values(DRIVER_STATUS)[reported:]
-                 if int(v['sample']) > flood_end + AFTER_SAMPLES]
+                 if int(v["sample"]) > flood_end + AFTER_SAMPLES]
         return later[0] if later else None
 
     assert wait_until(ros_context, lambda: reported_after() is not None), logs()
     values = reported_after()
     print(f'{out.strip()}; samples {flood_start}..{flood_end} during the flood; driver {values}; '
           f'pointing {diagnostics.values("pointing_controller")}')
-    assert int(values.get('pointing_malformed', values['pointing_invalid'])) > 0   # reached it
-    assert int(values['timeouts']) == 0, values           # no command lost for good
-    assert int(values['missed_samples']) == 0, values
+    assert int(values.get("pointing_malformed", values["pointing_invalid"])) > 0   # reached it
+    assert int(values["timeouts"]) == 0, values           # no command lost for good
+    assert int(values["missed_samples"]) == 0, values
     # Every sample (seen here) applied the pointing command of that very sample.
     ours, applied = commands.by_run[run], force.by_run[run]
     window = [n for n in range(flood_start, flood_end + AFTER_SAMPLES)

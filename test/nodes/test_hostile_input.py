@@ -30,7 +30,7 @@ from hexapod_vibration.core.model.sensors import EddySensorArray
 from hexapod_vibration.core.sim.closed_loop import make_pointing_controller
 from hexapod_vibration.paths import config_path
 
-MODEL = load_model_config(config_path('pph_model.yaml'))
+MODEL = load_model_config(config_path("pph_model.yaml"))
 FIRST_HOLD = 1000
 SECOND_HOLD = 3000
 STRAY_RUN = 987654321
@@ -39,10 +39,10 @@ STRAY_RUN = 987654321
 def _malformed(raw: bytes) -> dict[str, bytes]:
     """The issue's malformed bytes, made from a well-formed message ``raw``."""
     huge_dims = bytearray(raw)
-    huge_dims[4:8] = struct.pack('<I', 0xFFFFFFFF)
-    return {'truncated_by_8': raw[:-8], 'truncated_at_half': raw[:len(raw) // 2],
-            'header_only': raw[:4], 'ff_garbage': b'\xff' * len(raw),
-            'big_endian_header': b'\x00\x00' + raw[2:], 'huge_dims': bytes(huge_dims)}
+    huge_dims[4:8] = struct.pack("<I", 0xFFFFFFFF)
+    return {"truncated_by_8": raw[:-8], "truncated_at_half": raw[:len(raw) // 2],
+            "header_only": raw[:4], "ff_garbage": b"\xff" * len(raw),
+            "big_endian_header": b"\x00\x00" + raw[2:], "huge_dims": bytes(huge_dims)}
 
 
 def _hostile_eddy(index: int, round_: int) -> list[bytes]:
@@ -59,7 +59,7 @@ def _hostile_eddy(index: int, round_: int) -> list[bytes]:
             _unindexed(np.full(6, 1e300)),                         # old: taken as next
             encode_strut_cdr(np.full(6, 1e-5), absurd),            # absurd but valid index
             encode_strut_cdr(np.full(6, 1e-5), index + 1, STRAY_RUN + round_),  # stray run
-            _label(np.full(6, 1e-5), 'sample:99999999999999999999')]
+            _label(np.full(6, 1e-5), "sample:99999999999999999999")]
 
 
 def _hostile_commands(index: int, run: int) -> list[bytes]:
@@ -98,27 +98,27 @@ def _replayed_pointing(eddy: list[np.ndarray]) -> np.ndarray:
 
 
 def test_hostile_messages_are_counted_and_change_nothing(ros_context, node_processes):
-    driver = node_processes.start('pph_driver', '--ros-args', '-p',
-                                  'lockstep_controllers:=[pointing]',
-                                  '-p', f'hold_at_time_s:={FIRST_HOLD / 1000}')
-    pointing = node_processes.start('pointing_controller')
+    driver = node_processes.start("pph_driver", "--ros-args", "-p",
+                                  "lockstep_controllers:=[pointing]",
+                                  "-p", f"hold_at_time_s:={FIRST_HOLD / 1000}")
+    pointing = node_processes.start("pointing_controller")
     processes = (driver, pointing)
-    node = ros_context.create_node('hostile_publisher')
-    eddy, pointing_cmd = StrutTopic(node, '/pph/eddy'), StrutTopic(node, '/pph/pointing_command')
-    force = StrutTopic(node, '/pph/actuator_force')
+    node = ros_context.create_node("hostile_publisher")
+    eddy, pointing_cmd = StrutTopic(node, "/pph/eddy"), StrutTopic(node, "/pph/pointing_command")
+    force = StrutTopic(node, "/pph/actuator_force")
     diagnostics = Diagnostics(node)
     qos = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
-    to_pointing = node.create_publisher(Float64MultiArray, '/pph/eddy', qos)
-    to_driver = node.create_publisher(Float64MultiArray, '/pph/notch_command', qos)
-    driver_params = ParameterClient(ros_context, node, 'pph_driver')
-    pointing_params = ParameterClient(ros_context, node, 'pointing_controller')
+    to_pointing = node.create_publisher(Float64MultiArray, "/pph/eddy", qos)
+    to_driver = node.create_publisher(Float64MultiArray, "/pph/notch_command", qos)
+    driver_params = ParameterClient(ros_context, node, "pph_driver")
+    pointing_params = ParameterClient(ros_context, node, "pointing_controller")
 
     def logs() -> str:
-        return '\n'.join(p.output() for p in processes)
+        return "\n".join(p.output() for p in processes)
 
     def run() -> int | None:
         """The driver's run (None from a driver without one)."""
-        value = diagnostics.value(DRIVER_STATUS, 'run')
+        value = diagnostics.value(DRIVER_STATUS, "run")
         return int(value) if value else None
 
     def last(topic: StrutTopic) -> int:
@@ -131,12 +131,12 @@ def test_hostile_messages_are_counted_and_change_nothing(ros_context, node_proce
         The hold is re-announced every 0.5 s; the topics' last samples may have gone out
         before this listener was matched.
         """
-        return (diagnostics.value(DRIVER_STATUS, 'held') == 'true'
-                and diagnostics.int_value(DRIVER_STATUS, 'sample') == sample)
+        return (diagnostics.value(DRIVER_STATUS, "held") == "true"
+                and diagnostics.int_value(DRIVER_STATUS, "sample") == sample)
 
     def newest_sample() -> int:
         """The loop's last sample as far as this listener knows (topics or diagnostics)."""
-        return max(last(force), diagnostics.int_value(DRIVER_STATUS, 'sample') - 1)
+        return max(last(force), diagnostics.int_value(DRIVER_STATUS, "sample") - 1)
 
     rounds = itertools.count()
 
@@ -151,10 +151,10 @@ def test_hostile_messages_are_counted_and_change_nothing(ros_context, node_proce
     # While the loop is held (until the driver counted one round), then while it runs to
     # the second breakpoint. The controller reports its counts every 1000 samples.
     counted = wait_until(ros_context, lambda: all(p.running() for p in processes) and (
-        diagnostics.int_value(DRIVER_STATUS, 'notch_malformed') >= 6), step=send_hostile)
+        diagnostics.int_value(DRIVER_STATUS, "notch_malformed") >= 6), step=send_hostile)
     assert counted, (diagnostics.values(DRIVER_STATUS), logs())
     for flag in (False, True):      # the law starts afresh at FIRST_HOLD: replayable
-        assert pointing_params.set('enabled', flag).successful
+        assert pointing_params.set("enabled", flag).successful
     # Every sample of the judged window must reach this listener: the loop goes on only
     # once its subscriptions matched the nodes' publishers (discovery on a loaded machine
     # can take longer than the first hold; /pph/eddy has this test's own publisher too).
@@ -162,7 +162,7 @@ def test_hostile_messages_are_counted_and_change_nothing(ros_context, node_proce
         eddy.subscription.get_publisher_count() >= 2
         and pointing_cmd.subscription.get_publisher_count() >= 1
         and force.subscription.get_publisher_count() >= 1)), logs()
-    assert driver_params.set('hold_at_time_s', SECOND_HOLD / 1000).successful
+    assert driver_params.set("hold_at_time_s", SECOND_HOLD / 1000).successful
     # held, and this listener has the window's last sample on every judged topic (the hold
     # is announced on /diagnostics, which may overtake the loop topics' last messages: a
     # loaded run judged before the last 294 pointing commands had come in)
@@ -173,11 +173,11 @@ def test_hostile_messages_are_counted_and_change_nothing(ros_context, node_proce
 
     # Counted on /diagnostics, by reason, as WARN.
     point, drive = diagnostics.values(POINTING_STATUS), diagnostics.values(DRIVER_STATUS)
-    print(f'pointing: {point}\ndriver: {drive}')
-    for key in ('malformed', 'out_of_range', 'unconfirmed'):
+    print(f"pointing: {point}\ndriver: {drive}")
+    for key in ("malformed", "out_of_range", "unconfirmed"):
         assert int(point[key]) > 0, (key, point)
-    for key in ('malformed', 'out_of_range', 'other_run', 'future'):
-        assert int(drive[f'notch_{key}']) > 0, (key, drive)
+    for key in ("malformed", "out_of_range", "other_run", "future"):
+        assert int(drive[f"notch_{key}"]) > 0, (key, drive)
     assert diagnostics.latest[POINTING_STATUS].level == diagnostics.latest[POINTING_STATUS].WARN
     assert diagnostics.latest[DRIVER_STATUS].level == diagnostics.latest[DRIVER_STATUS].WARN
 
@@ -202,21 +202,21 @@ def test_hostile_messages_are_counted_and_change_nothing(ros_context, node_proce
 
 def test_hostile_accelerations_never_reach_the_notch_weights(ros_context, node_processes):
     """Regression: one accel message of 6 x 1e300 took the weights from 9.9 N to 7.1e298 N."""
-    driver = node_processes.start('pph_driver', '--ros-args', '-p',
-                                  'lockstep_controllers:=[notch]')
-    notch = node_processes.start('notch_controller', '--ros-args', '-p', 'adaptation:=raw',
-                                 '-p', 'mu:=1e-5', '-p', 'tone_frequencies_hz:=[40.0]',
-                                 '-p', 'auto_identify:=false')
+    driver = node_processes.start("pph_driver", "--ros-args", "-p",
+                                  "lockstep_controllers:=[notch]")
+    notch = node_processes.start("notch_controller", "--ros-args", "-p", "adaptation:=raw",
+                                 "-p", "mu:=1e-5", "-p", "tone_frequencies_hz:=[40.0]",
+                                 "-p", "auto_identify:=false")
     processes = (driver, notch)
-    node = ros_context.create_node('hostile_accel')
-    accel, command = StrutTopic(node, '/pph/accel'), StrutTopic(node, '/pph/notch_command')
+    node = ros_context.create_node("hostile_accel")
+    accel, command = StrutTopic(node, "/pph/accel"), StrutTopic(node, "/pph/notch_command")
     diagnostics = Diagnostics(node)
-    to_notch = node.create_publisher(Float64MultiArray, '/pph/accel',
+    to_notch = node.create_publisher(Float64MultiArray, "/pph/accel",
                                      QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE))
     rounds = itertools.count()
 
     def logs() -> str:
-        return '\n'.join(p.output() for p in processes)
+        return "\n".join(p.output() for p in processes)
 
     def send_hostile() -> None:
         """One round every 5 spins: refusal is tested here, floods in test_flood.py."""
@@ -227,7 +227,7 @@ def test_hostile_accelerations_never_reach_the_notch_weights(ros_context, node_p
 
     def counted() -> bool:
         values = diagnostics.values(NOTCH_STATUS)
-        return all(int(values.get(k, 0)) > 0 for k in ('malformed', 'out_of_range'))
+        return all(int(values.get(k, 0)) > 0 for k in ("malformed", "out_of_range"))
 
     assert wait_until(ros_context, lambda: not all(p.running() for p in processes) or (
         counted() and command.last_index > 2000), step=send_hostile), logs()

@@ -23,13 +23,13 @@ from hexapod_vibration.ros.messages import make_vector_array, parse_vector_sampl
 
 
 def test_estimates_are_published_and_bad_references_refused(ros_context, node_processes):
-    driver = node_processes.start('pph_driver', '--ros-args', '-p',
-                                  'lockstep_controllers:=[notch]')
-    notch = node_processes.start('notch_controller', '--ros-args',
-                                 '-p', 'tone_frequencies_hz:=[40.0, 80.0]',
-                                 '-p', 'auto_identify:=false')
-    node = ros_context.create_node('frequency_listener')
-    command = StrutTopic(node, '/pph/notch_command')
+    driver = node_processes.start("pph_driver", "--ros-args", "-p",
+                                  "lockstep_controllers:=[notch]")
+    notch = node_processes.start("notch_controller", "--ros-args",
+                                 "-p", "tone_frequencies_hz:=[40.0, 80.0]",
+                                 "-p", "auto_identify:=false")
+    node = ros_context.create_node("frequency_listener")
+    command = StrutTopic(node, "/pph/notch_command")
     received: dict[int, np.ndarray] = {}
 
     def on_estimates(msg: Float64MultiArray) -> None:
@@ -49,7 +49,7 @@ def test_estimates_are_published_and_bad_references_refused(ros_context, node_pr
     mark = command.last_index
 
     def refused_and_running() -> bool:
-        return (notch.output().count(f'{REFERENCE_FREQUENCY_TOPIC}: rejected') >= 1
+        return (notch.output().count(f"{REFERENCE_FREQUENCY_TOPIC}: rejected") >= 1
                 and command.last_index > mark + 200)
 
     assert wait_until(ros_context, refused_and_running, HANG_GUARD_S,

@@ -18,22 +18,22 @@ from hexapod_vibration.parameter_specs import NODE_SPECS
 from hexapod_vibration.ros.parameters import descriptor_for
 
 STARTUP_REFUSALS = {
-    'pph_driver': [
-        {'shaker_frequencies_hz': '[600.0]'},
-        {'shaker_amplitudes_n': '[1000.0]'},
-        {'shaker_phases_rad': '[100.0]'},
-        {'shaker_frequencies_hz': '[498.0]', 'shaker_drift_hz': '2.0'},   # together
-        {'command_timeout_samples': '0'},
+    "pph_driver": [
+        {"shaker_frequencies_hz": "[600.0]"},
+        {"shaker_amplitudes_n": "[1000.0]"},
+        {"shaker_phases_rad": "[100.0]"},
+        {"shaker_frequencies_hz": "[498.0]", "shaker_drift_hz": "2.0"},   # together
+        {"command_timeout_samples": "0"},
     ],
-    'notch_controller': [
-        {'tone_frequencies_hz': '[0.0]'},                                   # open bound
-        {'tone_frequencies_hz': '[40.0, 40.0]'},
-        {'mu': '0.7'},                              # beyond the normalised bound 0.618
-        {'adaptation': 'fancy'},
+    "notch_controller": [
+        {"tone_frequencies_hz": "[0.0]"},                                   # open bound
+        {"tone_frequencies_hz": "[40.0, 40.0]"},
+        {"mu": "0.7"},                              # beyond the normalised bound 0.618
+        {"adaptation": "fancy"},
     ],
-    'pointing_controller': [
-        {'target_translation_m': '[0.0, 0.0]'},
-        {'target_tilt_x_deg': '2.0', 'target_tilt_y_deg': '2.0'},           # norm > 2.5
+    "pointing_controller": [
+        {"target_translation_m": "[0.0, 0.0]"},
+        {"target_tilt_x_deg": "2.0", "target_tilt_y_deg": "2.0"},           # norm > 2.5
     ],
 }
 
@@ -43,19 +43,19 @@ def _python(text: str):
 
 
 def test_descriptors_are_the_specs(ros_context, node_processes, tmp_path):
-    args = {'pph_driver': ['--ros-args', '-p', 'lockstep_controllers:=[]'],
-            'pph_recorder': ['--ros-args', '-p', f'bag_path:={tmp_path / "bag"}']}
-    names = ('pph_driver', 'notch_controller', 'pointing_controller', 'pph_recorder')
+    args = {"pph_driver": ["--ros-args", "-p", "lockstep_controllers:=[]"],
+            "pph_recorder": ["--ros-args", "-p", f'bag_path:={tmp_path / "bag"}']}
+    names = ("pph_driver", "notch_controller", "pointing_controller", "pph_recorder")
     for name in names:
         node_processes.start(name, *args.get(name, []))
-    node = ros_context.create_node('describer')
+    node = ros_context.create_node("describer")
     for name in names:
         client = ParameterClient(ros_context, node, name)
         spec = NODE_SPECS[name]
         described = client._wait(client.client.describe_parameters(list(spec.names)))
         for parameter, actual in zip(spec.parameters, described.descriptors, strict=True):
             expected = descriptor_for(parameter)
-            what = f'{name} {parameter.name}'
+            what = f"{name} {parameter.name}"
             assert actual.name == parameter.name, what
             assert actual.type == expected.type, what
             assert actual.description == expected.description, what
@@ -71,19 +71,19 @@ def test_start_up_refuses_what_run_time_refuses(ros_context, node_processes):
     startup_reasons = {}
     for name, cases in STARTUP_REFUSALS.items():
         for case in cases:
-            overrides = [a for key, value in case.items() for a in ('-p', f'{key}:={value}')]
-            process = node_processes.start(name, '--ros-args', *overrides)
+            overrides = [a for key, value in case.items() for a in ("-p", f"{key}:={value}")]
+            process = node_processes.start(name, "--ros-args", *overrides)
             code = process.wait(HANG_GUARD_S)
             assert code == 2, (case, process.output())
             lines = process.stderr_path.read_text().strip().splitlines()
-            errors = [line for line in lines if line.startswith(f'{name}: error: ')]
-            assert len(errors) == 1 and 'Traceback' not in process.output(), process.output()
-            startup_reasons[(name, tuple(case.items()))] = errors[0][len(f'{name}: error: '):]
-    running = {'pph_driver': node_processes.start('pph_driver', '--ros-args', '-p',
-                                                  'lockstep_controllers:=[]'),
-               'notch_controller': node_processes.start('notch_controller'),
-               'pointing_controller': node_processes.start('pointing_controller')}
-    node = ros_context.create_node('setter')
+            errors = [line for line in lines if line.startswith(f"{name}: error: ")]
+            assert len(errors) == 1 and "Traceback" not in process.output(), process.output()
+            startup_reasons[(name, tuple(case.items()))] = errors[0][len(f"{name}: error: "):]
+    running = {"pph_driver": node_processes.start("pph_driver", "--ros-args", "-p",
+                                                  "lockstep_controllers:=[]"),
+               "notch_controller": node_processes.start("notch_controller"),
+               "pointing_controller": node_processes.start("pointing_controller")}
+    node = ros_context.create_node("setter")
     for name, cases in STARTUP_REFUSALS.items():
         client = ParameterClient(ros_context, node, name)
         for case in cases:
@@ -101,25 +101,25 @@ def test_start_up_refuses_what_run_time_refuses(ros_context, node_processes):
 
 
 def test_unknown_parameters_are_reported(node_processes, tmp_path):
-    params = tmp_path / 'params.yaml'
-    params.write_text(yaml.safe_dump({'pph_driver': {'ros__parameters': {
-        'shaker_frequency_hz': [40.0], 'seed': 3}}}))
-    process = node_processes.start('pph_driver', '--ros-args', '--params-file', str(params),
-                                   '-p', 'mu:=0.01', '-p', 'lockstep_controllers:=[]')
-    deadline_output = ''
+    params = tmp_path / "params.yaml"
+    params.write_text(yaml.safe_dump({"pph_driver": {"ros__parameters": {
+        "shaker_frequency_hz": [40.0], "seed": 3}}}))
+    process = node_processes.start("pph_driver", "--ros-args", "--params-file", str(params),
+                                   "-p", "mu:=0.01", "-p", "lockstep_controllers:=[]")
+    deadline_output = ""
     for _ in range(int(HANG_GUARD_S / 0.1)):
         deadline_output = process.output()
-        if 'PPH driver up' in deadline_output or not process.running():
+        if "PPH driver up" in deadline_output or not process.running():
             break
         process.wait(0.1)
-    assert 'unknown parameter(s) ignored: mu, shaker_frequency_hz' in deadline_output, \
+    assert "unknown parameter(s) ignored: mu, shaker_frequency_hz" in deadline_output, \
         deadline_output
     assert process.running(), deadline_output
-    assert 'seed' not in deadline_output.split('unknown parameter(s) ignored:')[1].split('(')[0]
+    assert "seed" not in deadline_output.split("unknown parameter(s) ignored:")[1].split("(")[0]
 
 
 def test_params_file_in_the_package_is_complete():
     root = Path(__file__).resolve().parents[2]
-    params = yaml.safe_load((root / 'config' / 'pph.yaml').read_text())
-    for name in ('pph_driver', 'notch_controller', 'pointing_controller'):
-        assert set(params[name]['ros__parameters']) == set(NODE_SPECS[name].names)
+    params = yaml.safe_load((root / "config" / "pph.yaml").read_text())
+    for name in ("pph_driver", "notch_controller", "pointing_controller"):
+        assert set(params[name]["ros__parameters"]) == set(NODE_SPECS[name].names)

@@ -25,7 +25,7 @@ from hexapod_vibration.core.model.config import load_model_config
 from hexapod_vibration.core.model.plant import saturate_commands
 from hexapod_vibration.paths import config_path
 
-STRUT = load_model_config(config_path('pph_model.yaml')).strut
+STRUT = load_model_config(config_path("pph_model.yaml")).strut
 RESUME_WITHIN_SAMPLES = 1000      # 1 s of simulated progress
 CHECKED_SAMPLES = 1000
 REALTIME_MIN_ANSWERS = 100        # answers of the new run or process come back (load-tolerant)
@@ -38,10 +38,10 @@ driver (not waiting for it then) may have passed; then lockstep waits for it aga
 CONTROLLERS = {
     # stream: (executable, command topic, its arguments); the raw notch (P = I) adapts from
     # the first sample, so its commands are not zero.
-    'pointing': ('pointing_controller', '/pph/pointing_command', []),
-    'notch': ('notch_controller', '/pph/notch_command',
-              ['-p', 'adaptation:=raw', '-p', 'mu:=1e-5', '-p', 'tone_frequencies_hz:=[40.0]',
-               '-p', 'auto_identify:=false']),
+    "pointing": ("pointing_controller", "/pph/pointing_command", []),
+    "notch": ("notch_controller", "/pph/notch_command",
+              ["-p", "adaptation:=raw", "-p", "mu:=1e-5", "-p", "tone_frequencies_hz:=[40.0]",
+               "-p", "auto_identify:=false"]),
 }
 
 
@@ -50,18 +50,18 @@ MIN_CHECKED_FORCES = 100
 
 
 def _driver_args(mode: str, stream: str) -> list[str]:
-    return ['--ros-args', '-p', f'clock_mode:={mode}', '-p', f'lockstep_controllers:=[{stream}]',
-            '-p', 'lockstep_timeout_s:=0.5']
+    return ["--ros-args", "-p", f"clock_mode:={mode}", "-p", f"lockstep_controllers:=[{stream}]",
+            "-p", "lockstep_timeout_s:=0.5"]
 
 
 def _controller(node_processes, stream: str, *extra: str):
     executable, _, args = CONTROLLERS[stream]
-    return node_processes.start(executable, '--ros-args', *args, *extra)
+    return node_processes.start(executable, "--ros-args", *args, *extra)
 
 
 def _applied(stream: str, command: np.ndarray) -> np.ndarray:
     """The force the driver applies for this controller's command alone."""
-    notch, pointing = (command, np.zeros(6)) if stream == 'notch' else (np.zeros(6), command)
+    notch, pointing = (command, np.zeros(6)) if stream == "notch" else (np.zeros(6), command)
     return saturate_commands(notch, pointing, STRUT)
 
 
@@ -76,9 +76,9 @@ def _driver_reports(diagnostics: Diagnostics, run: int) -> dict[int, tuple[int, 
     between them was answered by every waited controller before the driver advanced, by
     the driver's own account, whatever this listener received.
     """
-    return {int(v['sample']): (int(v['timeouts']), int(v['missed_samples']))
+    return {int(v["sample"]): (int(v["timeouts"]), int(v["missed_samples"]))
             for v in diagnostics.history_values(DRIVER_STATUS)
-            if v.get('run') == str(run) and 'timeouts' in v and 'sample' in v}
+            if v.get("run") == str(run) and "timeouts" in v and "sample" in v}
 
 
 def _driver_counts_over(diagnostics: Diagnostics, run: int, first: int
@@ -117,7 +117,7 @@ def _answers_from(commands: dict[int, np.ndarray], first: int) -> int:
 def _check_resumed(mode: str, stream: str, commands: dict[int, np.ndarray],
                    force: dict[int, np.ndarray], first: int,
                    counts: list[tuple[int, int]] | None = None) -> None:
-    if mode == 'realtime':
+    if mode == "realtime":
         # answers come back (the callers waited for them): at load 8 a controller can
         # answer none of one second of samples and catch up later
         assert _answers_from(commands, first) >= REALTIME_MIN_ANSWERS, first
@@ -128,8 +128,8 @@ def _check_resumed(mode: str, stream: str, commands: dict[int, np.ndarray],
     # the 1000 checked, with the driver's counts unchanged).
     assert counts is not None and counts[0] == counts[1], (first, counts)
     window = range(first, first + CHECKED_SAMPLES)
-    print(f'listener saw {sum(n in commands for n in window)} of the {CHECKED_SAMPLES} '
-          f'commands of the window; driver (timeouts, missed) {counts}')
+    print(f"listener saw {sum(n in commands for n in window)} of the {CHECKED_SAMPLES} "
+          f"commands of the window; driver (timeouts, missed) {counts}")
     # Lockstep pairs them: the driver applied each one at its sample. (A restarted driver's
     # first forces may be published before it has discovered this listener, on a loaded
     # machine for longer than the window: every force seen of the new run is checked,
@@ -142,26 +142,26 @@ def _check_resumed(mode: str, stream: str, commands: dict[int, np.ndarray],
                                    rtol=0, atol=1e-12, err_msg=str(n))
 
 
-@pytest.mark.parametrize('stream', ['pointing', 'notch'])
-@pytest.mark.parametrize('mode', ['lockstep', 'realtime'])
+@pytest.mark.parametrize("stream", ["pointing", "notch"])
+@pytest.mark.parametrize("mode", ["lockstep", "realtime"])
 def test_restarted_driver_is_answered_within_a_second(ros_context, node_processes, mode,
                                                       stream):
-    driver = node_processes.start('pph_driver', *_driver_args(mode, stream))
+    driver = node_processes.start("pph_driver", *_driver_args(mode, stream))
     pointing = _controller(node_processes, stream)
-    node = ros_context.create_node('restart_listener')
+    node = ros_context.create_node("restart_listener")
     commands = StrutTopic(node, CONTROLLERS[stream][1])
-    force = StrutTopic(node, '/pph/actuator_force')
+    force = StrutTopic(node, "/pph/actuator_force")
     diagnostics = Diagnostics(node)
 
     def logs() -> str:
-        return '\n'.join(p.output() for p in node_processes.started)
+        return "\n".join(p.output() for p in node_processes.started)
 
     assert wait_until(ros_context, lambda: _runs(commands)
                       and len(commands.by_run[_runs(commands)[0]]) > BEFORE_SAMPLES), logs()
     old_run = _runs(commands)[0]
     driver.process.kill()                  # SIGKILL, at any sample
     assert driver.wait(60.0) is not None
-    again = node_processes.start('pph_driver', *_driver_args(mode, stream))
+    again = node_processes.start("pph_driver", *_driver_args(mode, stream))
 
     def new_run():
         return next((r for r in _runs(commands) if r != old_run), None)
@@ -174,7 +174,7 @@ def test_restarted_driver_is_answered_within_a_second(ros_context, node_processe
         if run is None or run not in force.by_run or run not in commands.by_run:
             return False
         first = min(commands.by_run[run])
-        if mode == 'realtime':
+        if mode == "realtime":
             return _answers_from(commands.by_run[run], first) >= REALTIME_MIN_ANSWERS
         waited = _waited_again_from(diagnostics, run, first + SETTLE_SAMPLES)
         return waited is not None and len(_pairs_seen(
@@ -186,35 +186,35 @@ def test_restarted_driver_is_answered_within_a_second(ros_context, node_processe
             diagnostics, new_run()).items())[-12:], logs())
     run = new_run()
     first = min(commands.by_run[run])
-    print(f'{mode}: new run answered from sample {first}')
+    print(f"{mode}: new run answered from sample {first}")
     assert first <= RESUME_WITHIN_SAMPLES, first
-    if mode == 'lockstep':
+    if mode == "lockstep":
         # a controller the loaded machine stalls for five 0.5 s waits is dropped by the
         # watchdog and the loop runs on without it until it answers again (counted):
         # judged from the first 1000 samples the driver's counts show clean
         first = _waited_again_from(diagnostics, run, first + SETTLE_SAMPLES)
-        print(f'{mode}: every sample answered from sample {first}')
+        print(f"{mode}: every sample answered from sample {first}")
     _check_resumed(mode, stream, commands.by_run[run], force.by_run[run], first,
                    _driver_counts_over(diagnostics, run, first))
     for process in (again, pointing):
         assert process.stop() == 130, process.output()     # SIGINT: 128 + 2
 
 
-@pytest.mark.parametrize('stream', ['pointing', 'notch'])
-@pytest.mark.parametrize('mode', ['lockstep', 'realtime'])
+@pytest.mark.parametrize("stream", ["pointing", "notch"])
+@pytest.mark.parametrize("mode", ["lockstep", "realtime"])
 def test_restarted_controller_is_waited_for_again(ros_context, node_processes, mode, stream):
-    driver = node_processes.start('pph_driver', *_driver_args(mode, stream))
+    driver = node_processes.start("pph_driver", *_driver_args(mode, stream))
     pointing = _controller(node_processes, stream)
-    node = ros_context.create_node('restart_listener')
+    node = ros_context.create_node("restart_listener")
     commands = StrutTopic(node, CONTROLLERS[stream][1])
-    force = StrutTopic(node, '/pph/actuator_force')
+    force = StrutTopic(node, "/pph/actuator_force")
     diagnostics = Diagnostics(node)
 
     def logs() -> str:
-        return '\n'.join(p.output() for p in node_processes.started)
+        return "\n".join(p.output() for p in node_processes.started)
 
     def current_run() -> int | None:
-        value = diagnostics.value(DRIVER_STATUS, 'run')
+        value = diagnostics.value(DRIVER_STATUS, "run")
         return int(value) if value else None
 
     # the driver's run as its /diagnostics names it, and that run's commands (the full
@@ -229,7 +229,7 @@ def test_restarted_controller_is_waited_for_again(ros_context, node_processes, m
     assert pointing.wait(60.0) is not None
     # Switched off, the new process answers exactly zero: its answers are told apart from
     # the old one's that this process may still receive (it can lag the loop).
-    again = _controller(node_processes, stream, '-p', 'enabled:=false')
+    again = _controller(node_processes, stream, "-p", "enabled:=false")
 
     def first_new() -> int | None:
         return next((n for n, c in sorted(commands.by_run.get(run, {}).items())
@@ -244,7 +244,7 @@ def test_restarted_controller_is_waited_for_again(ros_context, node_processes, m
     def checked() -> bool:
         if first_new() is None:
             return False
-        if mode == 'realtime':
+        if mode == "realtime":
             return _answers_from(commands.by_run[run],
                                  first_new() + CATCH_UP_SAMPLES) >= REALTIME_MIN_ANSWERS
         first = waited_from()
@@ -257,11 +257,11 @@ def test_restarted_controller_is_waited_for_again(ros_context, node_processes, m
         sorted(_driver_reports(diagnostics, run).items())[-12:],
         diagnostics.values(DRIVER_STATUS), logs())
     old_last = max(n for n, c in commands.by_run[run].items() if np.any(c))
-    print(f'{mode}: last answer of the killed process {old_last}, answered again from '
-          f'{first_new()}')
+    print(f"{mode}: last answer of the killed process {old_last}, answered again from "
+          f"{first_new()}")
     assert first_new() > old_last
-    first = first_new() + CATCH_UP_SAMPLES if mode == 'realtime' else waited_from()
-    print(f'{mode}: waited for again from sample {first}')
+    first = first_new() + CATCH_UP_SAMPLES if mode == "realtime" else waited_from()
+    print(f"{mode}: waited for again from sample {first}")
     _check_resumed(mode, stream, commands.by_run[run], force.by_run[run], first,
                    _driver_counts_over(diagnostics, run, first))
     for process in (driver, again):

@@ -21,8 +21,8 @@ from hexapod_vibration.ros.messages import make_strut_array
 from hexapod_vibration.ros.qos import LOOP_QOS
 
 TIMEOUT_SAMPLES = 5          # the driver's command_timeout_samples default (documented)
-DRIVER = 'pph_driver: loop'
-STRUT = load_model_config(config_path('pph_model.yaml')).strut
+DRIVER = "pph_driver: loop"
+STRUT = load_model_config(config_path("pph_model.yaml")).strut
 
 
 def _notch_part(force: StrutTopic, pointing: StrutTopic, n: int) -> np.ndarray:
@@ -34,28 +34,28 @@ def test_killed_notch_controller_is_dropped_within_the_timeout(ros_context, node
     # Each of the last TIMEOUT_SAMPLES samples waits lockstep_timeout_s for the dead one;
     # long enough (20 offers) that the live pointing controller is never timed out on a
     # loaded machine, which would hold its previous command and look like the notch's here.
-    driver = node_processes.start('pph_driver', '--ros-args', '-p', 'lockstep_timeout_s:=1.0')
+    driver = node_processes.start("pph_driver", "--ros-args", "-p", "lockstep_timeout_s:=1.0")
     notch = node_processes.start(
-        'notch_controller', '--ros-args', '-p', 'tone_frequencies_hz:=[40.0]',
-        '-p', 'mu:=0.01', '-p', 'identify_delay_s:=0.2')
-    pointing = node_processes.start('pointing_controller')
+        "notch_controller", "--ros-args", "-p", "tone_frequencies_hz:=[40.0]",
+        "-p", "mu:=0.01", "-p", "identify_delay_s:=0.2")
+    pointing = node_processes.start("pointing_controller")
     processes = (driver, notch, pointing)
 
     def logs() -> str:
-        return '\n'.join(p.output() for p in processes)
+        return "\n".join(p.output() for p in processes)
 
-    node = ros_context.create_node('watchdog_listener')
-    force = StrutTopic(node, '/pph/actuator_force')
-    pointing_cmd = StrutTopic(node, '/pph/pointing_command')
-    notch_cmd = StrutTopic(node, '/pph/notch_command')
+    node = ros_context.create_node("watchdog_listener")
+    force = StrutTopic(node, "/pph/actuator_force")
+    pointing_cmd = StrutTopic(node, "/pph/pointing_command")
+    notch_cmd = StrutTopic(node, "/pph/notch_command")
     diagnostics = Diagnostics(node)
     assert driver.running()
 
     # Kill the notch controller while it adapts (its command is far from zero).
     adapting = wait_until(ros_context,
-        lambda: diagnostics.value('notch_controller', 'state') == 'adapting'
-        and notch_cmd.last_index > diagnostics.int_value('notch_controller',
-                                                         'enabled_since_sample') + 200,
+        lambda: diagnostics.value("notch_controller", "state") == "adapting"
+        and notch_cmd.last_index > diagnostics.int_value("notch_controller",
+                                                         "enabled_since_sample") + 200,
         HANG_GUARD_S)
     assert adapting, logs()
     notch.process.kill()        # SIGKILL: no goodbye on the graph
@@ -65,9 +65,9 @@ def test_killed_notch_controller_is_dropped_within_the_timeout(ros_context, node
     # last notch command it got: take in every command the controller sent before it
     # died, up to that one (progress, not a pause: this process may lag the loop).
     def reported() -> bool:
-        return diagnostics.int_value(DRIVER, 'notch_stale_events') >= 1
+        return diagnostics.int_value(DRIVER, "notch_stale_events") >= 1
     assert wait_until(ros_context, reported, HANG_GUARD_S), (diagnostics.values(DRIVER), logs())
-    driver_last = diagnostics.int_value(DRIVER, 'notch_last_sample')
+    driver_last = diagnostics.int_value(DRIVER, "notch_last_sample")
     assert wait_until(ros_context, lambda: notch_cmd.last_index >= driver_last, HANG_GUARD_S)
     # The driver's last one, not this listener's: a RELIABLE sample the writer sent just
     # before its SIGKILL may reach one reader and never be repaired to the other (the full
@@ -77,11 +77,11 @@ def test_killed_notch_controller_is_dropped_within_the_timeout(ros_context, node
 
     # Sample indices keep increasing well past the kill.
     ok = wait_until(ros_context, lambda: force.last_index > last + 1000
-                    and diagnostics.int_value(DRIVER, 'sample') > last, HANG_GUARD_S)
+                    and diagnostics.int_value(DRIVER, "sample") > last, HANG_GUARD_S)
     assert ok, (diagnostics.values(DRIVER), logs())
     assert driver.running(), driver.output()
     status = diagnostics.latest[DRIVER]
-    assert 'stale' in status.message and 'notch' in status.message, status
+    assert "stale" in status.message and "notch" in status.message, status
     assert status.level == status.WARN
 
     # Per sample: before the kill the driver applied notch + pointing of the same sample;
@@ -94,8 +94,8 @@ def test_killed_notch_controller_is_dropped_within_the_timeout(ros_context, node
     assert all(n in force.by_index and n in pointing_cmd.by_index for n in after)
     held = [n for n in after if np.any(_notch_part(force, pointing_cmd, n) != 0.0)]
     assert held == list(range(last + 1, last + 1 + len(held))), held
-    print(f'last notch command: sample {last}; held for {len(held)} samples; driver: '
-          f'{diagnostics.values(DRIVER)}')
+    print(f"last notch command: sample {last}; held for {len(held)} samples; driver: "
+          f"{diagnostics.values(DRIVER)}")
     # The driver may have got command(s) after the status that named ``last`` (the
     # controller was killed mid-send; a command whose sample the driver had already passed
     # after a timeout is still applied as the latest): each one the driver got for sample
@@ -121,20 +121,20 @@ def _invalid_commands(sample: int) -> list[Float64MultiArray]:
     inf = make_strut_array(np.full(6, 30.0), None)
     inf.data[0] = math.inf
     garbled = make_strut_array(np.full(6, 30.0), sample)
-    garbled.layout.dim[1] = MultiArrayDimension(label='sample:x', size=1, stride=1)
+    garbled.layout.dim[1] = MultiArrayDimension(label="sample:x", size=1, stride=1)
     future = make_strut_array(np.full(6, 30.0), sample + 10**9)
     return [short, nan, inf, garbled, future]
 
 
 def test_invalid_notch_commands_are_counted_and_never_applied(ros_context, node_processes):
-    driver = node_processes.start('pph_driver', '--ros-args',
-                                  '-p', 'lockstep_controllers:=[pointing]')
-    pointing = node_processes.start('pointing_controller')
-    node = ros_context.create_node('bad_notch_controller')
-    force = StrutTopic(node, '/pph/actuator_force')
-    pointing_cmd = StrutTopic(node, '/pph/pointing_command')
+    driver = node_processes.start("pph_driver", "--ros-args",
+                                  "-p", "lockstep_controllers:=[pointing]")
+    pointing = node_processes.start("pointing_controller")
+    node = ros_context.create_node("bad_notch_controller")
+    force = StrutTopic(node, "/pph/actuator_force")
+    pointing_cmd = StrutTopic(node, "/pph/pointing_command")
     diagnostics = Diagnostics(node)
-    publisher = node.create_publisher(Float64MultiArray, '/pph/notch_command',
+    publisher = node.create_publisher(Float64MultiArray, "/pph/notch_command",
                                       QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE))
     sent = 0
 
@@ -148,7 +148,7 @@ def test_invalid_notch_commands_are_counted_and_never_applied(ros_context, node_
     assert started, driver.output() + pointing.output()
     first = force.last_index
     counted = wait_until(ros_context,
-        lambda: diagnostics.int_value(DRIVER, 'notch_invalid') >= 50, HANG_GUARD_S,
+        lambda: diagnostics.int_value(DRIVER, "notch_invalid") >= 50, HANG_GUARD_S,
         step=send_invalid)
     assert counted, (diagnostics.values(DRIVER), driver.output())
 
@@ -161,7 +161,7 @@ def test_invalid_notch_commands_are_counted_and_never_applied(ros_context, node_
     assert wait_until(ros_context, lambda: len(observed()) > 100, HANG_GUARD_S,
                       step=send_invalid), driver.output()
     stop = force.last_index
-    invalid = diagnostics.int_value(DRIVER, 'notch_invalid')
+    invalid = diagnostics.int_value(DRIVER, "notch_invalid")
     assert invalid <= sent
     assert diagnostics.latest[DRIVER].level == diagnostics.latest[DRIVER].WARN
     # Never applied: the applied force is the pointing command alone at every sample.
@@ -189,10 +189,10 @@ def test_invalid_notch_commands_are_counted_and_never_applied(ros_context, node_
 
 def test_only_the_first_command_of_a_sample_is_applied(ros_context, node_processes):
     """Regression: the driver took a second command for a sample it had and applied it."""
-    driver = node_processes.start('pph_driver', '--ros-args', '-p', 'lockstep_controllers:=[notch]')
-    node = ros_context.create_node('duplicating_notch')
-    force = StrutTopic(node, '/pph/actuator_force')
-    publisher = node.create_publisher(Float64MultiArray, '/pph/notch_command',
+    driver = node_processes.start("pph_driver", "--ros-args", "-p", "lockstep_controllers:=[notch]")
+    node = ros_context.create_node("duplicating_notch")
+    force = StrutTopic(node, "/pph/actuator_force")
+    publisher = node.create_publisher(Float64MultiArray, "/pph/notch_command",
                                       QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE))
 
     def first(index: int) -> np.ndarray:
@@ -204,7 +204,7 @@ def test_only_the_first_command_of_a_sample_is_applied(ros_context, node_process
         publisher.publish(encode_strut_cdr(first(index), index, run))
         publisher.publish(encode_strut_cdr(-first(index), index, run))
 
-    node.create_subscription(Float64MultiArray, '/pph/accel', answer_twice, LOOP_QOS, raw=True)
+    node.create_subscription(Float64MultiArray, "/pph/accel", answer_twice, LOOP_QOS, raw=True)
     assert wait_until(ros_context, lambda: force.last_index > 1000, HANG_GUARD_S), driver.output()
     observed = sorted(force.by_index)
     assert len(observed) > 500

@@ -11,7 +11,7 @@ from hexapod_vibration.cdr import clock_cdr
 from hexapod_vibration.ros.diagnostics import sample_time
 
 
-@pytest.mark.parametrize('sample, rate, sec, nanosec', [
+@pytest.mark.parametrize("sample, rate, sec, nanosec", [
     (0, 1000.0, 0, 0), (1500, 1000.0, 1, 500_000_000), (-5, 1000.0, 0, 0),
     (3, 3.0, 1, 0), (1, 3.0, 0, 333_333_333)])
 def test_sample_time(sample, rate, sec, nanosec):

@@ -30,24 +30,24 @@ class Graph:
 
     def __init__(self, ros_context):
         self.ctx = ros_context
-        self.talker = ros_context.create_node('spinner_talker')
-        self.listener = ros_context.create_node('spinner_listener')
-        self.listener.declare_parameter('gain', 1.0)
+        self.talker = ros_context.create_node("spinner_talker")
+        self.listener = ros_context.create_node("spinner_listener")
+        self.listener.declare_parameter("gain", 1.0)
         self.loop_msgs: list[tuple[np.ndarray, int]] = []
         self.other_msgs: list[str] = []
         self.kinds: set[type] = set()
         self.loop_sub = self.listener.create_subscription(
-            Float64MultiArray, '/spin/loop', self._on_loop, LOOP_QOS)
-        self.listener.create_subscription(String, '/spin/other',
+            Float64MultiArray, "/spin/loop", self._on_loop, LOOP_QOS)
+        self.listener.create_subscription(String, "/spin/other",
                                           lambda m: self.other_msgs.append(m.data), 10)
         self.loop_pub = StrutArrayPublisher(self.talker.create_publisher(
-            Float64MultiArray, '/spin/loop', LOOP_PUBLISHER_QOS))
-        self.other_pub = self.talker.create_publisher(String, '/spin/other', 10)
+            Float64MultiArray, "/spin/loop", LOOP_PUBLISHER_QOS))
+        self.other_pub = self.talker.create_publisher(String, "/spin/other", 10)
 
     def _on_loop(self, msg: Float64MultiArray | bytes) -> None:
         # The fast path hands over the serialized message, the executor a Python one.
         self.kinds.add(type(msg))
-        values, index = receive_strut_array(msg, self.listener.get_logger(), '/spin/loop')
+        values, index = receive_strut_array(msg, self.listener.get_logger(), "/spin/loop")
         self.loop_msgs.append((values.copy(), index))
 
     def spinner(self, fast: bool = True, service_period_s: float = 0.01) -> LoopSpinner:
@@ -65,7 +65,7 @@ class Graph:
         self.kinds.clear()
 
 
-@pytest.mark.parametrize('fast', [True, False])
+@pytest.mark.parametrize("fast", [True, False])
 def test_loop_messages_arrive_in_order_with_their_index(ros_context, fast):
     graph = Graph(ros_context)
     spinner = graph.spinner(fast)
@@ -85,17 +85,17 @@ def test_fast_spinner_serves_other_callbacks_and_parameter_services(ros_context)
     graph = Graph(ros_context)
     spinner = graph.spinner(fast=True, service_period_s=0.0)
     graph.connect(spinner)
-    graph.other_pub.publish(String(data='hello'))
-    assert graph.spin_until(spinner, lambda: graph.other_msgs == ['hello'])
+    graph.other_pub.publish(String(data="hello"))
+    assert graph.spin_until(spinner, lambda: graph.other_msgs == ["hello"])
 
     # The parameter service (what `ros2 param set` calls) of the listener node.
-    client = graph.talker.create_client(SetParameters, '/spinner_listener/set_parameters')
+    client = graph.talker.create_client(SetParameters, "/spinner_listener/set_parameters")
     assert graph.spin_until(spinner, client.service_is_ready)
-    request = SetParameters.Request(parameters=[Parameter('gain', value=2.5).to_parameter_msg()])
+    request = SetParameters.Request(parameters=[Parameter("gain", value=2.5).to_parameter_msg()])
     future = client.call_async(request)
     assert graph.spin_until(spinner, future.done)
     assert future.result().results[0].successful
-    assert graph.listener.get_parameter('gain').value == 2.5
+    assert graph.listener.get_parameter("gain").value == 2.5
 
 
 def test_fast_spinner_keeps_loop_messages_taken_by_the_executor(ros_context):
@@ -113,7 +113,7 @@ def test_fast_spinner_keeps_loop_messages_taken_by_the_executor(ros_context):
 def test_strut_array_publisher_sends_what_make_strut_array_builds(ros_context):
     graph = Graph(ros_context)
     raw_msgs: list[bytes] = []
-    graph.listener.create_subscription(Float64MultiArray, '/spin/loop', raw_msgs.append,
+    graph.listener.create_subscription(Float64MultiArray, "/spin/loop", raw_msgs.append,
                                        LOOP_QOS, raw=True)
     spinner = graph.spinner(fast=False)
     values = np.array([1.0, -2.0, 3.5, 1e-9, -7.25, 123456.0])
@@ -126,7 +126,7 @@ def test_strut_array_publisher_sends_what_make_strut_array_builds(ros_context):
     assert graph.spin_until(spinner, received, step=lambda: graph.loop_pub.publish(values, 987654))
 
 
-@pytest.mark.parametrize('values, index', [(np.zeros(5), 1), (np.zeros(7), 1),
+@pytest.mark.parametrize("values, index", [(np.zeros(5), 1), (np.zeros(7), 1),
                                            (np.zeros(6), -1)])
 def test_strut_array_publisher_rejects_bad_input_and_sends_nothing(ros_context, values, index):
     graph = Graph(ros_context)

@@ -15,29 +15,29 @@ HANG_GUARD_S = 30.0
 
 
 def test_a_watched_publisher_reports_its_matched_subscriptions_and_calls_back(ros_context):
-    talker = ros_context.create_node('matching_talker')
-    listener = ros_context.create_node('matching_listener')
+    talker = ros_context.create_node("matching_talker")
+    listener = ros_context.create_node("matching_listener")
     changes: list[dict[str, int]] = []
     readers = MatchedReaders(lambda: changes.append(readers.values()))
-    readers.publisher(talker, Float64MultiArray, '/match/loop', LOOP_PUBLISHER_QOS)
-    assert readers.values() == {'/match/loop readers': 0}
-    sub = listener.create_subscription(Float64MultiArray, '/match/loop', lambda _m: None,
+    readers.publisher(talker, Float64MultiArray, "/match/loop", LOOP_PUBLISHER_QOS)
+    assert readers.values() == {"/match/loop readers": 0}
+    sub = listener.create_subscription(Float64MultiArray, "/match/loop", lambda _m: None,
                                        LOOP_QOS)
-    assert ros_context.wait_for(lambda: changes, HANG_GUARD_S), 'no matched event'
-    assert changes[-1] == {'/match/loop readers': 1}
+    assert ros_context.wait_for(lambda: changes, HANG_GUARD_S), "no matched event"
+    assert changes[-1] == {"/match/loop readers": 1}
     listener.destroy_subscription(sub)
-    assert ros_context.wait_for(lambda: readers.values()['/match/loop readers'] == 0,
+    assert ros_context.wait_for(lambda: readers.values()["/match/loop readers"] == 0,
                                   HANG_GUARD_S)
-    assert ros_context.wait_for(lambda: changes[-1] == {'/match/loop readers': 0},
+    assert ros_context.wait_for(lambda: changes[-1] == {"/match/loop readers": 0},
                                   HANG_GUARD_S), changes
 
 
 def test_a_topic_is_unmatched_until_its_publisher_matched_every_subscriber_the_graph_shows():
-    graph = {'/a': 2, '/b': 1, '/c': 1}
-    driver = {readers_key('/a'): '1', 'held': 'true'}
-    notch = {readers_key('/b'): '1'}
-    assert unmatched_topics([driver, notch], ['/a', '/b', '/c'], graph.get) == ['/a', '/c']
-    driver[readers_key('/a')] = '2'
-    assert unmatched_topics([driver, notch], ['/a', '/b'], graph.get) == []
-    graph['/b'] = 3                          # a subscriber the publisher has not matched yet
-    assert unmatched_topics([driver, notch], ['/a', '/b'], graph.get) == ['/b']
+    graph = {"/a": 2, "/b": 1, "/c": 1}
+    driver = {readers_key("/a"): "1", "held": "true"}
+    notch = {readers_key("/b"): "1"}
+    assert unmatched_topics([driver, notch], ["/a", "/b", "/c"], graph.get) == ["/a", "/c"]
+    driver[readers_key("/a")] = "2"
+    assert unmatched_topics([driver, notch], ["/a", "/b"], graph.get) == []
+    graph["/b"] = 3                          # a subscriber the publisher has not matched yet
+    assert unmatched_topics([driver, notch], ["/a", "/b"], graph.get) == ["/b"]

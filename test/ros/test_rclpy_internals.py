@@ -21,7 +21,7 @@ RUN = 1234567890123
 # ------------------------------------------------------------------ the version gate
 def test_verified_rclpy_is_installed_and_the_fast_path_is_on():
     assert rclpy_version() == VERIFIED_RCLPY_VERSION
-    assert fast_path_problem() == '' and fast_path()
+    assert fast_path_problem() == "" and fast_path()
 
 
 def test_public_api_fallback_gives_the_same_bytes(tmp_path):
@@ -31,23 +31,23 @@ def test_public_api_fallback_gives_the_same_bytes(tmp_path):
     depend on the gate, its bytes are what rclpy deserializes into the same message.
     """
     script = (
-        'import numpy as np\n'
-        'from hexapod_vibration import cdr\n'
-        'from hexapod_vibration.ros import rclpy_internals as ri\n'
-        'assert not ri.fast_path() and not ri.fast_path()\n'
-        'assert ri.take_serialized_batch(None, 5) == []\n'
-        'from rclpy.serialization import deserialize_message\n'
-        'from std_msgs.msg import Float64MultiArray\n'
-        f'raw = cdr.encode_strut_cdr(np.arange(6.0), 5, {RUN})\n'
-        f'expected = {encode_strut_cdr(np.arange(6.0), 5, RUN)!r}\n'
-        'assert raw == expected\n'
-        'assert (deserialize_message(raw, Float64MultiArray)\n'
-        '        == deserialize_message(expected, Float64MultiArray))\n'
-        'assert cdr.decode_strut_cdr(raw).run == cdr.decode_strut_cdr(expected).run\n'
-        f'assert cdr.clock_cdr(1500) == {clock_cdr(1500)!r}\n'
-        'print(ri.fast_path_problem())\n')
-    env = dict(os.environ, **{PUBLIC_API_ENV: '1'})
-    result = subprocess.run([sys.executable, '-c', script], env=env, capture_output=True,
+        "import numpy as np\n"
+        "from hexapod_vibration import cdr\n"
+        "from hexapod_vibration.ros import rclpy_internals as ri\n"
+        "assert not ri.fast_path() and not ri.fast_path()\n"
+        "assert ri.take_serialized_batch(None, 5) == []\n"
+        "from rclpy.serialization import deserialize_message\n"
+        "from std_msgs.msg import Float64MultiArray\n"
+        f"raw = cdr.encode_strut_cdr(np.arange(6.0), 5, {RUN})\n"
+        f"expected = {encode_strut_cdr(np.arange(6.0), 5, RUN)!r}\n"
+        "assert raw == expected\n"
+        "assert (deserialize_message(raw, Float64MultiArray)\n"
+        "        == deserialize_message(expected, Float64MultiArray))\n"
+        "assert cdr.decode_strut_cdr(raw).run == cdr.decode_strut_cdr(expected).run\n"
+        f"assert cdr.clock_cdr(1500) == {clock_cdr(1500)!r}\n"
+        "print(ri.fast_path_problem())\n")
+    env = dict(os.environ, **{PUBLIC_API_ENV: "1"})
+    result = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True,
                             text=True, timeout=120)
     assert result.returncode == 0, result.stderr
     assert PUBLIC_API_ENV in result.stdout

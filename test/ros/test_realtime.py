@@ -16,7 +16,7 @@ BIN_DIR = Path(sys.executable).parent
 
 
 def _threads(pid: int) -> list[int]:
-    return [int(tid) for tid in os.listdir(f'/proc/{pid}/task')]
+    return [int(tid) for tid in os.listdir(f"/proc/{pid}/task")]
 
 
 def _scheduled(process, text: str) -> bool:
@@ -25,15 +25,15 @@ def _scheduled(process, text: str) -> bool:
 
 
 def test_nothing_requested_changes_nothing():
-    assert apply_scheduling(0, []) == ''
+    assert apply_scheduling(0, []) == ""
 
 
 def test_priority_and_affinity_apply_to_every_thread(node_processes, ros_context):
-    node = node_processes.start('pointing_controller', '--ros-args', '-p',
-                                'realtime_priority:=10', '-p', 'cpu_affinity:=[0]')
-    assert ros_context.wait_for(lambda: _scheduled(node, 'scheduling:'), HANG_GUARD_S)
+    node = node_processes.start("pointing_controller", "--ros-args", "-p",
+                                "realtime_priority:=10", "-p", "cpu_affinity:=[0]")
+    assert ros_context.wait_for(lambda: _scheduled(node, "scheduling:"), HANG_GUARD_S)
     assert node.running(), node.output()
-    assert 'scheduling: CPUs [0], SCHED_FIFO priority 10' in node.output()
+    assert "scheduling: CPUs [0], SCHED_FIFO priority 10" in node.output()
     threads = _threads(node.pid)
     assert len(threads) > 1                       # the DDS transport's threads too
     for tid in threads:
@@ -44,24 +44,24 @@ def test_priority_and_affinity_apply_to_every_thread(node_processes, ros_context
 
 def test_a_cpu_the_process_may_not_use_is_refused(node_processes):
     cpu = max(os.sched_getaffinity(0)) + 1
-    node = node_processes.start('pointing_controller', '--ros-args', '-p',
-                                f'cpu_affinity:=[{cpu}]')
+    node = node_processes.start("pointing_controller", "--ros-args", "-p",
+                                f"cpu_affinity:=[{cpu}]")
     assert node.wait(HANG_GUARD_S) == 2, node.output()
-    assert f'error: cpu_affinity [{cpu}]: this process may run on CPUs' in node.output()
-    assert 'Traceback' not in node.output()
+    assert f"error: cpu_affinity [{cpu}]: this process may run on CPUs" in node.output()
+    assert "Traceback" not in node.output()
 
 
-@pytest.mark.skipif(not (shutil.which('setpriv') and shutil.which('prlimit')),
-                    reason='needs util-linux setpriv and prlimit to withhold the permission')
+@pytest.mark.skipif(not (shutil.which("setpriv") and shutil.which("prlimit")),
+                    reason="needs util-linux setpriv and prlimit to withhold the permission")
 def test_a_priority_the_os_does_not_permit_is_refused_in_one_line(node_processes):
     # No CAP_SYS_NICE and an rtprio limit of 0: what an unprivileged user has by default.
-    command = ['prlimit', '--rtprio=0', 'setpriv', '--bounding-set', '-sys_nice',
-               '--inh-caps', '-sys_nice', str(BIN_DIR / 'pointing_controller'),
-               '--ros-args', '-p', 'realtime_priority:=50']
-    node = node_processes.start('pointing_controller', command=command)
+    command = ["prlimit", "--rtprio=0", "setpriv", "--bounding-set", "-sys_nice",
+               "--inh-caps", "-sys_nice", str(BIN_DIR / "pointing_controller"),
+               "--ros-args", "-p", "realtime_priority:=50"]
+    node = node_processes.start("pointing_controller", command=command)
     assert node.wait(HANG_GUARD_S) == 2, node.output()
-    errors = [line for line in node.output().splitlines() if 'error:' in line]
-    assert errors == ['pointing_controller: error: realtime_priority 50: the OS refused '
-                      'SCHED_FIFO (Operation not permitted); grant CAP_SYS_NICE or raise the '
-                      'rtprio limit (ulimit -r, /etc/security/limits.conf), or set '
-                      'realtime_priority 0'], node.output()
+    errors = [line for line in node.output().splitlines() if "error:" in line]
+    assert errors == ["pointing_controller: error: realtime_priority 50: the OS refused "
+                      "SCHED_FIFO (Operation not permitted); grant CAP_SYS_NICE or raise the "
+                      "rtprio limit (ulimit -r, /etc/security/limits.conf), or set "
+                      "realtime_priority 0"], node.output()

@@ -101,9 +101,9 @@ def test_a_realtime_priority_goes_to_every_loop_node_and_only_when_asked():
     from hexapod_vibration.core.sim.scenario import load_scenario
     from hexapod_vibration.paths import scenario_path
 
-    scenario = load_scenario(scenario_path('single_tone_harmonic'))
-    params = node_parameters(scenario, 'realtime', realtime_priority=50)
-    assert {node: p['ros__parameters'].get('realtime_priority') for node, p in params.items()} \
-        == {'pph_driver': 50, 'pointing_controller': 50, 'notch_controller': 50}
-    assert all('realtime_priority' not in p['ros__parameters']
-               for p in node_parameters(scenario, 'realtime').values())
+    scenario = load_scenario(scenario_path("single_tone_harmonic"))
+    params = node_parameters(scenario, "realtime", realtime_priority=50)
+    assert {node: p["ros__parameters"].get("realtime_priority") for node, p in params.items()} \
+        == {"pph_driver": 50, "pointing_controller": 50, "notch_controller": 50}
+    assert all("realtime_priority" not in p["ros__parameters"]
+               for p in node_parameters(scenario, "realtime").values())

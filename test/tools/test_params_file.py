@@ -17,12 +17,12 @@ from node_graph import HANG_GUARD_S, ParameterClient, StrutTopic, run_experiment
 from hexapod_vibration.analysis.bag_reading import read_strut_topics
 
 SCENARIO = {
-    'name': 'params_reuse', 'seed': 7, 'duration_s': 6.5, 'identify_at_s': 0.2,
-    'control_on_s': 5.5, 'window_s': 1.0,
-    'shaker': {'frequencies_hz': [40.0, 80.0], 'amplitudes_n': [80.0, 16.0],
-               'noise_rms_n': 0.5},
-    'notch': {'preset': 'paper', 'tone_frequencies_hz': [40.0], 'mu': 0.01,
-              'adaptation': 'decentralized'},            # test tones: a short timeline
+    "name": "params_reuse", "seed": 7, "duration_s": 6.5, "identify_at_s": 0.2,
+    "control_on_s": 5.5, "window_s": 1.0,
+    "shaker": {"frequencies_hz": [40.0, 80.0], "amplitudes_n": [80.0, 16.0],
+               "noise_rms_n": 0.5},
+    "notch": {"preset": "paper", "tone_frequencies_hz": [40.0], "mu": 0.01,
+              "adaptation": "decentralized"},            # test tones: a short timeline
 }
 COMPARED = 3000     # samples before control-on (5500)
 MATCHED_BY_SAMPLE = 200
@@ -33,31 +33,31 @@ of the 3000 compared samples)."""
 
 
 def test_params_yaml_starts_the_same_run(ros_env, ros_context, node_processes, tmp_path):
-    scenario = tmp_path / 'scenario.yaml'
+    scenario = tmp_path / "scenario.yaml"
     scenario.write_text(yaml.safe_dump(SCENARIO))
-    out = tmp_path / 'run'
+    out = tmp_path / "run"
     result = run_experiment(ros_env, scenario, out, timeout=600)
     assert result.returncode == 0, result.stdout[-2000:] + result.stderr[-2000:]
-    params_file = out / 'params.yaml'
+    params_file = out / "params.yaml"
     text = params_file.read_text()
-    assert 'ros2 launch hexapod_vibration pph.launch.py params_file:=' in text
+    assert "ros2 launch hexapod_vibration pph.launch.py params_file:=" in text
     params = yaml.safe_load(text)
-    assert 'hold_at_time_s' not in params['pph_driver']['ros__parameters']
-    recorded = read_strut_topics(out / 'bag')['/pph/accel']
+    assert "hold_at_time_s" not in params["pph_driver"]["ros__parameters"]
+    recorded = read_strut_topics(out / "bag")["/pph/accel"]
 
     # The launch file's command lines, from the params file alone.
-    node = ros_context.create_node('listener')
-    accel = StrutTopic(node, '/pph/accel')
-    common = ['--ros-args', '--params-file', str(params_file)]
-    for name in ('notch_controller', 'pointing_controller'):
+    node = ros_context.create_node("listener")
+    accel = StrutTopic(node, "/pph/accel")
+    common = ["--ros-args", "--params-file", str(params_file)]
+    for name in ("notch_controller", "pointing_controller"):
         node_processes.start(name, *common)
-    driver = node_processes.start('pph_driver', *common, '-p', 'clock_mode:=lockstep',
-                                  '-p', f'hold_at_time_s:={MATCHED_BY_SAMPLE / 1000.0}')
+    driver = node_processes.start("pph_driver", *common, "-p", "clock_mode:=lockstep",
+                                  "-p", f"hold_at_time_s:={MATCHED_BY_SAMPLE / 1000.0}")
     assert wait_until(ros_context, lambda: not driver.running()
                       or accel.subscription.get_publisher_count() >= 1, HANG_GUARD_S), \
         driver.output()
-    driver_params = ParameterClient(ros_context, node, 'pph_driver')
-    assert driver_params.set('hold_at_time_s', (COMPARED + 100) / 1000.0).successful
+    driver_params = ParameterClient(ros_context, node, "pph_driver")
+    assert driver_params.set("hold_at_time_s", (COMPARED + 100) / 1000.0).successful
     assert wait_until(ros_context, lambda: accel.last_index >= COMPARED, HANG_GUARD_S), \
         driver.output()
     # Every sample this listener received before COMPARED must be the recorded one, bit
@@ -65,6 +65,6 @@ def test_params_yaml_starts_the_same_run(ros_env, ros_context, node_processes, t
     idx, values = accel.window(0, COMPARED)
     print(f"listener received {len(idx)} of the {COMPARED} compared samples")
     assert len(idx) >= COMPARED // 2, len(idx)
-    assert np.all(np.diff(idx) == 1), 'a gap in the middle of the stream'
+    assert np.all(np.diff(idx) == 1), "a gap in the middle of the stream"
     assert np.array_equal(recorded.sample_index[:COMPARED], np.arange(COMPARED))
     assert np.array_equal(recorded.values[idx], values)

@@ -44,7 +44,7 @@ def paper_mu_bound(alpha: float, beta_rad: float) -> float:
         ``mu`` is stable: a positive-phase plant needs the sign flip of a coefficient).
     """
     if not np.isfinite(alpha) or alpha <= 0.0:
-        raise ValueError(f'alpha must be finite and > 0, got {alpha}')
+        raise ValueError(f"alpha must be finite and > 0, got {alpha}")
     c = float(np.cos(beta_rad))
     return -4.0 * c / alpha if c < 0.0 else 0.0
 
@@ -57,7 +57,7 @@ def _as_stack(m: np.ndarray) -> np.ndarray:
     if a.ndim == 2:
         a = a[None]
     if a.ndim != 3 or a.shape[1] != a.shape[2]:
-        raise ValueError(f'expected a square matrix or a (T, C, C) stack, got shape {a.shape}')
+        raise ValueError(f"expected a square matrix or a (T, C, C) stack, got shape {a.shape}")
     return a
 
 
@@ -73,14 +73,14 @@ def weight_loop_eigenvalues(G: np.ndarray, P: np.ndarray) -> np.ndarray:
     """
     g, p = _as_stack(G), _as_stack(P)
     if g.shape != p.shape:
-        raise ValueError(f'G and P must have the same shape, got {g.shape} and {p.shape}')
+        raise ValueError(f"G and P must have the same shape, got {g.shape} and {p.shape}")
     lam = np.linalg.eigvals(-0.5 * p @ g)
     return lam[0] if np.ndim(G) < 3 else lam
 
 
 def _delay_int(delay_samples: float) -> int:
     if not np.isfinite(delay_samples) or delay_samples < 0.0:
-        raise ValueError(f'delay_samples must be finite and >= 0, got {delay_samples}')
+        raise ValueError(f"delay_samples must be finite and >= 0, got {delay_samples}")
     return int(np.ceil(delay_samples - 1e-12))
 
 
@@ -129,7 +129,7 @@ def mu_bound(G: np.ndarray, P: np.ndarray, delay_samples: float = 0.0) -> float:
     """
     lams = np.ravel(weight_loop_eigenvalues(G, P))
     if lams.size == 0:
-        return float('inf')
+        return float("inf")
     return min(delayed_mode_mu_bound(lam, delay_samples) for lam in lams)
 
 
@@ -155,7 +155,7 @@ def predicted_time_constant_s(G: np.ndarray, P: np.ndarray, mu: float, sample_ra
     """Time constant (s) of the slowest weight mode: ``-1 / (fs ln rho)``; inf if unstable."""
     rho = convergence_factor(G, P, mu, delay_samples)
     if rho >= 1.0:
-        return float('inf')
+        return float("inf")
     if rho <= 0.0:
         return 0.0
     return float(-1.0 / (sample_rate_hz * np.log(rho)))
@@ -184,7 +184,7 @@ def canceller_state_space(
     p = _as_stack(coefficients)
     t, c = p.shape[0], p.shape[1]
     if t != freqs.size:
-        raise ValueError(f'{freqs.size} tones but {t} coefficient matrices')
+        raise ValueError(f"{freqs.size} tones but {t} coefficient matrices")
     rot = np.kron(np.diag(np.exp(1j * TWO_PI * freqs / sample_rate_hz)), np.eye(c))
     p_stack = mu * p.reshape(t * c, c)
     a_c, b_c = rot, rot @ p_stack
@@ -280,13 +280,13 @@ def normalized_coefficients(G: np.ndarray, mode: str,
     """
     g = _as_stack(G)
     if mode not in ADAPTATION_MODES:
-        raise ValueError(f'mode must be one of {ADAPTATION_MODES}, got {mode!r}')
+        raise ValueError(f"mode must be one of {ADAPTATION_MODES}, got {mode!r}")
     if not np.all(np.isfinite(g)):
-        raise ValueError('G must be finite')
+        raise ValueError("G must be finite")
     c = g.shape[1]
-    if mode == 'raw':
+    if mode == "raw":
         p = np.broadcast_to(np.eye(c, dtype=complex), g.shape).copy()
-    elif mode == 'centralized':
+    elif mode == "centralized":
         cond = np.linalg.cond(g)
         if not np.all(cond <= max_condition):
             raise ValueError(f'G is ill-conditioned (condition numbers {np.round(cond, 1)}, '
@@ -296,7 +296,7 @@ def normalized_coefficients(G: np.ndarray, mode: str,
         diag = np.diagonal(g, axis1=1, axis2=2)
         scale = np.max(np.abs(g), axis=(1, 2), keepdims=True)[:, :, 0]
         if np.any(np.abs(diag) <= 1e-9 * scale) or np.any(scale == 0.0):
-            raise ValueError('G has a (near) zero diagonal entry: decentralized P undefined')
+            raise ValueError("G has a (near) zero diagonal entry: decentralized P undefined")
         p = (-2.0 / diag)[:, :, None] * np.eye(c)
     return p[0] if np.ndim(G) < 3 else p
 
@@ -361,7 +361,7 @@ class SampledRun:
         """
         e = np.asarray(error, dtype=float)
         if e.shape != (self._c,):
-            raise ValueError(f'error must have shape ({self._c},), got {e.shape}')
+            raise ValueError(f"error must have shape ({self._c},), got {e.shape}")
         self._u[:] = 0.0
         if self._n >= self._total:
             return None
@@ -416,19 +416,19 @@ class ToneResponseIdentifier(SampledRun):
         """Validate the arguments (ValueError) and allocate the segment buffers."""
         self._c = int(n_channels)
         if self._c != n_channels or self._c < 1:
-            raise ValueError(f'n_channels must be a positive integer, got {n_channels!r}')
+            raise ValueError(f"n_channels must be a positive integer, got {n_channels!r}")
         self._fs = float(sample_rate_hz)
         self._freqs = validate_frequencies(tone_frequencies_hz, self._fs)
         if self._freqs.size == 0:
-            raise ValueError('at least one tone frequency is required')
+            raise ValueError("at least one tone frequency is required")
         t = self._freqs.size
         amp = np.broadcast_to(np.asarray(amplitude_n, dtype=float), (t,))
         if not np.all(np.isfinite(amp)) or np.any(amp <= 0.0):
-            raise ValueError(f'amplitude_n must be finite and > 0, got {amplitude_n!r}')
+            raise ValueError(f"amplitude_n must be finite and > 0, got {amplitude_n!r}")
         self._settle = int(round(settle_s * self._fs))
         self._measure = int(round(measure_s * self._fs))
         if self._settle < 0 or self._measure < 2 * (2 * t + 1):
-            raise ValueError('settle_s must be >= 0 and measure_s must hold > 2(2T+1) samples')
+            raise ValueError("settle_s must be >= 0 and measure_s must hold > 2(2T+1) samples")
         self._x = amp * np.exp(1j * schroeder_phases(t))
         self._dphi = TWO_PI * self._freqs / self._fs
         self._phi = np.zeros(t)
@@ -507,7 +507,7 @@ class ToneResponseIdentifier(SampledRun):
             RuntimeError: if the run is not finished.
         """
         if not self.done:
-            raise RuntimeError(f'identification not finished ({100 * self.progress:.0f} %)')
+            raise RuntimeError(f"identification not finished ({100 * self.progress:.0f} %)")
         change = np.linalg.norm(self._y[-1] - self._y[0], axis=1)                  # (T,)
         base = 0.5 * (self._y[0] + self._y[-1])
         response = np.linalg.norm(self._y[1:-1] - base[None], axis=2)            # (C, T)
@@ -520,7 +520,7 @@ class ToneResponseIdentifier(SampledRun):
             RuntimeError: if the run is not finished.
         """
         if not self.done:
-            raise RuntimeError(f'identification not finished ({100 * self.progress:.0f} %)')
+            raise RuntimeError(f"identification not finished ({100 * self.progress:.0f} %)")
         w = np.arange(1, self._c + 1) / (self._c + 1)
         base = (1.0 - w)[:, None, None] * self._y[0] + w[:, None, None] * self._y[-1]
         resp = (self._y[1:-1] - base) / self._x[None, :, None]

@@ -107,7 +107,7 @@ def tracking_bounds_hz(nominal_hz: Sequence[float] | np.ndarray, range_hz: float
     f = np.asarray(nominal_hz, dtype=float).reshape(-1)
     r = float(range_hz)
     if not np.isfinite(r) or r < 0.0:
-        raise ValueError(f'tracking_range_hz must be finite and >= 0, got {range_hz!r}')
+        raise ValueError(f"tracking_range_hz must be finite and >= 0, got {range_hz!r}")
     lower, upper = f - r, f + r
     order = np.argsort(f)
     sorted_f = f[order]
@@ -189,19 +189,19 @@ def weight_phase_error(previous: np.ndarray, current: np.ndarray, rate: float,
     t = current.shape[0]
     if rate <= 0.0 or samples < 1:
         return np.zeros(t), np.zeros(t)
-    residual = np.einsum('tij,tj->ti', inverse_coefficients, current - previous)
+    residual = np.einsum("tij,tj->ti", inverse_coefficients, current - previous)
     # y from the weights before the block: the block's own change is proportional to E,
     # and through a coupled G its cross term Im(E^H (G P)^H E) would bias psi by the
     # residual's power (a weak tone beside strong lines then drifts off its frequency)
-    y = np.einsum('tij,tj->ti', plant, previous)
+    y = np.einsum("tij,tj->ti", plant, previous)
     y_conj = np.conj(y)
-    y2 = np.einsum('ti,ti->t', y_conj, y).real
-    p2 = np.einsum('ti,ti->t', np.conj(previous), previous).real
-    growth = np.einsum('ti,ti->t', np.conj(current), current).real
+    y2 = np.einsum("ti,ti->t", y_conj, y).real
+    p2 = np.einsum("ti,ti->t", np.conj(previous), previous).real
+    growth = np.einsum("ti,ti->t", np.conj(current), current).real
     growth /= np.maximum(p2, WEIGHT_FLOOR_N ** 2)
     valid = ((p2 > WEIGHT_FLOOR_N ** 2) & (y2 > 0.0) & (growth <= MAX_GROWTH ** 2)
              & (growth >= MAX_GROWTH ** -2))
-    cross = np.einsum('ti,ti->t', y_conj, residual).imag
+    cross = np.einsum("ti,ti->t", y_conj, residual).imag
     cross *= -2.0 / (rate * samples)
     error = cross / np.where(valid, y2, np.inf)
     np.clip(error, -MAX_PHASE_ERROR_RAD, MAX_PHASE_ERROR_RAD, out=error)
@@ -257,7 +257,7 @@ class FrequencyTracker:
         self.range_hz = float(range_hz)
         self.lower_hz, self.upper_hz = tracking_bounds_hz(self.nominal_hz, range_hz, self.fs)
         if int(block_samples) < 1:
-            raise ValueError(f'block_samples must be >= 1, got {block_samples!r}')
+            raise ValueError(f"block_samples must be >= 1, got {block_samples!r}")
         self.block_samples = int(block_samples)
         self._damping = float(damping)
         self._bandwidth_hz = np.broadcast_to(np.asarray(bandwidth_hz, float),
@@ -283,7 +283,7 @@ class FrequencyTracker:
         self._gamma = self._beta * RAMP_FRACTION * omega_n  # K3 (rate per rad)
         self._beta_b = self._beta * self.block_samples      # per block
         self._gamma_b = self._gamma * self.block_samples
-        self._k1_rate = float('nan')                        # K1 = alpha - mu, cached
+        self._k1_rate = float("nan")                        # K1 = alpha - mu, cached
         self._k1 = self._alpha
         self._smoothing = -np.expm1(-TWO_PI * np.asarray(corner_hz, float)
                                     * self.block_samples / self.fs)

@@ -37,7 +37,7 @@ from hexapod_vibration.core.control import sensitivity
 from hexapod_vibration.core.control.notch import validate_frequencies
 from hexapod_vibration.parameter_specs import MU_POLICIES, NOTCH_CONTROLLER
 
-DEFAULT_MAX_RISE_DB = NOTCH_CONTROLLER['max_rise_db'].default
+DEFAULT_MAX_RISE_DB = NOTCH_CONTROLLER["max_rise_db"].default
 """The notch's default ``max_rise_db`` (dB)."""
 RELATIVE_TOLERANCE = 0.02
 SMALLEST_SCALE = 1e-3
@@ -80,10 +80,10 @@ class MuChoice:
 def validate_policy(policy: str, max_rise_db: float) -> tuple[str, float]:
     """Return ``(policy, max_rise_db)`` checked, or raise ValueError with the reason."""
     if policy not in MU_POLICIES:
-        raise ValueError(f'mu_policy must be one of {MU_POLICIES}, got {policy!r}')
+        raise ValueError(f"mu_policy must be one of {MU_POLICIES}, got {policy!r}")
     value = float(max_rise_db)
     if not np.isfinite(value) or value <= 0.0:
-        raise ValueError(f'max_rise_db must be finite and > 0 dB, got {max_rise_db!r}')
+        raise ValueError(f"max_rise_db must be finite and > 0 dB, got {max_rise_db!r}")
     return policy, value
 
 
@@ -106,7 +106,7 @@ class _RiseEvaluator:
         """(rise dB, at Hz); (inf, NaN) when the closed loop would be unstable."""
         prediction = sensitivity.predict_sensitivity(
             self._plant, self._tones, self._fs, self._p, rates,
-            output_weights=self._c if self._metric == 'output' else None,
+            output_weights=self._c if self._metric == "output" else None,
             disturbance_csd=self._phi, update_lowpass_hz=self._lowpass_hz)
         return prediction.largest_rise(self._metric)
 
@@ -123,7 +123,7 @@ def _largest_within(ok, lo: float, hi: float) -> float:
 
 def choose_tone_rates(plant: sensitivity.PlantResponse,
                       tone_frequencies_hz: Sequence[float] | np.ndarray, sample_rate_hz: float,
-                      coefficients: np.ndarray, mu: float, policy: str = 'manual',
+                      coefficients: np.ndarray, mu: float, policy: str = "manual",
                       max_rise_db: float = DEFAULT_MAX_RISE_DB, metric: str | None = None,
                       output_weights: np.ndarray | None = None,
                       disturbance_csd: sensitivity.PlantResponse | None = None,
@@ -152,11 +152,11 @@ def choose_tone_rates(plant: sensitivity.PlantResponse,
     """
     policy, limit = validate_policy(policy, max_rise_db)
     if metric is None:
-        metric = ('output' if output_weights is not None and disturbance_csd is not None
-                  else 'sigma_max')
+        metric = ("output" if output_weights is not None and disturbance_csd is not None
+                  else "sigma_max")
     if metric not in sensitivity.METRICS:
-        raise ValueError(f'metric must be one of {sensitivity.METRICS}, got {metric!r}')
-    if metric == 'output' and output_weights is None:
+        raise ValueError(f"metric must be one of {sensitivity.METRICS}, got {metric!r}")
+    if metric == "output" and output_weights is None:
         raise ValueError("metric 'output' needs output_weights")
     fs = float(sample_rate_hz)
     tones = validate_frequencies(tone_frequencies_hz, fs)
@@ -164,20 +164,20 @@ def choose_tone_rates(plant: sensitivity.PlantResponse,
     rates = sensitivity.tone_rates(mu, tones.size)
     mu = float(mu)
     if tones.size == 0:
-        return MuChoice(policy, mu, rates, limit, 0.0, float('nan'), metric, None)
+        return MuChoice(policy, mu, rates, limit, 0.0, float("nan"), metric, None)
     evaluator = _RiseEvaluator(plant, tones, fs, p, metric, output_weights, disturbance_csd,
                                update_lowpass_hz)
-    floor_note = ''
-    if policy == 'auto' and mu > 0.0:
+    floor_note = ""
+    if policy == "auto" and mu > 0.0:
         rates, floor_note = _auto_rates(evaluator, mu, tones.size, limit)
     rise_db, at_hz = evaluator.rise(rates)
     warning = None
     if not np.isfinite(rise_db):
-        warning = (f'the loop would be unstable with mu={mu:g} ({policy}): '
-                   'lower mu or use mu_policy auto')
+        warning = (f"the loop would be unstable with mu={mu:g} ({policy}): "
+                   "lower mu or use mu_policy auto")
     elif rise_db > limit:
-        warning = (f'mu={mu:g} predicts a rise of {rise_db:.1f} dB at {at_hz:.2f} Hz, '
-                   f'above max_rise_db={limit:g} ({policy}{floor_note})')
+        warning = (f"mu={mu:g} predicts a rise of {rise_db:.1f} dB at {at_hz:.2f} Hz, "
+                   f"above max_rise_db={limit:g} ({policy}{floor_note})")
     return MuChoice(policy, mu, rates, limit, rise_db, at_hz, metric, warning)
 
 
@@ -192,15 +192,15 @@ def _auto_rates(evaluator: _RiseEvaluator, mu: float, n_tones: int, limit: float
     """
     full = np.full(n_tones, mu)
     if evaluator.rise(full)[0] <= limit:
-        return full, ''
-    note = ''
+        return full, ""
+    note = ""
     floor_db, floor_hz = evaluator.rise(full * SMALLEST_SCALE)
     if floor_db > limit:
         # the rise beside a notch stays whatever the rate: bound the rest (the far field,
         # e.g. a loop resonance the rates raise) to just above it instead of giving up
         limit = floor_db + FLOOR_MARGIN_DB
-        note = (f'; {floor_db:.1f} dB at {floor_hz:.2f} Hz remain at any rate (a '
-                f'coefficient phase error, not the rate): rates bounded to {limit:.2f} dB')
+        note = (f"; {floor_db:.1f} dB at {floor_hz:.2f} Hz remain at any rate (a "
+                f"coefficient phase error, not the rate): rates bounded to {limit:.2f} dB")
 
     def ok(rates: np.ndarray) -> bool:
         return evaluator.rise(rates)[0] <= limit

@@ -83,24 +83,24 @@ def validate_frequencies(
     """
     f = np.asarray(freqs_hz, dtype=float).reshape(-1)
     if not np.all(np.isfinite(f)):
-        raise ValueError(f'tone frequencies must be finite, got {f.tolist()}')
+        raise ValueError(f"tone frequencies must be finite, got {f.tolist()}")
     nyquist = 0.5 * sample_rate_hz
     bad = f[(f <= 0.0) | (f >= nyquist)]
     if bad.size:
         raise ValueError(
-            f'tone frequencies must be in (0, {nyquist:g}) Hz (fs/2), got {bad.tolist()}'
+            f"tone frequencies must be in (0, {nyquist:g}) Hz (fs/2), got {bad.tolist()}"
         )
     if f.size > 1:
         sorted_f = np.sort(f)
         if np.any(np.diff(sorted_f) <= SAME_FREQUENCY_TOL_HZ):
-            raise ValueError(f'duplicate tone frequencies in {f.tolist()}')
+            raise ValueError(f"duplicate tone frequencies in {f.tolist()}")
     return f
 
 
 def _validate_ramp(ramp_samples: int) -> int:
     ramp = int(ramp_samples)
     if ramp != ramp_samples or ramp < 0:
-        raise ValueError(f'ramp_samples must be an integer >= 0, got {ramp_samples!r}')
+        raise ValueError(f"ramp_samples must be an integer >= 0, got {ramp_samples!r}")
     return ramp
 
 
@@ -190,10 +190,10 @@ class AdaptiveNotchCanceller(NotchWeights):
     ) -> None:
         """Validate the arguments (ValueError) and allocate the per-sample buffers."""
         if int(n_channels) != n_channels or n_channels < 1:
-            raise ValueError(f'n_channels must be a positive integer, got {n_channels!r}')
+            raise ValueError(f"n_channels must be a positive integer, got {n_channels!r}")
         fs = float(sample_rate_hz)
         if not np.isfinite(fs) or fs <= 0.0:
-            raise ValueError(f'sample_rate_hz must be finite and > 0, got {sample_rate_hz!r}')
+            raise ValueError(f"sample_rate_hz must be finite and > 0, got {sample_rate_hz!r}")
         freqs = validate_frequencies(tone_frequencies_hz, fs)
         super().__init__(int(n_channels), fs, mu)
         p_full = validate_coefficients(coefficients, freqs.size, self._c)
@@ -234,9 +234,9 @@ class AdaptiveNotchCanceller(NotchWeights):
         """
         e = np.asarray(error, dtype=float)
         if e.shape != (self._c,):
-            raise ValueError(f'error must have shape ({self._c},), got {e.shape}')
+            raise ValueError(f"error must have shape ({self._c},), got {e.shape}")
         if not math.isfinite(sum(e.tolist())):         # a NaN would poison the weights
-            raise ValueError(f'error must be finite, got {e.tolist()}')
+            raise ValueError(f"error must be finite, got {e.tolist()}")
         if self._enabled and not self._frozen and self._mu > 0.0:
             self._adapt(e)
             if self._weight_limit is not None:
@@ -262,7 +262,7 @@ class AdaptiveNotchCanceller(NotchWeights):
         """
         samples = int(samples)
         if samples < 0:
-            raise ValueError(f'samples must be >= 0, got {samples}')
+            raise ValueError(f"samples must be >= 0, got {samples}")
         self._move_gain(samples)
         self._fading.advance(samples)
         self._osc.advance(samples)
@@ -350,10 +350,10 @@ class AdaptiveNotchCanceller(NotchWeights):
         """
         f = np.asarray(freqs_hz, dtype=float)
         if f.shape != self._freqs.shape:
-            raise ValueError(f'retune needs {self._freqs.size} frequencies, got {f.shape}')
+            raise ValueError(f"retune needs {self._freqs.size} frequencies, got {f.shape}")
         if f.size and not (f.min() > 0.0 and f.max() < 0.5 * self._fs):
-            raise ValueError(f'tone frequencies must be in (0, {0.5 * self._fs:g}) Hz, '
-                             f'got {f.tolist()}')
+            raise ValueError(f"tone frequencies must be in (0, {0.5 * self._fs:g}) Hz, "
+                             f"got {f.tolist()}")
         self._freqs[...] = f
         np.multiply(f, TWO_PI / self._fs, out=self._dphi)
         self._osc.retune(self._dphi)

@@ -52,9 +52,9 @@ def validate_mu(mu: float) -> float:
     try:
         value = float(mu)
     except (TypeError, ValueError) as exc:
-        raise ValueError(f'mu must be a real number, got {mu!r}') from exc
+        raise ValueError(f"mu must be a real number, got {mu!r}") from exc
     if not np.isfinite(value) or value < 0.0:
-        raise ValueError(f'mu must be finite and >= 0, got {value}')
+        raise ValueError(f"mu must be finite and >= 0, got {value}")
     return value
 
 
@@ -80,11 +80,11 @@ def validate_coefficients(
         p = p[:, :, None] * np.eye(n_channels)
     if p.shape != (n_tones, n_channels, n_channels):
         raise ValueError(
-            f'coefficients must have shape (T, C, C) = ({n_tones}, {n_channels}, {n_channels})'
-            f' or (T, C) for diagonal P, got {p.shape}'
+            f"coefficients must have shape (T, C, C) = ({n_tones}, {n_channels}, {n_channels})"
+            f" or (T, C) for diagonal P, got {p.shape}"
         )
     if not np.all(np.isfinite(p)):
-        raise ValueError('coefficients must be finite')
+        raise ValueError("coefficients must be finite")
     return p
 
 
@@ -99,8 +99,8 @@ def validate_update_lowpass(corner_hz: float, sample_rate_hz: float) -> float:
     """The update low-pass corner (Hz): 0 (off) or in (0, fs/2); ValueError otherwise."""
     value = float(corner_hz)
     if not math.isfinite(value) or value < 0.0 or value >= 0.5 * sample_rate_hz:
-        raise ValueError(f'update_lowpass_hz must be 0 (off) or in (0, '
-                         f'{0.5 * sample_rate_hz:g}) Hz, got {corner_hz!r}')
+        raise ValueError(f"update_lowpass_hz must be 0 (off) or in (0, "
+                         f"{0.5 * sample_rate_hz:g}) Hz, got {corner_hz!r}")
     return value
 
 
@@ -256,14 +256,14 @@ class NotchWeights:
 
     def set_weights(self, weights: np.ndarray) -> None:
         """Overwrite the complex (T, C) weights (N); the output follows immediately."""
-        self._v[...] = self._channel_major(weights, 'weights')
+        self._v[...] = self._channel_major(weights, "weights")
 
     def _channel_major(self, values: np.ndarray, what: str) -> np.ndarray:
         """conj(X)^T (C, T) of a finite complex (T, C) array, the layout of the state."""
         x = np.array(values, dtype=complex)
         shape = (self._v.shape[1], self._c)
         if x.shape != shape or not np.all(np.isfinite(x)):
-            raise ValueError(f'{what} must be finite with shape {shape}, got {x.shape}')
+            raise ValueError(f"{what} must be finite with shape {shape}, got {x.shape}")
         return np.conj(x).T
 
     def limit_weights(self, limit_n: float) -> bool:
@@ -306,9 +306,9 @@ class NotchWeights:
         elif r.shape == (t,):
             values, base = r.copy(), float(r.max(initial=0.0))
         else:
-            raise ValueError(f'integral ratio must be one value or {t}, got shape {r.shape}')
+            raise ValueError(f"integral ratio must be one value or {t}, got shape {r.shape}")
         if not np.all(np.isfinite(values)) or np.any(values < 0.0):
-            raise ValueError(f'integral ratio must be finite and >= 0, got {values.tolist()}')
+            raise ValueError(f"integral ratio must be finite and >= 0, got {values.tolist()}")
         self._ratio, self._integral_base = values, base
         self._zv[:, values == 0.0] = 0.0
         self._update_rate()
@@ -326,12 +326,12 @@ class NotchWeights:
 
     def set_weight_rates(self, rates: np.ndarray) -> None:
         """Overwrite the weights' rates of change Z (T, C) (N per sample, type-2 update)."""
-        self._zv[...] = self._channel_major(rates, 'rates')
+        self._zv[...] = self._channel_major(rates, "rates")
 
     def set_weight_limit(self, limit_n: float | None) -> None:
         """Apply :meth:`limit_weights` after every adaptation step (None: no limit)."""
         if limit_n is not None and not (np.isfinite(limit_n) and limit_n > 0.0):
-            raise ValueError(f'weight limit must be finite and > 0 N, got {limit_n!r}')
+            raise ValueError(f"weight limit must be finite and > 0 N, got {limit_n!r}")
         self._weight_limit = None if limit_n is None else float(limit_n)
 
     @property

@@ -43,7 +43,7 @@ class PhasorBank:
         self._amp = np.ones(t) if amplitudes is None else np.array(
             amplitudes, dtype=float).reshape(t)
         if int(resync_samples) < 1:
-            raise ValueError(f'resync_samples must be >= 1, got {resync_samples!r}')
+            raise ValueError(f"resync_samples must be >= 1, got {resync_samples!r}")
         self._resync_at = int(resync_samples)
         # storage of at least two phasors: numpy's in-place ufuncs take a ~2x slower path
         # on one-element arrays; the spare phasor (1, rotated by 1) is never read

@@ -123,15 +123,15 @@ def zippered_odd_multisine(n_channels: int, sample_rate_hz: float,
     c = int(n_channels)
     fs = float(sample_rate_hz)
     if c != n_channels or c < 1:
-        raise ValueError(f'n_channels must be a positive integer, got {n_channels!r}')
+        raise ValueError(f"n_channels must be a positive integer, got {n_channels!r}")
     if not np.isfinite(fs) or fs <= 0.0:
-        raise ValueError(f'sample_rate_hz must be > 0, got {sample_rate_hz!r}')
+        raise ValueError(f"sample_rate_hz must be > 0, got {sample_rate_hz!r}")
     period = int(round(period_s * fs))
     if not np.isfinite(period_s) or period < 4 * c or abs(period - period_s * fs) > 1e-6:
-        raise ValueError(f'period_s must be a whole number of samples >= {4 * c}, got '
-                         f'{period_s!r} s at {fs:g} Hz')
+        raise ValueError(f"period_s must be a whole number of samples >= {4 * c}, got "
+                         f"{period_s!r} s at {fs:g} Hz")
     if not np.isfinite(amplitude_rms_n) or amplitude_rms_n <= 0.0:
-        raise ValueError(f'amplitude_rms_n must be > 0 N, got {amplitude_rms_n!r}')
+        raise ValueError(f"amplitude_rms_n must be > 0 N, got {amplitude_rms_n!r}")
     f_max = 0.5 * fs if max_frequency_hz is None else float(max_frequency_hz)
     bins = np.arange(1, (period + 1) // 2, 2)
     freqs = bins * fs / period
@@ -140,8 +140,8 @@ def zippered_odd_multisine(n_channels: int, sample_rate_hz: float,
     bins, channel = bins[keep], channel[keep]
     counts = np.bincount(channel, minlength=c)
     if counts.min() < 2:
-        raise ValueError(f'the band {min_frequency_hz:g}..{f_max:g} Hz leaves fewer than 2 '
-                         'lines for some channel: widen it or lengthen period_s')
+        raise ValueError(f"the band {min_frequency_hz:g}..{f_max:g} Hz leaves fewer than 2 "
+                         "lines for some channel: widen it or lengthen period_s")
     phasors = np.zeros(bins.size, dtype=complex)
     for j in range(c):
         sel = channel == j
@@ -180,7 +180,7 @@ class PlantFrequencyResponse:
         """
         f = np.asarray(frequencies_hz, dtype=float).reshape(-1)
         if np.any(~np.isfinite(f)) or np.any(f < 0.0) or np.any(f > 0.5 * self.sample_rate_hz):
-            raise ValueError(f'frequencies must be in [0, {0.5 * self.sample_rate_hz:g}] Hz')
+            raise ValueError(f"frequencies must be in [0, {0.5 * self.sample_rate_hz:g}] Hz")
         c = self.n_channels
         out = np.empty((f.size, c, c), dtype=complex)
         for j, spline in enumerate(self._splines()):
@@ -190,11 +190,11 @@ class PlantFrequencyResponse:
 
     def _splines(self) -> list[CubicSpline]:
         """One cubic spline per column, built once (the response is immutable)."""
-        cached = self.__dict__.get('_spline_cache')
+        cached = self.__dict__.get("_spline_cache")
         if cached is None:
             cached = [CubicSpline(lines, g, axis=0) for lines, g in
                       zip(self.line_frequencies_hz, self.line_response, strict=True)]
-            object.__setattr__(self, '_spline_cache', cached)
+            object.__setattr__(self, "_spline_cache", cached)
         return cached
 
 
@@ -299,8 +299,8 @@ def remove_strong_lines(record: np.ndarray, fs: float, design: MultisineDesign,
         others = strong[np.abs(strong - k0) > 2]
         near = free[(np.abs(free - k0) <= span) & ~np.isin(free, others)]
         fit = minimize_scalar(lambda nu, near=near, sp=spectrum: _kernel_fit(sp, near, nu, n)[1],
-                              bounds=(k0 - 1.0, k0 + 1.0), method='bounded',
-                              options={'xatol': 1e-6})
+                              bounds=(k0 - 1.0, k0 + 1.0), method="bounded",
+                              options={"xatol": 1e-6})
         nu = float(fit.x)
         if (abs(nu - round(nu)) < ON_GRID_TOLERANCE
                 or fit.fun > OFF_GRID_GAIN * _kernel_fit(spectrum, near, round(nu), n)[1]):
@@ -363,8 +363,8 @@ def response_from_periods(design: MultisineDesign, error_periods: np.ndarray,
     e = np.asarray(error_periods, dtype=float)
     m, p, c = e.shape
     if p != design.period_samples or c != design.n_channels:
-        raise ValueError(f'error_periods must be (M, {design.period_samples}, '
-                         f'{design.n_channels}), got {e.shape}')
+        raise ValueError(f"error_periods must be (M, {design.period_samples}, "
+                         f"{design.n_channels}), got {e.shape}")
     spectrum = np.fft.fft(e.mean(axis=0), axis=0) * (2.0 / p)           # (P, C) phasors
     mean = spectrum[design.bins] / design.phasors_n[:, None]             # (L, C) = E / U
     noise = detection_line_noise(spectrum, design.bins) / np.abs(design.phasors_n)[:, None]
@@ -428,9 +428,9 @@ def disturbance_from_periods(design: MultisineDesign, error_periods: np.ndarray,
     p = design.period_samples
     even = np.arange(2, (p + 1) // 2, 2)
     a = np.fft.fft(e, axis=1)[:, even, :] * (2.0 / p)                     # (M, K, C)
-    snap = (np.einsum('mki,mkj->kij', a, np.conj(a)) / e.shape[0]
+    snap = (np.einsum("mki,mkj->kij", a, np.conj(a)) / e.shape[0]
             * (p / (2.0 * design.sample_rate_hz)))
-    power = np.einsum('kii->k', snap).real
+    power = np.einsum("kii->k", snap).real
     df = 2.0 * design.sample_rate_hz / p
     half = max(1, int(round(0.5 * smoothing_hz / df)))
     keep = np.ones(even.size, bool)
@@ -481,9 +481,9 @@ class BroadbandIdentifier(SampledRun):
                                              amplitude_rms_n, min_frequency_hz,
                                              max_frequency_hz)
         if int(periods) != periods or periods < 1:
-            raise ValueError(f'periods must be a positive integer, got {periods!r}')
+            raise ValueError(f"periods must be a positive integer, got {periods!r}")
         if not np.isfinite(settle_s) or settle_s < 0.0:
-            raise ValueError(f'settle_s must be >= 0 s, got {settle_s!r}')
+            raise ValueError(f"settle_s must be >= 0 s, got {settle_s!r}")
         self._c = int(n_channels)
         self._fs = float(sample_rate_hz)
         self._table = self.design.period_table()
@@ -528,7 +528,7 @@ class BroadbandIdentifier(SampledRun):
             RuntimeError: if the run is not finished.
         """
         if not self.done:
-            raise RuntimeError(f'identification not finished ({100 * self.progress:.0f} %)')
+            raise RuntimeError(f"identification not finished ({100 * self.progress:.0f} %)")
         periods, removed = self._cleaned_periods()
         return response_from_periods(self.design, periods, self._max_rel,
                                      [line.frequency_hz for line in removed])
@@ -540,7 +540,7 @@ class BroadbandIdentifier(SampledRun):
             RuntimeError: if the run is not finished.
         """
         if not self.done:
-            raise RuntimeError(f'identification not finished ({100 * self.progress:.0f} %)')
+            raise RuntimeError(f"identification not finished ({100 * self.progress:.0f} %)")
         return disturbance_from_periods(self.design, self._cleaned_periods()[0], smoothing_hz)
 
     def removed_lines(self) -> list[RemovedLine]:
@@ -560,7 +560,7 @@ class BroadbandIdentifier(SampledRun):
             RuntimeError: if the run is not finished.
         """
         if not self.done:
-            raise RuntimeError(f'identification not finished ({100 * self.progress:.0f} %)')
+            raise RuntimeError(f"identification not finished ({100 * self.progress:.0f} %)")
         _, removed = self._cleaned_periods()
         record = self._cleaned_record
         n = record.shape[0]
@@ -577,7 +577,7 @@ class BroadbandIdentifier(SampledRun):
 
     def _cleaned_periods(self) -> tuple[np.ndarray, list[RemovedLine]]:
         """The aligned periods with the strong disturbance lines removed (cached)."""
-        if getattr(self, '_cleaned', None) is None:
+        if getattr(self, "_cleaned", None) is None:
             record, removed = remove_strong_lines(self._filled_record(), self._fs, self.design)
             self._cleaned_record = record
             self._cleaned = (self._align(record), removed)

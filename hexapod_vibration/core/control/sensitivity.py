@@ -43,7 +43,7 @@ from hexapod_vibration.core.control.notch_weights import update_lowpass_response
 DEFAULT_GRID_STEP_HZ = 0.1
 REFERENCE_MU = 0.002
 NEAR_TONE_SPAN_HZ = 5.0
-METRICS = ('sigma_max', 'strut', 'output')
+METRICS = ("sigma_max", "strut", "output")
 POLE_GUARD = 1e-12
 
 PlantResponse = Callable[[np.ndarray], np.ndarray]
@@ -54,9 +54,9 @@ def tone_rates(mu: float | Sequence[float] | np.ndarray, n_tones: int) -> np.nda
     rates = np.broadcast_to(np.asarray(mu, dtype=float), (n_tones,)).copy() \
         if np.ndim(mu) == 0 else np.asarray(mu, dtype=float).reshape(-1)
     if rates.shape != (n_tones,):
-        raise ValueError(f'expected one rate or {n_tones} per-tone rates, got {rates.size}')
+        raise ValueError(f"expected one rate or {n_tones} per-tone rates, got {rates.size}")
     if not np.all(np.isfinite(rates)) or np.any(rates < 0.0):
-        raise ValueError(f'rates must be finite and >= 0, got {rates.tolist()}')
+        raise ValueError(f"rates must be finite and >= 0, got {rates.tolist()}")
     return rates
 
 
@@ -72,7 +72,7 @@ def per_tone_coefficients(coefficients: np.ndarray, mu: float,
     """
     p = np.asarray(coefficients, dtype=complex)
     if not np.isfinite(mu) or mu <= 0.0:
-        raise ValueError(f'mu must be > 0 to fold per-tone rates into P, got {mu!r}')
+        raise ValueError(f"mu must be > 0 to fold per-tone rates into P, got {mu!r}")
     rates = tone_rates(tone_mu, p.shape[0])
     return p * (rates / mu)[:, None, None]
 
@@ -111,7 +111,7 @@ def canceller_frequency_response(
     tones = validate_frequencies(tone_frequencies_hz, sample_rate_hz)
     p = np.asarray(coefficients, dtype=complex)
     if p.ndim != 3 or p.shape[0] != tones.size or p.shape[1] != p.shape[2]:
-        raise ValueError(f'coefficients must be ({tones.size}, C, C), got {p.shape}')
+        raise ValueError(f"coefficients must be ({tones.size}, C, C), got {p.shape}")
     rates = tone_rates(mu, tones.size)
     f = np.asarray(frequencies_hz, dtype=float).reshape(-1)
     z = radius * np.exp(2j * np.pi * f / sample_rate_hz)                 # (F,)
@@ -128,8 +128,8 @@ def canceller_frequency_response(
         g_neg = g_neg * update_lowpass_response(update_lowpass_hz, sample_rate_hz,
                                                 z[:, None] * pole[None, :])
     half = 0.5 * rates[:, None, None] * p                                 # (T, C, C)
-    return (np.einsum('ft,tij->fij', g_pos, half)
-            + np.einsum('ft,tij->fij', g_neg, np.conj(half)))
+    return (np.einsum("ft,tij->fij", g_pos, half)
+            + np.einsum("ft,tij->fij", g_neg, np.conj(half)))
 
 
 def sensitivity_matrix(plant: np.ndarray, canceller: np.ndarray) -> np.ndarray:
@@ -160,9 +160,9 @@ def output_sensitivity(sensitivity: np.ndarray, output_weights: np.ndarray,
     c = np.asarray(output_weights, dtype=float).reshape(-1)
     phi = (np.broadcast_to(np.eye(c.size), s.shape) if disturbance_csd is None
            else np.asarray(disturbance_csd, dtype=complex))
-    row = np.einsum('i,fij->fj', c, s)                                    # c^T S
-    num = np.einsum('fi,fij,fj->f', row, phi, np.conj(row)).real
-    den = np.einsum('i,fij,j->f', c, phi, c).real
+    row = np.einsum("i,fij->fj", c, s)                                    # c^T S
+    num = np.einsum("fi,fij,fj->f", row, phi, np.conj(row)).real
+    den = np.einsum("i,fij,j->f", c, phi, c).real
     return np.sqrt(np.maximum(num, 0.0) / np.maximum(den, 1e-300))
 
 
@@ -186,7 +186,7 @@ def prediction_grid(tone_frequencies_hz: Sequence[float] | np.ndarray, sample_ra
     tones = validate_frequencies(tone_frequencies_hz, fs)
     rates = np.maximum(tone_rates(mu, tones.size), 1e-9)
     if not step_hz > 0.0:
-        raise ValueError(f'step_hz must be > 0, got {step_hz!r}')
+        raise ValueError(f"step_hz must be > 0, got {step_hz!r}")
     parts = [np.arange(0.0, 0.5 * fs, step_hz), [0.5 * fs]]
     for tone, rate in zip(tones, rates, strict=True):
         smallest = min(0.01 * rate * fs / (2.0 * np.pi), 0.1 * NEAR_TONE_SPAN_HZ)
@@ -225,21 +225,21 @@ class SensitivityPrediction:
 
     def values(self, metric: str) -> np.ndarray:
         """|S| (F,) of ``metric`` (``sigma_max``, ``strut`` (worst strut) or ``output``)."""
-        if metric == 'sigma_max':
+        if metric == "sigma_max":
             return self.sigma_max
-        if metric == 'strut':
+        if metric == "strut":
             return self.strut.max(axis=1)
-        if metric == 'output':
+        if metric == "output":
             if self.output is None:
-                raise ValueError('no output sensitivity: give output_weights')
+                raise ValueError("no output sensitivity: give output_weights")
             return self.output
-        raise ValueError(f'metric must be one of {METRICS}, got {metric!r}')
+        raise ValueError(f"metric must be one of {METRICS}, got {metric!r}")
 
-    def db(self, metric: str = 'sigma_max') -> np.ndarray:
+    def db(self, metric: str = "sigma_max") -> np.ndarray:
         """``20 log10 |S|`` (F,) of ``metric``."""
         return 20.0 * np.log10(np.maximum(self.values(metric), 1e-300))
 
-    def largest_rise(self, metric: str = 'sigma_max') -> tuple[float, float]:
+    def largest_rise(self, metric: str = "sigma_max") -> tuple[float, float]:
         """(largest rise in dB, its frequency in Hz) over the grid; inf if unstable.
 
         |S| < 1 inside every notch, so the largest value of ``20 log10 |S|`` lies outside
@@ -247,7 +247,7 @@ class SensitivityPrediction:
         from the tones where S tends to I).
         """
         if self.stable is False:
-            return float('inf'), float('nan')
+            return float("inf"), float("nan")
         db = self.db(metric)
         k = int(np.argmax(db))
         return float(db[k]), float(self.frequencies_hz[k])
@@ -258,7 +258,7 @@ class SensitivityPrediction:
         The output's |S| when the prediction has one (the ratio for the disturbance's own
         direction, what the mu policy bounds), else the worst strut's.
         """
-        metric = 'output' if self.output is not None else 'strut'
+        metric = "output" if self.output is not None else "strut"
         return np.interp(np.asarray(frequencies_hz, dtype=float), self.frequencies_hz,
                          self.db(metric))
 
@@ -268,11 +268,11 @@ class SensitivityPrediction:
         ``sigma_max_db``, ``strut<k>_db`` (k = 1..C) and, when there is one, ``output_db``
         (the rows of ``/pph/notch_sensitivity``).
         """
-        rows = {'frequency_hz': self.frequencies_hz, 'sigma_max_db': self.db('sigma_max')}
+        rows = {"frequency_hz": self.frequencies_hz, "sigma_max_db": self.db("sigma_max")}
         strut_db = 20.0 * np.log10(np.maximum(self.strut, 1e-300))
-        rows.update({f'strut{k + 1}_db': strut_db[:, k] for k in range(strut_db.shape[1])})
+        rows.update({f"strut{k + 1}_db": strut_db[:, k] for k in range(strut_db.shape[1])})
         if self.output is not None:
-            rows['output_db'] = self.db('output')
+            rows["output_db"] = self.db("output")
         return rows
 
 
@@ -280,8 +280,8 @@ def _plant_at(plant: PlantResponse | np.ndarray, frequencies_hz: np.ndarray) -> 
     g = plant(frequencies_hz) if callable(plant) else np.asarray(plant, dtype=complex)
     g = np.asarray(g, dtype=complex)
     if g.ndim != 3 or g.shape[0] != frequencies_hz.size or g.shape[1] != g.shape[2]:
-        raise ValueError(f'plant response must be ({frequencies_hz.size}, C, C), '
-                         f'got {g.shape}')
+        raise ValueError(f"plant response must be ({frequencies_hz.size}, C, C), "
+                         f"got {g.shape}")
     return g
 
 

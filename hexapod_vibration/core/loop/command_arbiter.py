@@ -50,12 +50,12 @@ STATS_WINDOW = int(60 * SAMPLE_RATE_HZ)
 class Refusal(StrEnum):
     """Why a command was not taken."""
 
-    MALFORMED = 'malformed'          # undecodable bytes, wrong length, non-finite, bad label
-    OUT_OF_RANGE = 'out_of_range'    # beyond what the actuator can be asked for
-    OTHER_RUN = 'other_run'          # answers another run of the driver
-    FUTURE = 'future'                # for a sample not published yet
-    OUT_OF_ORDER = 'out_of_order'    # for a sample before the stream's last command
-    DUPLICATE = 'duplicate'          # a second command for the same sample
+    MALFORMED = "malformed"          # undecodable bytes, wrong length, non-finite, bad label
+    OUT_OF_RANGE = "out_of_range"    # beyond what the actuator can be asked for
+    OTHER_RUN = "other_run"          # answers another run of the driver
+    FUTURE = "future"                # for a sample not published yet
+    OUT_OF_ORDER = "out_of_order"    # for a sample before the stream's last command
+    DUPLICATE = "duplicate"          # a second command for the same sample
 
     @property
     def invalid(self) -> bool:

@@ -37,12 +37,12 @@ CONFIRMATIONS = 3
 class Admission(Enum):
     """What to do with a received sample."""
 
-    ACCEPTED = 'accepted'          # next sample of the current run: act on it
-    NEW_RUN = 'new_run'            # first sample of a newly adopted run (or of the same run
+    ACCEPTED = "accepted"          # next sample of the current run: act on it
+    NEW_RUN = "new_run"            # first sample of a newly adopted run (or of the same run
                                    # started again from a lower index): reset, then act
-    REPEAT = 'repeat'              # the last sample again: re-send the answer, do not act
-    LATE = 'late'                  # older than the last one: drop
-    UNCONFIRMED = 'unconfirmed'    # another run or an implausible jump, not yet confirmed
+    REPEAT = "repeat"              # the last sample again: re-send the answer, do not act
+    LATE = "late"                  # older than the last one: drop
+    UNCONFIRMED = "unconfirmed"    # another run or an implausible jump, not yet confirmed
 
 
 @dataclass(frozen=True)
@@ -71,7 +71,7 @@ class SampleSequence:
             confirmations: Messages that confirm a candidate sequence (>= 1).
         """
         if max_jump_samples < 1 or confirmations < 1:
-            raise ValueError('max_jump_samples and confirmations must be >= 1')
+            raise ValueError("max_jump_samples and confirmations must be >= 1")
         self.max_jump_samples = max_jump_samples
         self.confirmations = confirmations
         self.run: int | None = None

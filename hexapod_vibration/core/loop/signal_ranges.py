@@ -52,5 +52,5 @@ def out_of_range(values: np.ndarray, limit: float) -> str:
     """Why ``values`` are beyond ``+-limit`` ("" if every one is within), for diagnostics."""
     worst = float(np.max(np.abs(values)))
     if worst <= limit:
-        return ''
-    return f'|value| {worst:.6g} beyond the physical range {limit:.6g}'
+        return ""
+    return f"|value| {worst:.6g} beyond the physical range {limit:.6g}"
