@@ -288,3 +288,14 @@ def float64_array(data, dims) -> Float64MultiArray:
     ]
     msg.data = [float(x) for x in data]
     return msg
+
+
+def start_pointing_loop(node_processes, *driver_args: str) -> tuple:
+    """A lockstep driver that waits for the pointing controller only, and that controller.
+
+    ``driver_args``: more ``-p name:=value`` arguments of the driver. Returns (driver,
+    pointing) processes.
+    """
+    driver = node_processes.start("pph_driver", "--ros-args", "-p",
+                                  "lockstep_controllers:=[pointing]", *driver_args)
+    return driver, node_processes.start("pointing_controller")

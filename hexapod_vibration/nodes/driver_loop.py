@@ -150,6 +150,7 @@ def run_realtime(node: PPHDriver, spinner: LoopSpinner) -> None:
     ``REALTIME_HANDSHAKE_S``), so a restarted driver is answered from its first samples.
     """
     period = 1.0 / node.fs
+    wait_while_held(node, spinner)             # the start breakpoint (hold_at_time_s 0)
     wait_for_controllers(node, spinner, REALTIME_HANDSHAKE_S)
     start = time.perf_counter() - period      # sample 0's period was the handshake's
     if rclpy.ok():

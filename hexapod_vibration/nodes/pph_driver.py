@@ -91,9 +91,15 @@ class PPHDriver(Node):
         return self.settings.lockstep_timeout_s
 
     def held(self) -> bool:
-        """True while the lockstep breakpoint ``hold_at_time_s`` stops the loop here."""
+        """True while the breakpoint ``hold_at_time_s`` stops the loop here.
+
+        Lockstep: at any sample. Realtime: only the start breakpoint (0) before sample 0,
+        so that the clock starts when the graph (a recorder) is ready.
+        """
         hold = self.settings.hold_at_time_s
-        return self.mode == "lockstep" and hold >= 0.0 and self.sample >= round(hold * self.fs)
+        if self.mode == "lockstep":
+            return hold >= 0.0 and self.sample >= round(hold * self.fs)
+        return hold == 0.0 and self.sample == 0
 
     def commands_ready(self) -> bool:
         """Lockstep: every waited controller answered the current sample."""

@@ -1,9 +1,10 @@
 """One scenario through the ROS graph: start the processes, drive the timeline, stop, analyse.
 
 The recorder first, then the controllers and the driver (each a process that dies with this
-one); lockstep: the driver holds at breakpoints (before sample 0, at control-on, at the end)
-and the runner switches control on at its breakpoint, so a run is reproducible; realtime:
-control goes on when ``/clock`` passes control-on. A run fails when a process dies or
+one), which holds before sample 0 until the recorder matched every publisher; lockstep: it
+holds at breakpoints (control-on, the end too) and the runner switches control on at its
+breakpoint, so a run is reproducible; realtime: control goes on when the sim time (the
+driver's reports, paced by the wall clock) passes control-on. A run fails when a process dies or
 nothing moves for ``STALL_TIMEOUT_S``.
 """
 
@@ -128,7 +129,9 @@ class ExperimentRun:
         # Lockstep: the breakpoints and the progress come from the driver's status; a 1 kHz
         # /clock reader here would only cost the runner (three quarters of its CPU: rclpy's
         # executor waking for it) and the driver a reader to serve.
-        self.graph = GraphMonitor(watch_clock=not self.lockstep)
+        # No 1 kHz /clock subscription in either mode: in realtime the sim time follows
+        # the driver's reports and the wall clock (this process woke for every sample).
+        self.graph = GraphMonitor(watch_clock=False, paced=not self.lockstep)
         if self.o.composed:
             self.children.append(start_child("pph_graph", "hexapod_vibration.nodes.pph_graph",
                                              common + self._breakpoint("pph_driver:"), logs))
@@ -166,8 +169,12 @@ class ExperimentRun:
         return [t for t in STRUT_TOPICS if t != "/pph/notch_command" or self.has_notch]
 
     def _breakpoint(self, prefix: str = "") -> list[str]:
-        """Lockstep: the driver starts held before sample 0 (after the params file: wins)."""
-        return ["-p", f"{prefix}hold_at_time_s:=0.0"] if self.lockstep else []
+        """The driver starts held before sample 0 (after the params file: wins).
+
+        Realtime too: its clock starts when the recorder matched every publisher, so the
+        bag has every sample from 0 (without it, the first ~3 s went unrecorded).
+        """
+        return ["-p", f"{prefix}hold_at_time_s:=0.0"]
 
     def _check(self, what: str) -> None:
         for child in self.children:
@@ -226,17 +233,19 @@ class ExperimentRun:
         # (lockstep: before the driver leaves its start breakpoint, so the bag has sample 0).
         self._wait(lambda: not self.graph.recorder_unmatched(self.recorded_topics()),
                    "recorder matching every publisher")
-        if self.lockstep:      # and every publisher matching the recorder: see writers_unmatched
-            self._wait(lambda: not self.graph.writers_unmatched(self.matched_topics()),
-                       WRITERS_MATCHING)
+        # and every publisher matching the recorder: see writers_unmatched
+        self._wait(lambda: not self.graph.writers_unmatched(self.matched_topics()),
+                   WRITERS_MATCHING)
+        self._wait(lambda: self.graph.held_at(0), "driver at its start breakpoint")
+        if self.lockstep:
             self._run_lockstep()
         else:
+            self.graph.set_parameter("pph_driver", "hold_at_time_s", -1.0)
             self._run_realtime()
         self.graph.spin(1.0)       # let the recorder drain its queues
 
     def _run_lockstep(self) -> None:
         sc = self.o.scenario
-        self._wait(lambda: self.graph.held_at(0), "driver at its start breakpoint")
         if self.n_on > 0:
             self.graph.set_parameter("pph_driver", "hold_at_time_s", sc.control_on_s)
             self._wait(lambda: self.graph.held_at(self.n_on), "running with control off")

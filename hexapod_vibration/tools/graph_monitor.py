@@ -13,6 +13,10 @@ from typing import Any
 
 from hexapod_vibration.contract import DRIVER_STATUS, NOTCH_STATUS, POINTING_STATUS
 
+PACED_AHEAD_S = 1.5
+"""How far (s) a paced monitor's sim time runs ahead of the driver's last report (reports
+come once per simulated second): a stalled loop is not taken for a running one."""
+
 
 class ExperimentError(RuntimeError):
     """The experiment could not run (a process died, the graph never came up, ...)."""
@@ -21,12 +25,14 @@ class ExperimentError(RuntimeError):
 class GraphMonitor:
     """The runner's in-process rclpy node: watches /clock and /diagnostics, sets parameters."""
 
-    def __init__(self, watch_clock: bool = True) -> None:
+    def __init__(self, watch_clock: bool = True, paced: bool = False) -> None:
         """Create the node on the caller's domain.
 
-        ``watch_clock=False``: no ``/clock`` subscription (a benchmark that must not add a
-        1 kHz subscriber to the loop it measures); ``sim_time_s`` then follows the
-        driver's ``sample`` on /diagnostics (once per simulated second).
+        ``watch_clock=False``: no ``/clock`` subscription (a 1 kHz subscriber costs this
+        process a wake-up per sample, taken from the loop's two cores); ``sim_time_s``
+        then follows the driver's ``sample`` on /diagnostics (once per simulated second),
+        and with ``paced`` (a realtime loop: one simulated second per wall second) moves on
+        with the wall clock from the last report, at most ``PACED_AHEAD_S`` past it.
         """
         import rclpy
         from diagnostic_msgs.msg import DiagnosticArray
@@ -41,7 +47,9 @@ class GraphMonitor:
         # in the middle of a call (tracebacks); cli.StopSignal unwinds instead.
         rclpy.init(args=[], signal_handler_options=SignalHandlerOptions.NO)
         self.node = rclpy.create_node("experiment")
-        self.sim_time_s = -1.0
+        self._reported_s = -1.0              # the driver's last reported sample (s)
+        self._reported_at = 0.0              # when it came (time.monotonic(), s)
+        self._paced = paced and not watch_clock
         self.driver: dict[str, str] = {}
         self.notch: dict[str, str] = {}
         self.pointing: dict[str, str] = {}
@@ -54,16 +62,25 @@ class GraphMonitor:
         self.clients = {name: AsyncParameterClient(self.node, name)
                         for name in ("pph_driver", "notch_controller", "pointing_controller")}
 
+    @property
+    def sim_time_s(self) -> float:
+        """The loop's sim time (s): ``/clock``'s, or the driver's report (see ``__init__``)."""
+        if self._paced and self._reported_s >= 0.0:
+            ahead = min(time.monotonic() - self._reported_at, PACED_AHEAD_S)
+            return self._reported_s + ahead
+        return self._reported_s
+
     def _on_clock(self, msg: Any) -> None:
-        self.sim_time_s = msg.clock.sec + msg.clock.nanosec * 1e-9
+        self._reported_s = msg.clock.sec + msg.clock.nanosec * 1e-9
 
     def _on_diag(self, msg: Any) -> None:
         for status in msg.status:
             values = {kv.key: kv.value for kv in status.values}
             if status.name == DRIVER_STATUS:
                 self.driver = values
-                if not self._watch_clock:
-                    self.sim_time_s = max(self.sim_time_s, int(values.get("sample", 0)) / 1e3)
+                reported = int(values.get("sample", 0)) / 1e3
+                if not self._watch_clock and reported > self._reported_s:
+                    self._reported_s, self._reported_at = reported, time.monotonic()
             elif status.name == NOTCH_STATUS:
                 self.notch = values
             elif status.name == POINTING_STATUS:

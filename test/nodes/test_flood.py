@@ -14,7 +14,7 @@ import subprocess
 import sys
 
 import numpy as np
-from node_graph import HANG_GUARD_S, Diagnostics, StrutTopic, wait_until
+from node_graph import HANG_GUARD_S, Diagnostics, StrutTopic, start_pointing_loop, wait_until
 
 from hexapod_vibration.contract import DRIVER_STATUS
 from hexapod_vibration.core.model.config import load_model_config
@@ -51,9 +51,7 @@ rclpy.shutdown()
 
 def test_flood_of_invalid_commands_loses_no_lockstep_command(ros_context, node_processes,
                                                             ros_env):
-    driver = node_processes.start("pph_driver", "--ros-args",
-                                  "-p", "lockstep_controllers:=[pointing]")
-    pointing = node_processes.start("pointing_controller")
+    driver, pointing = start_pointing_loop(node_processes)
     node = ros_context.create_node("flood_listener")
     commands = StrutTopic(node, "/pph/pointing_command")
     force = StrutTopic(node, "/pph/actuator_force")

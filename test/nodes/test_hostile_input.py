@@ -17,7 +17,7 @@ import itertools
 import struct
 
 import numpy as np
-from node_graph import Diagnostics, ParameterClient, StrutTopic, wait_until
+from node_graph import Diagnostics, ParameterClient, StrutTopic, start_pointing_loop, wait_until
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from std_msgs.msg import Float64MultiArray
 
@@ -98,10 +98,8 @@ def _replayed_pointing(eddy: list[np.ndarray]) -> np.ndarray:
 
 
 def test_hostile_messages_are_counted_and_change_nothing(ros_context, node_processes):
-    driver = node_processes.start("pph_driver", "--ros-args", "-p",
-                                  "lockstep_controllers:=[pointing]",
-                                  "-p", f"hold_at_time_s:={FIRST_HOLD / 1000}")
-    pointing = node_processes.start("pointing_controller")
+    driver, pointing = start_pointing_loop(node_processes,
+                                           "-p", f"hold_at_time_s:={FIRST_HOLD / 1000}")
     processes = (driver, pointing)
     node = ros_context.create_node("hostile_publisher")
     eddy, pointing_cmd = StrutTopic(node, "/pph/eddy"), StrutTopic(node, "/pph/pointing_command")

@@ -23,6 +23,7 @@ from node_graph import (
     assert_close,
     assert_rejected,
     db,
+    start_pointing_loop,
     tone_amplitude,
     wait_until,
 )
@@ -265,9 +266,7 @@ def test_driver_parameters(ros_context, node_processes):
 
 
 def test_pointing_controller_parameters(ros_context, node_processes):
-    driver = node_processes.start("pph_driver", "--ros-args",
-                                  "-p", "lockstep_controllers:=[pointing]")
-    pointing = node_processes.start("pointing_controller")
+    driver, pointing = start_pointing_loop(node_processes)
     node = ros_context.create_node("param_client")
     command = StrutTopic(node, "/pph/pointing_command")
     client = ParameterClient(ros_context, node, "pointing_controller")

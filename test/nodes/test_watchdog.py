@@ -9,7 +9,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from node_graph import HANG_GUARD_S, Diagnostics, StrutTopic, wait_until
+from node_graph import HANG_GUARD_S, Diagnostics, StrutTopic, start_pointing_loop, wait_until
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
@@ -127,9 +127,7 @@ def _invalid_commands(sample: int) -> list[Float64MultiArray]:
 
 
 def test_invalid_notch_commands_are_counted_and_never_applied(ros_context, node_processes):
-    driver = node_processes.start("pph_driver", "--ros-args",
-                                  "-p", "lockstep_controllers:=[pointing]")
-    pointing = node_processes.start("pointing_controller")
+    driver, pointing = start_pointing_loop(node_processes)
     node = ros_context.create_node("bad_notch_controller")
     force = StrutTopic(node, "/pph/actuator_force")
     pointing_cmd = StrutTopic(node, "/pph/pointing_command")
