@@ -28,6 +28,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from test_executables import console_scripts
 
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = "hexapod_vibration"
@@ -38,10 +39,6 @@ HANG_GUARD_S = 120.0
 NODES = {"pph_driver": ["PPH driver up"], "notch_controller": ["notch controller up"],
          "pointing_controller": ["pointing controller up"], "pph_recorder": ["recording"],
          "pph_graph": ["PPH driver up", "notch controller up", "pointing controller up"]}
-
-
-def console_scripts() -> set[str]:
-    return set(re.findall(r"'(\w+) = [\w.]+:\w+'", (ROOT / "setup.py").read_text()))
 
 
 def readme_commands() -> list[str]:

@@ -25,7 +25,7 @@ HANG_GUARD_S = 120.0
 def console_scripts() -> dict[str, str]:
     """``name: module:function`` of every console script declared in setup.py."""
     text = (ROOT / "setup.py").read_text()
-    return dict(re.findall(r"'(\w+) = ([\w.]+:\w+)'", text))
+    return dict(re.findall(r"[\"'](\w+) = ([\w.]+:\w+)[\"']", text))
 
 
 NODES = ("pph_driver", "notch_controller", "pointing_controller", "pph_graph", "pph_recorder")

@@ -27,6 +27,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from test_executables import console_scripts
 
 from hexapod_vibration import parameter_specs
 from hexapod_vibration.tools import parameter_docs
@@ -85,10 +86,6 @@ def _split_and(words: list[str]) -> list[list[str]]:
         else:
             parts[-1].append(word)
     return [p for p in parts if p]
-
-
-def console_scripts() -> set[str]:
-    return set(re.findall(r"'(\w+) = [\w.]+:\w+'", (ROOT / "setup.py").read_text()))
 
 
 def make_targets() -> tuple[set[str], set[str]]:

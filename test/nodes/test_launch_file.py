@@ -65,10 +65,10 @@ def test_launch_file_compiles_and_starts_the_three_nodes(tmp_path):
                  for c in _calls(tree, "DeclareLaunchArgument")}
     assert arguments == {"params_file", "clock_mode", "record", "bag_path", "composed",
                          "realtime_priority"}
-    assert "choices=['lockstep', 'realtime']" in source
+    assert 'choices=["lockstep", "realtime"]' in source
     # The params file comes from the package's share directory.
     assert "get_package_share_directory" in source
-    assert constants["PARAMS_FILE"] == PARAMS_FILE.name and "'config'" in source
+    assert constants["PARAMS_FILE"] == PARAMS_FILE.name and '"config"' in source
 
 
 def test_params_file_has_a_section_per_node():
@@ -78,4 +78,4 @@ def test_params_file_has_a_section_per_node():
         assert set(params[name]) == {"ros__parameters"}
     # setup.py installs both files into the share directory.
     setup = (ROOT / "setup.py").read_text()
-    assert "glob('launch/*.launch.py')" in setup and "glob('config/*.yaml')" in setup
+    assert 'glob("launch/*.launch.py")' in setup and 'glob("config/*.yaml")' in setup
