@@ -94,12 +94,17 @@ def _plain(value: Any) -> Any:
 
 
 class ParameterServices:
-    """A client of ``target``'s parameter services (``with``: connect, then shut down)."""
+    """A client of ``target``'s parameter services (``with``: connect, then shut down).
 
-    def __init__(self, target: str, timeout_s: float) -> None:
+    ``timeout_s``: how long to wait for the services (discovery, s); ``answer_timeout_s``:
+    for each answer (s).
+    """
+
+    def __init__(self, target: str, timeout_s: float, answer_timeout_s: float) -> None:
         """Start a private rclpy context (no signal handlers: ``cli``'s stop handlers rule)."""
         self.target = target
         self.timeout_s = timeout_s
+        self.answer_timeout_s = answer_timeout_s
         self.context = Context()
         rclpy.init(context=self.context, signal_handler_options=SignalHandlerOptions.NO)
         self.node = rclpy.create_node(f"hexapod_param_{os.getpid()}", context=self.context,
@@ -126,9 +131,10 @@ class ParameterServices:
         rclpy.try_shutdown(context=self.context)
 
     def _call(self, future: Any) -> Any:
-        self.executor.spin_until_future_complete(future, timeout_sec=self.timeout_s)
+        self.executor.spin_until_future_complete(future, timeout_sec=self.answer_timeout_s)
         if not future.done():
-            raise Unreachable(f"{self.target} did not answer within {self.timeout_s:g} s")
+            raise Unreachable(f"{self.target} did not answer within "
+                              f"{self.answer_timeout_s:g} s")
         return future.result()
 
     def names(self) -> list[str]:

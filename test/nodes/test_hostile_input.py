@@ -49,17 +49,21 @@ def _hostile_eddy(index: int, round_: int) -> list[bytes]:
     """Malformed, beyond the gaps' range, absurd or foreign indices (none is applicable).
 
     The absurd index and the stray run differ from one round to the next: three consistent
-    ones in a row would look like a restarted driver and be followed (by design).
+    ones in a row would look like a restarted driver and be followed (by design). Each round
+    is rotated by one: the controller takes the newest of what is queued at a wake-up
+    (``latest_only``), so only the last of a burst is sure to be judged.
     """
     good = encode_strut_cdr(np.full(6, 1e-5), index)
     absurd = 999_999_999 + (round_ % 2) * 10**7
-    return [*_malformed(good).values(),
+    burst = [*_malformed(good).values(),
             encode_strut_cdr(np.full(6, 1e300), index),            # finite, impossible
             encode_strut_cdr(np.full(6, 1.0), index),              # 1 m gaps
             _unindexed(np.full(6, 1e300)),                         # old: taken as next
             encode_strut_cdr(np.full(6, 1e-5), absurd),            # absurd but valid index
             encode_strut_cdr(np.full(6, 1e-5), index + 1, STRAY_RUN + round_),  # stray run
             _label(np.full(6, 1e-5), "sample:99999999999999999999")]
+    shift = round_ % len(burst)
+    return burst[shift:] + burst[:shift]
 
 
 def _hostile_commands(index: int, run: int) -> list[bytes]:
@@ -148,8 +152,14 @@ def test_hostile_messages_are_counted_and_change_nothing(ros_context, node_proce
     assert wait_until(ros_context, lambda: held_at(FIRST_HOLD)), logs()
     # While the loop is held (until the driver counted one round), then while it runs to
     # the second breakpoint. The controller reports its counts every 1000 samples.
+    def pointing_counted() -> bool:
+        """The pointing controller judged each kind at least once (its periodic status)."""
+        return all(diagnostics.int_value(POINTING_STATUS, key) > 0
+                   for key in ("malformed", "out_of_range", "unconfirmed"))
+
     counted = wait_until(ros_context, lambda: all(p.running() for p in processes) and (
-        diagnostics.int_value(DRIVER_STATUS, "notch_malformed") >= 6), step=send_hostile)
+        diagnostics.int_value(DRIVER_STATUS, "notch_malformed") >= 6) and pointing_counted(),
+        step=send_hostile)
     assert counted, (diagnostics.values(DRIVER_STATUS), logs())
     for flag in (False, True):      # the law starts afresh at FIRST_HOLD: replayable
         assert pointing_params.set("enabled", flag).successful
