@@ -78,7 +78,7 @@ def _run(out: Path, mode: str, executor: str, wall_s: float, composed: bool
          ) -> dict[str, Any]:
     """One run; returns the driver's last diagnostics (floats) or a stall note."""
     children = _start_graph(out, mode, executor, composed)
-    sup = GraphMonitor(watch_clock=False)
+    sup = GraphMonitor()
     try:
         start = time.monotonic()
         while sup.sim_time_s < 0.0:           # handshake / discovery
@@ -217,7 +217,7 @@ def measure_budget(out: Path, quick: bool) -> dict[str, Any]:
     budget = {}
     for setup in BUDGET_SETUPS:
         print(f"CPU budget: {setup.key}, {warmup_s:g} + {measure_s:g} s ...", flush=True)
-        watch = GraphMonitor(watch_clock=False)
+        watch = GraphMonitor()
         try:
             params = _write_params(out, setup.mode, "waitset", setup.priority)
             budget[setup.key] = measure(out, params, setup, warmup_s, measure_s, watch)

@@ -116,22 +116,19 @@ class ExperimentRun:
         return self.o.mode == "lockstep"
 
     def start(self) -> None:
-        """Recorder first, then the controllers; the driver when the recorder matched them.
+        """Recorder first, then the controllers and the driver.
 
-        Lockstep: the driver starts with the controllers (it holds before sample 0 until
-        the recorder matched every publisher, so nothing is lost and its start-up, ~2 s
-        of imports, overlaps theirs).
+        The driver holds before sample 0 until the recorder matched every publisher (see
+        :meth:`run`), so nothing is lost and its start-up, ~2 s of imports, overlaps theirs.
         """
         logs = self.o.out
         common = ["--params-file", str(self.params_file)]
         self.children.append(start_child("pph_recorder", "hexapod_vibration.nodes.recorder", [
             *common, "-p", f"bag_path:={self.bag}", "-p", f"storage:={self.o.storage}"], logs))
-        # Lockstep: the breakpoints and the progress come from the driver's status; a 1 kHz
-        # /clock reader here would only cost the runner (three quarters of its CPU: rclpy's
-        # executor waking for it) and the driver a reader to serve.
-        # No 1 kHz /clock subscription in either mode: in realtime the sim time follows
-        # the driver's reports and the wall clock (this process woke for every sample).
-        self.graph = GraphMonitor(watch_clock=False, paced=not self.lockstep)
+        # The breakpoints and the progress come from the driver's status (in realtime paced
+        # by the wall clock): a 1 kHz /clock reader here would cost the runner three quarters
+        # of its CPU (rclpy's executor waking for it) and the driver a reader to serve.
+        self.graph = GraphMonitor(paced=not self.lockstep)
         if self.o.composed:
             self.children.append(start_child("pph_graph", "hexapod_vibration.nodes.pph_graph",
                                              common + self._breakpoint("pph_driver:"), logs))
@@ -141,10 +138,6 @@ class ExperimentRun:
                 "notch_controller", "hexapod_vibration.nodes.notch_controller", common, logs))
         self.children.append(start_child(
             "pointing_controller", "hexapod_vibration.nodes.pointing_controller", common, logs))
-        if not self.lockstep:
-            controllers = [*POINTING_TOPICS, *(NOTCH_TOPICS if self.has_notch else ())]
-            self._wait(lambda: not self.graph.recorder_unmatched(controllers),
-                       "recorder matching the controllers")
         self.children.append(start_child("pph_driver", "hexapod_vibration.nodes.pph_driver",
                                          common + self._breakpoint(), logs))
 

@@ -1,6 +1,7 @@
 """The experiment runner's own rclpy node: what the graph says, and the parameters it sets.
 
-It follows ``/clock`` (or the driver's sample on ``/diagnostics``) and every node's status,
+It follows the driver's sample on ``/diagnostics`` (no 1 kHz ``/clock`` reader: a wake-up
+per sample, taken from the loop's two cores) and every node's status,
 tells when the graph is discovered and matched and when the recorder has written every
 sample, and sets parameters through the nodes' parameter services. rclpy is imported when
 one is made (``experiment --help`` stays cheap).
@@ -23,24 +24,21 @@ class ExperimentError(RuntimeError):
 
 
 class GraphMonitor:
-    """The runner's in-process rclpy node: watches /clock and /diagnostics, sets parameters."""
+    """The runner's in-process rclpy node: watches /diagnostics, sets parameters."""
 
-    def __init__(self, watch_clock: bool = True, paced: bool = False) -> None:
+    def __init__(self, paced: bool = False) -> None:
         """Create the node on the caller's domain.
 
-        ``watch_clock=False``: no ``/clock`` subscription (a 1 kHz subscriber costs this
-        process a wake-up per sample, taken from the loop's two cores); ``sim_time_s``
-        then follows the driver's ``sample`` on /diagnostics (once per simulated second),
-        and with ``paced`` (a realtime loop: one simulated second per wall second) moves on
-        with the wall clock from the last report, at most ``PACED_AHEAD_S`` past it.
+        ``sim_time_s`` follows the driver's ``sample`` on /diagnostics (once per simulated
+        second); with ``paced`` (a realtime loop: one simulated second per wall second) it
+        moves on with the wall clock from the last report, at most ``PACED_AHEAD_S`` past it.
         """
         import rclpy
         from diagnostic_msgs.msg import DiagnosticArray
         from rclpy.parameter_client import AsyncParameterClient
         from rclpy.signals import SignalHandlerOptions
-        from rosgraph_msgs.msg import Clock
 
-        from hexapod_vibration.ros.qos import CLOCK_QOS, DIAGNOSTICS_QOS
+        from hexapod_vibration.ros.qos import DIAGNOSTICS_QOS
 
         self._rclpy = rclpy
         # No rclpy signal handlers: they would shut this context down from another thread
@@ -49,14 +47,11 @@ class GraphMonitor:
         self.node = rclpy.create_node("experiment")
         self._reported_s = -1.0              # the driver's last reported sample (s)
         self._reported_at = 0.0              # when it came (time.monotonic(), s)
-        self._paced = paced and not watch_clock
+        self._paced = paced
         self.driver: dict[str, str] = {}
         self.notch: dict[str, str] = {}
         self.pointing: dict[str, str] = {}
         self.recorder: dict[str, str] = {}
-        self._watch_clock = watch_clock
-        if watch_clock:
-            self.node.create_subscription(Clock, "/clock", self._on_clock, CLOCK_QOS)
         self.node.create_subscription(DiagnosticArray, "/diagnostics", self._on_diag,
                                       DIAGNOSTICS_QOS)
         self.clients = {name: AsyncParameterClient(self.node, name)
@@ -64,14 +59,11 @@ class GraphMonitor:
 
     @property
     def sim_time_s(self) -> float:
-        """The loop's sim time (s): ``/clock``'s, or the driver's report (see ``__init__``)."""
+        """The loop's sim time (s): the driver's last report (see ``__init__``)."""
         if self._paced and self._reported_s >= 0.0:
             ahead = min(time.monotonic() - self._reported_at, PACED_AHEAD_S)
             return self._reported_s + ahead
         return self._reported_s
-
-    def _on_clock(self, msg: Any) -> None:
-        self._reported_s = msg.clock.sec + msg.clock.nanosec * 1e-9
 
     def _on_diag(self, msg: Any) -> None:
         for status in msg.status:
@@ -79,7 +71,7 @@ class GraphMonitor:
             if status.name == DRIVER_STATUS:
                 self.driver = values
                 reported = int(values.get("sample", 0)) / 1e3
-                if not self._watch_clock and reported > self._reported_s:
+                if reported > self._reported_s:
                     self._reported_s, self._reported_at = reported, time.monotonic()
             elif status.name == NOTCH_STATUS:
                 self.notch = values

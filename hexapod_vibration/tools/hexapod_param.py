@@ -23,10 +23,10 @@ import os
 import re
 import sys
 from collections.abc import Sequence
-from pathlib import Path
 from typing import Any
 
 from hexapod_vibration import cli
+from hexapod_vibration.params_files import node_parameters
 
 EXIT_REFUSED = cli.EXIT_FAILED
 EXIT_UNREACHABLE = 3
@@ -92,7 +92,7 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point; returns the exit code (see the module docstring)."""
     args = build_parser().parse_args(argv)
-    file_values = _file_parameters(args.file, args.node) if args.command == "load" else None
+    file_values = node_parameters(args.file, args.node) if args.command == "load" else None
     if isinstance(file_values, str):
         return cli.fail("hexapod_param", file_values)
     from hexapod_vibration.tools.parameter_services import (
@@ -145,20 +145,3 @@ def value_text(value: Any) -> str:
     if isinstance(value, float) and not math.isfinite(value):
         return str(value)
     return json.dumps(value)
-
-
-def _file_parameters(path: Path, node: str) -> dict[str, Any] | str:
-    """The parameters a ROS params file gives ``node`` (``/node`` or ``node`` key), or why not."""
-    import yaml
-
-    try:
-        content = yaml.safe_load(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, yaml.YAMLError) as exc:
-        return f"cannot read {path}: {' '.join(str(exc).split())}"
-    keys = (node, node.lstrip("/"), "/**", "**")
-    section = next((content[k] for k in keys if isinstance(content, dict) and k in content),
-                   None)
-    values = section.get("ros__parameters") if isinstance(section, dict) else None
-    if not isinstance(values, dict):
-        return f"{path} has no parameters for {node} (expected {node}: ros__parameters: ...)"
-    return values

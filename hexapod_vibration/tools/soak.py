@@ -193,7 +193,7 @@ def run(args: argparse.Namespace) -> int:
                               "layout": "pph_graph" if args.composed else "processes"}
     try:
         children = start_graph(params_file, args.out, args.composed, has_notch)
-        graph = GraphMonitor(watch_clock=False)
+        graph = GraphMonitor()
         AccelLevel(graph.node, samples)
         result.update(_drive(graph, children, samples, scenario, args, has_notch))
     except KeyboardInterrupt:

@@ -242,7 +242,7 @@ class AdaptiveNotchCanceller(NotchWeights):
             if self._weight_limit is not None:
                 self.limit_weights(self._weight_limit)
         if self._gain != self._target:
-            self._advance_gain()
+            self._move_gain(1)
         np.dot(self._v_r, self._z_r, out=self._u)          # sum_t a cos phi + b sin phi
         if self._fading.active:
             self._fading.accumulate(self._u)
@@ -267,18 +267,6 @@ class AdaptiveNotchCanceller(NotchWeights):
         self._fading.advance(samples)
         self._osc.advance(samples)
 
-    def _advance_gain(self) -> None:
-        """One sample of the enable/disable ramp towards ``_target`` (the caller checks)."""
-        target = self._target
-        if self._smooth:
-            self._move_gain(1)
-        elif self._gain_step <= 0.0:
-            self._gain = target
-        elif self._gain < target:
-            self._gain = min(target, self._gain + self._gain_step)
-        else:
-            self._gain = max(target, self._gain - self._gain_step)
-
     def _move_gain(self, samples: int) -> None:
         """``samples`` samples of the ramp: linear in the gain, or along the smooth curve."""
         target = self._target
@@ -291,7 +279,7 @@ class AdaptiveNotchCanceller(NotchWeights):
         elif self._gain_step <= 0.0 or samples * self._gain_step >= abs(target - self._gain):
             self._gain = target if samples else self._gain
         else:
-            self._gain += np.copysign(samples * self._gain_step, target - self._gain)
+            self._gain += math.copysign(samples * self._gain_step, target - self._gain)
 
     # ------------------------------------------------------------------ configuration
     def set_tone_frequencies(

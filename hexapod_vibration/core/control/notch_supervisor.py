@@ -28,7 +28,7 @@ the ROS parameter must mirror) is queued as :class:`SupervisorEvent` for
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -326,7 +326,7 @@ class NotchSupervisor:
         values.update(self._plant.status())
         return values
 
-    def drain_events(self) -> list[SupervisorEvent]:
+    def drain_events(self) -> Sequence[SupervisorEvent]:
         """The events since the last call, oldest first (and forget them)."""
         return self._events.drain()
 

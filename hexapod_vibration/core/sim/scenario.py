@@ -21,6 +21,7 @@ from hexapod_vibration.core.control.notch_supervisor import NotchConfig, NotchSu
 from hexapod_vibration.core.model.rotor import Rotor, rotor_or_none
 from hexapod_vibration.core.model.shaker import ShakerTone, tones_from_arrays
 from hexapod_vibration.parameter_specs import ADAPTATION_MODES, NOTCH_CONTROLLER
+from hexapod_vibration.params_files import node_parameters
 from hexapod_vibration.paths import share_directory
 
 
@@ -87,16 +88,13 @@ def notch_preset(name: str) -> dict[str, Any]:
         ValueError: an unknown preset (the reason lists the known ones), or a file that is
             not a params file of notch_controller's parameters.
     """
-    if not isinstance(name, str) or name not in available_presets():
-        raise ValueError(f"unknown preset {name!r}; presets: {', '.join(available_presets())}")
+    presets = available_presets()
+    if not isinstance(name, str) or name not in presets:
+        raise ValueError(f"unknown preset {name!r}; presets: {', '.join(presets)}")
     path = share_directory() / "config" / PRESETS_FOLDER / f"{name}.yaml"
-    with open(path, encoding="utf-8") as stream:
-        data = yaml.safe_load(stream)
-    try:
-        values = dict(data["notch_controller"]["ros__parameters"])
-    except (TypeError, KeyError):
-        raise ValueError(f"{path}: not a params file of notch_controller (no "
-                         "notch_controller: ros__parameters:)") from None
+    values = node_parameters(path, NOTCH_CONTROLLER.node)
+    if isinstance(values, str):
+        raise ValueError(values)
     unknown = set(values) - set(NOTCH_CONTROLLER.names)
     if unknown:
         raise ValueError(f"{path}: not a notch_controller parameter: "

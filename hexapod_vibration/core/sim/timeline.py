@@ -68,13 +68,8 @@ def _fix(scenario: Scenario, identification: Interval) -> str:
             f"{scenario.window_s:g} s uncontrolled window after it)")
 
 
-def control_on_conflict(scenario: Scenario, sample_rate_hz: float) -> str | None:
-    """Why control cannot go on when the scenario asks (one line), or None if it can.
-
-    Control-on inside the identification: the canceller is held until the identification
-    ends and its analysis is done, so the run would measure no control at all.
-    """
-    found = identification_interval(scenario, sample_rate_hz)
+def _control_on_inside(scenario: Scenario, found: tuple[Interval, str] | None) -> str | None:
+    """Why control-on falls inside the identification ``found``, or None."""
     if found is None:
         return None
     identification, method = found
@@ -85,10 +80,19 @@ def control_on_conflict(scenario: Scenario, sample_rate_hz: float) -> str | None
     return None
 
 
+def control_on_conflict(scenario: Scenario, sample_rate_hz: float) -> str | None:
+    """Why control cannot go on when the scenario asks (one line), or None if it can.
+
+    Control-on inside the identification: the canceller is held until the identification
+    ends and its analysis is done, so the run would measure no control at all.
+    """
+    return _control_on_inside(scenario, identification_interval(scenario, sample_rate_hz))
+
+
 def timeline_conflict(scenario: Scenario, sample_rate_hz: float) -> str | None:
     """Why the point's timeline cannot measure control (one line), or None if it can."""
-    conflict = control_on_conflict(scenario, sample_rate_hz)
     found = identification_interval(scenario, sample_rate_hz)
+    conflict = _control_on_inside(scenario, found)
     if conflict is not None or found is None:
         return conflict
     identification, method = found

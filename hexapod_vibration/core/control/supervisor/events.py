@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -33,7 +34,12 @@ class EventLog:
         """Queue one event (see :class:`SupervisorEvent`)."""
         self._events.append(SupervisorEvent(level, message, parameter))
 
-    def drain(self) -> list[SupervisorEvent]:
-        """The events since the last call, oldest first (and forget them)."""
+    def drain(self) -> Sequence[SupervisorEvent]:
+        """The events since the last call, oldest first (and forget them).
+
+        Called once per loop sample: with none, nothing is allocated (an empty tuple).
+        """
+        if not self._events:
+            return ()
         events, self._events = self._events, []
         return events
