@@ -64,6 +64,18 @@ NOTCH_SENSITIVITY_TOPIC = "/pph/notch_sensitivity"
 named in ``layout.dim[0].label`` (``SENSITIVITY_ROWS_PREFIX`` + comma-separated names:
 ``frequency_hz`` then |S| in dB per view), ``layout.dim[1] = ("frequency", F, 1)``."""
 
+NOTCH_HELD_TOPIC = "/pph/notch_held"
+"""The notch commands a realtime driver did not apply when due (every
+``HELD_REPORT_EVERY_SAMPLES``, reliable): rows ``(first due sample, last due sample, sample
+whose command stood in)`` (-1: zero force, the watchdog) flattened,
+``layout.dim[0] = (HELD_ROWS_LABEL, 3 R, 3 R)``, then the sample label (the last due sample
+the report is complete up to) and the run label."""
+
+HELD_ROWS_LABEL = "held:first_due,last_due,applied"
+
+HELD_REPORT_EVERY_SAMPLES = 100
+"""Samples between two reports on ``NOTCH_HELD_TOPIC`` (10 Hz, empty ones included)."""
+
 FREQUENCY_LABEL = "frequency_hz"
 """``layout.dim[0]`` label of the frequency topics (values in Hz)."""
 

@@ -415,6 +415,10 @@ PPH_DRIVER = NodeSpec("pph_driver", summary="the simulated hexapod (plant, senso
     ParameterSpec("command_timeout_samples", "int", 5, "watchdog: a command stream older "
                   "than this many samples (1 ms each) is dropped to zero force",
                   unit="samples", low=1, high=1000),
+    ParameterSpec("command_delay_samples", "int", 0, "the command answering sample n is "
+                  "applied over [n+d, n+d+1): a controller has d+1 periods to answer (a "
+                  "realtime pipeline); the notch's loop_delay_samples must grow by d",
+                  unit="samples", low=0, high=10, read_only=True),
     ParameterSpec("lockstep_timeout_s", "double", 2.0, "lockstep: longest wait for the "
                   "commands of one sample before advancing without them", unit="s",
                   low=0.001, high=10.0),

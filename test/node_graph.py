@@ -30,6 +30,7 @@ from hexapod_vibration.cdr import decode_strut_cdr
 from hexapod_vibration.contract import SAMPLE_RATE_HZ, InvalidStrutMessage
 from hexapod_vibration.ros.qos import DIAGNOSTICS_QOS
 from hexapod_vibration.ros.rclpy_internals import take_serialized_batch
+from hexapod_vibration.ros.service_handshake import shake_hands
 
 HANG_GUARD_S = 180.0
 """Longest wait for anything (s): a guard against hangs, never a timing requirement (90 s
@@ -201,6 +202,9 @@ class ParameterClient:
         self.target = target
         self.client = AsyncParameterClient(node, target)
         assert self.client.wait_for_services(timeout_sec=HANG_GUARD_S), f"{target}: no services"
+        silent = shake_hands(self.client,
+                             lambda t: ros_context.executor.spin_once(timeout_sec=t), HANG_GUARD_S)
+        assert not silent, f"{target}: {silent} did not answer"
 
     def _wait(self, future):
         assert wait_until(self.ros_context, future.done), f"{self.target}: no answer"

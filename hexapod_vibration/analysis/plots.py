@@ -324,8 +324,8 @@ def _weights_panel(ax: plt.Axes, signals: BagSignals, result: Analysis, on: floa
     t_start = result.levels_over_time and min(v["t_s"][0] for v in
                                               result.levels_over_time.values()
                                               if v["t_s"].size)
-    if signals.weights.size:
-        keep = signals.weights_index / FS >= (t_start or 0.0)
+    keep = signals.weights_index / FS >= (t_start or 0.0)
+    if signals.weights.size and keep.any():
         t_w = signals.weights_index[keep] / FS
         magnitude = np.hypot(signals.weights[keep, ..., 0], signals.weights[keep, ..., 1])
         tones = signals.notch_tones() or list(range(magnitude.shape[1]))
@@ -341,8 +341,8 @@ def _weights_panel(ax: plt.Axes, signals: BagSignals, result: Analysis, on: floa
             ax.set_ylim(bottom=max(1e-3, 0.3 * float(peaks.min()) / 10))
         ax.legend(loc="lower right")
     else:
-        ax.text(0.5, 0.5, "no /pph/notch_weights in the bag", transform=ax.transAxes,
-                ha="center", va="center")
+        ax.text(0.5, 0.5, "no /pph/notch_weights in the bag over this time",
+                transform=ax.transAxes, ha="center", va="center")
     ax.axvline(on, color="k", lw=1.0)
     ax.set(xlabel="sim time (s)", ylabel="notch weight |W| (N)",
            title="notch weights (amplitude of each strut's cancelling force)")

@@ -1,4 +1,6 @@
-"""What the driver publishes each sample: /clock, the tachometer, the sensors, the force.
+"""What the driver publishes: /clock, the tachometer, the sensors, the force, held commands.
+
+Every sample the first four; in realtime, every 100 samples, the notch commands it held.
 
 :class:`DriverOutputs` owns the driver's loop publishers (watched for their matched
 readers, :mod:`hexapod_vibration.ros.matching`). The sample's /clock and sensor messages are
@@ -14,11 +16,19 @@ from rosgraph_msgs.msg import Clock
 from std_msgs.msg import Float64MultiArray
 
 from hexapod_vibration.cdr import clock_cdr
-from hexapod_vibration.contract import DISTURBANCE_FREQUENCIES_TOPIC, REFERENCE_FREQUENCY_TOPIC
+from hexapod_vibration.contract import (
+    DISTURBANCE_FREQUENCIES_TOPIC,
+    HELD_REPORT_EVERY_SAMPLES,
+    HELD_ROWS_LABEL,
+    NOTCH_HELD_TOPIC,
+    REFERENCE_FREQUENCY_TOPIC,
+)
+from hexapod_vibration.core.loop.command_arbiter import CommandArbiter
+from hexapod_vibration.core.loop.held_log import HeldLog
 from hexapod_vibration.core.model.plant import PlantSample
 from hexapod_vibration.ros.matching import MatchedReaders
 from hexapod_vibration.ros.messages import StrutArrayPublisher, make_vector_array
-from hexapod_vibration.ros.qos import CLOCK_QOS, LOOP_PUBLISHER_QOS
+from hexapod_vibration.ros.qos import CLOCK_QOS, HELD_QOS, LOOP_PUBLISHER_QOS
 from hexapod_vibration.ros.rclpy_internals import serialized_publish
 
 LOOP_TOPICS = ("/pph/accel", "/pph/eddy", "/pph/actuator_force", REFERENCE_FREQUENCY_TOPIC,
@@ -48,6 +58,8 @@ class DriverOutputs:
         self._frequencies = arrays[DISTURBANCE_FREQUENCIES_TOPIC]
         self._clock = serialized_publish(self.readers.publisher(node, Clock, "/clock",
                                                                 CLOCK_QOS))
+        self._held = node.create_publisher(Float64MultiArray, NOTCH_HELD_TOPIC, HELD_QOS)
+        self._held_log = HeldLog()
         self._offer: tuple[bytes, bytes, bytes] | None = None
         self._reference_msg: Float64MultiArray | None = None
 
@@ -76,3 +88,15 @@ class DriverOutputs:
     def frequencies(self, frequencies_hz, n: int, run: int) -> None:
         """Publish the true frequency (Hz) of every sounding tone at sample ``n``."""
         self._frequencies.publish(make_vector_array(frequencies_hz, n, run))
+
+    def note_held(self, arbiter: CommandArbiter, run: int) -> None:
+        """Log the notch command applied now; report the held ones every 100 samples.
+
+        Called once per sample, after ``arbiter.close_sample`` (realtime only: lockstep
+        holds no command but after a timeout).
+        """
+        notch, log = arbiter.streams["notch"], self._held_log
+        log.note(arbiter.due, notch.applied, notch.stale)
+        if arbiter.sample % HELD_REPORT_EVERY_SAMPLES == 0 and log.covered >= 0:
+            flat = [float(v) for row in log.drain() for v in row]
+            self._held.publish(make_vector_array(flat, log.covered, run, label=HELD_ROWS_LABEL))

@@ -1,15 +1,13 @@
 """``notch_controller``: six decentralized Adaptive Notch Cancellers (the paper's algorithm).
 
-A thin rclpy shell over :class:`~hexapod_vibration.core.control.notch_supervisor.NotchSupervisor`,
-which holds everything numerical and every decision. Each ``/pph/accel`` sample (raw,
-gravity included) goes to the supervisor and its command out on ``/pph/notch_command`` with
-the same sample index; parameters are checked by the supervisor in the on-set callback and
-applied in the post-set callback. Out: the weights at 100 Hz (``/pph/notch_weights``), each
-tone's frequency now (``/pph/notch_frequencies``), the predicted sensitivity once after
-each identification (``/pph/notch_sensitivity``, transient local), the status on
-``/diagnostics`` (every simulated second, every second of wall time and on each change).
-A tachometer on ``/pph/reference_frequency`` (one value, Hz, with its sample index; a loop
-subscription served before ``/pph/accel``) goes to ``set_reference_frequency``.
+A thin rclpy shell over :class:`~hexapod_vibration.core.control.notch_supervisor.NotchSupervisor`
+(everything numerical, every decision). Each ``/pph/accel`` sample goes to the supervisor and
+its command out on ``/pph/notch_command`` with the same index (an older sample skipped for a
+newer one is only observed); parameters are checked in the on-set callback and applied in
+the post-set one. Out: the weights (100 Hz), each tone's frequency now, the predicted
+sensitivity after each identification (transient local), ``/diagnostics``. In, besides:
+the tachometer (``/pph/reference_frequency``, served before ``/pph/accel``) and the driver's
+held commands (``/pph/notch_held``).
 """
 
 from __future__ import annotations
@@ -38,6 +36,7 @@ from hexapod_vibration.parameter_specs import NOTCH_CONTROLLER
 from hexapod_vibration.paths import config_path
 from hexapod_vibration.ros.diagnostics import diagnostic_array, publish_status_periodically
 from hexapod_vibration.ros.executors import loop_meter
+from hexapod_vibration.ros.held_reports import subscribe_held_reports
 from hexapod_vibration.ros.matching import MatchedReaders
 from hexapod_vibration.ros.messages import (
     ControllerLoopPort,
@@ -89,7 +88,10 @@ class NotchControllerNode(Node):
         self.loop_subscriptions = [
             create_loop_subscription(self, REFERENCE_FREQUENCY_TOPIC, self._on_reference),
             create_loop_subscription(self, "/pph/accel", self._on_accel)]
-        self.latest_only_subscriptions = self.loop_subscriptions    # stale samples: skipped
+        self.latest_only_subscriptions = list(self.loop_subscriptions)  # stale samples: skipped
+        self.skipped_message_callbacks = {self.loop_subscriptions[1]: self.port.hold_skipped}
+        self.loop_subscriptions.append(subscribe_held_reports(
+            self, lambda: self.port.sequence.run, self.supervisor.note_held))
         self.meter = loop_meter()
         self._count = self.meter.counter("notch_controller")
         self._stage = {name: self.meter.stage(f"notch {name}")
@@ -132,6 +134,8 @@ class NotchControllerNode(Node):
             return
         if sample.new_run:
             self.supervisor.reset_run(sample.index)
+        for skipped in sample.skipped:                  # recorded, not answered
+            self.supervisor.observe(skipped.index, skipped.values)
         command = self.supervisor.step(sample.index, sample.values)
         meter.lap(stage["control"])
         if command is None:

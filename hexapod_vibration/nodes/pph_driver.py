@@ -14,6 +14,7 @@ statistics and the CPU budget go to ``/diagnostics`` once per simulated second.
 With ``rotor_tachometer`` on, the rotor's speed for sample n (Hz) goes out on
 ``/pph/reference_frequency`` before the sample's sensors; the true frequency of every sounding
 tone goes out on ``/pph/disturbance_frequencies`` every ``FREQUENCIES_EVERY_SAMPLES`` samples.
+A realtime driver reports the notch commands it held on ``/pph/notch_held``.
 """
 
 from __future__ import annotations
@@ -61,7 +62,8 @@ class PPHDriver(Node):
         self.run_id = new_run_id()
         self.arbiter = CommandArbiter(LOCKSTEP_STREAMS, self.settings.expected, self.run_id,
                                       SignalRanges.from_model(self.model).command_n,
-                                      latency_stream="notch")
+                                      latency_stream="notch",
+                                      delay_samples=values["command_delay_samples"])
         self.topics = {name: f"/pph/{name}_command" for name in LOCKSTEP_STREAMS}
         self.outputs = DriverOutputs(self, self.fs,
                                      lambda: self.publish_diagnostics(held=self.held()))
@@ -77,6 +79,7 @@ class PPHDriver(Node):
         self.get_logger().info(
             f"PPH driver up: {self.mode}, {'nonlinear' if self.model is model else 'linear'}"
             f" plant, {self.fs:.0f} Hz, watchdog {self.settings.timeout_samples} samples, "
+            f"command delay {self.arbiter.delay} samples, "
             f"run {self.run_id}")
 
     # ------------------------------------------------------------------ state for the loop
@@ -165,6 +168,8 @@ class PPHDriver(Node):
         """Apply the current sample's commands, publish the applied force, advance one sample."""
         timeout = self.settings.timeout_samples
         forces, newly_stale = self.arbiter.close_sample(self.mode == "lockstep", timeout)
+        if self.mode == "realtime":
+            self.outputs.note_held(self.arbiter, self.run_id)
         for name in newly_stale:
             self.get_logger().warn(f"{self.topics[name]}: no command for {timeout} samples, "
                                    "force set to zero")

@@ -27,7 +27,7 @@ falls back to the executor's own ``spin_once``.
 from __future__ import annotations
 
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Mapping, Sequence
 
 import rclpy
 from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedExecutor
@@ -99,7 +99,9 @@ class LoopSpinner:
 
     def __init__(self, executor: Executor, subscriptions: Sequence[Subscription],
                  fast: bool, service_period_s: float = SERVICE_PERIOD_S,
-                 latest_only: Sequence[Subscription] = ()) -> None:
+                 latest_only: Sequence[Subscription] = (),
+                 skipped: Mapping[Subscription, Callable[[bytes], None]] | None = None
+                 ) -> None:
         """Bind to ``executor`` (which holds the node) and its loop ``subscriptions``.
 
         ``latest_only``: subscriptions (among ``subscriptions``) whose callback gets only the
@@ -107,10 +109,14 @@ class LoopSpinner:
         controller that fell behind (a realtime loop after a stall) answers the sample the
         driver waits for now instead of working through samples whose deadlines passed:
         what it skipped is a gap in its sequence, counted as missed samples.
+        ``skipped``: for some of those, a callable that gets each skipped (older) message,
+        oldest first, before the callback gets the newest (e.g. to record a sample it will
+        not answer).
         """
         self.executor = executor
         self.subscriptions = list(subscriptions)
         self._latest_only = frozenset(latest_only)
+        self._skipped = dict(skipped or {})
         self.fast = fast and bool(self.subscriptions) and fast_path()
         self.service_period_s = service_period_s
         self.meter = loop_meter()
@@ -153,8 +159,10 @@ class LoopSpinner:
     def _take_all_of(self, sub: Subscription) -> None:
         """Take every queued message of ``sub``; call its callback with each (or the newest)."""
         if sub in self._latest_only:
-            newest = None
+            newest, on_skipped = None, self._skipped.get(sub)
             while (raw := self._take(sub)) is not None:
+                if newest is not None and on_skipped is not None:
+                    on_skipped(newest)
                 newest = raw
             if newest is not None:
                 sub.callback(newest)

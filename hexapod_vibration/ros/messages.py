@@ -234,6 +234,9 @@ class LoopSample:
     new_run: bool
     """First sample of a run adopted after another one (a restarted driver): reset the
     run-dependent state (integrators, identification, phase references) before acting."""
+    skipped: tuple[StrutSample, ...] = ()
+    """Older samples of this run, queued with it and skipped for it (oldest first): they
+    fall in its gap (:meth:`ControllerLoopPort.hold_skipped`)."""
 
 
 class ControllerLoopPort:
@@ -264,6 +267,7 @@ class ControllerLoopPort:
         self.sequence = sequence or SampleSequence()
         self.counters: Counter = Counter()
         self._answer: tuple[int | None, int, bytes] | None = None
+        self._skipped: list[StrutSample] = []
 
     @property
     def last_sample(self) -> int:
@@ -277,6 +281,7 @@ class ControllerLoopPort:
 
     def receive(self, msg: Float64MultiArray | bytes) -> LoopSample | None:
         """The sample to act on, or None (refused, repeated, late or unconfirmed)."""
+        skipped, self._skipped = self._skipped, []
         sample = receive_strut_sample(msg, self.logger, self.topic)
         if sample is None:
             self.counters["malformed"] += 1
@@ -297,7 +302,25 @@ class ControllerLoopPort:
             self.logger.info(f"{self.topic}: new run {sample.run} from sample {verdict.index}")
         if self.counts_gaps:
             self.counters["missed_samples"] += verdict.gap
-        return LoopSample(sample.values, verdict.index, sample.run, verdict.gap, new_run)
+        return LoopSample(sample.values, verdict.index, sample.run, verdict.gap, new_run,
+                          tuple(s for s in skipped if not new_run and s.index < verdict.index))
+
+    def hold_skipped(self, msg: Float64MultiArray | bytes) -> None:
+        """An older queued message skipped for a newer one (a loop behind).
+
+        Kept if decoded, in range, of the run in force and after the last sample acted on;
+        the next sample acted on carries those before it (``LoopSample.skipped``). The
+        sequence does not move: that sample finds the gap. Refusals are counted as by
+        :meth:`receive`.
+        """
+        sample = receive_strut_sample(msg, self.logger, self.topic)
+        if sample is None:
+            self.counters["malformed"] += 1
+        elif out_of_range(sample.values, self.limit_abs):
+            self.counters["out_of_range"] += 1
+        elif (sample.index is not None and sample.run == self.sequence.run
+              and self.sequence.last < sample.index):
+            self._skipped.append(sample)
 
     def _not_acted(self, admission: Admission, index: int, run: int | None) -> None:
         if admission is Admission.REPEAT:

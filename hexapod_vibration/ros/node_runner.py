@@ -31,7 +31,8 @@ def run_node(name: str, factory: Callable[[], object],
     """Init rclpy, build the node(s), run ``loop`` (default: serve them), exit the process.
 
     The node's 1 kHz subscriptions are those it lists in ``loop_subscriptions`` (those it
-    also lists in ``latest_only_subscriptions`` get only the newest queued message); its
+    also lists in ``latest_only_subscriptions`` get only the newest queued message, the
+    older ones going to its ``skipped_message_callbacks`` by subscription, if any); its
     ``executor`` parameter chooses how they are served (``ros/executors.py``).
     ``companions`` are more nodes composed into the same process and thread.
     ``nodes``: the node names whose parameters ``--help`` lists (default: ``name``).
@@ -52,6 +53,7 @@ def _run(name: str, factory, loop, args, companions) -> int:
     from rclpy.exceptions import InvalidHandle, ParameterException
     from rclpy.executors import ExternalShutdownException
     from rclpy.signals import SignalHandlerOptions
+    from threadpoolctl import threadpool_limits
 
     from hexapod_vibration.ros.executors import LoopSpinner, make_executor, spin_loop
     from hexapod_vibration.ros.rclpy_internals import RCLError
@@ -72,6 +74,8 @@ def _run(name: str, factory, loop, args, companions) -> int:
         subscriptions = [sub for node in built[1:] + built[:1]
                          for sub in getattr(node, "loop_subscriptions", ())]
         latest = [sub for node in built for sub in getattr(node, "latest_only_subscriptions", ())]
+        skipped = {sub: call for node in built
+                   for sub, call in getattr(node, "skipped_message_callbacks", {}).items()}
         # A signal in the middle of an rclpy constructor leaves a half-built object whose
         # __del__ prints a traceback: the stop is raised once they are whole.
         with cli.deferred():
@@ -79,8 +83,12 @@ def _run(name: str, factory, loop, args, companions) -> int:
             for node in built:
                 executor.add_node(node)
             spinner = LoopSpinner(executor, subscriptions, fast=executor_name == "waitset",
-                                  latest_only=latest)
+                                  latest_only=latest, skipped=skipped)
         _schedule(built[0], apply_scheduling)
+        # One BLAS thread: a node's computation (an identification's analysis) must not
+        # spread over the cores the loop runs on; under SCHED_FIFO, OpenBLAS's spinning
+        # workers stalled the notch's analysis (and the loop) for minutes.
+        threadpool_limits(limits=1)
         (loop or spin_loop)(built[0], spinner)
     except cli.StopSignal as stop:
         code = stop.exit_code

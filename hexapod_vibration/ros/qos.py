@@ -133,3 +133,12 @@ LATCHED_QOS = QoSProfile(
 """``/pph/notch_sensitivity``: published once per identification, kept for late joiners
 (TRANSIENT_LOCAL, the last one). A VOLATILE subscription matches it too but gets only what
 is published after it joined; the recorder and the tools subscribe TRANSIENT_LOCAL."""
+
+HELD_QOS = QoSProfile(
+    reliability=ReliabilityPolicy.RELIABLE,
+    history=HistoryPolicy.KEEP_LAST,
+    depth=100,
+    durability=DurabilityPolicy.VOLATILE,
+)
+"""``/pph/notch_held`` (10 Hz): RELIABLE and 100 deep (10 s of reports), so a notch
+controller that is busy for a while (an identification's analysis) still gets every row."""

@@ -26,6 +26,13 @@ EXPERIMENT_LOCKSTEP_TIMEOUT_S = 10.0
 """The driver's ``lockstep_timeout_s`` in an experiment (s, wall): the parameter's maximum."""
 
 
+REALTIME_COMMAND_DELAY_SAMPLES = 1
+"""The driver's ``command_delay_samples`` in a realtime experiment: a controller has two
+periods (2 ms) to answer, not one. Through separate processes on the project machine one
+period missed a few % of the notch's answers (docs/performance.md), and each held answer
+corrupts the identification's input. The notch's ``loop_delay_samples`` grows by as much."""
+
+
 def node_parameters(scenario: Scenario, mode: str, model_file: str = "",
                     realtime_priority: int = 0) -> dict[str, dict[str, Any]]:
     """The ROS params file content (``{node: {"ros__parameters": {...}}}``) of a scenario.
@@ -72,10 +79,23 @@ def node_parameters(scenario: Scenario, mode: str, model_file: str = "",
             "adaptation": notch.adaptation, "enabled": False,
             "identify_delay_s": scenario.identify_at_s,
         }
+    if mode == "realtime":
+        _pipeline(params, REALTIME_COMMAND_DELAY_SAMPLES)
     if realtime_priority:
         for values in params.values():
             values["realtime_priority"] = int(realtime_priority)
     return {node: {"ros__parameters": values} for node, values in params.items()}
+
+
+def _pipeline(params: dict[str, dict[str, Any]], delay_samples: int) -> None:
+    """Set the driver's command delay and add it to the notch's loop delay (samples)."""
+    from hexapod_vibration.parameter_specs import NOTCH_CONTROLLER
+
+    params["pph_driver"]["command_delay_samples"] = delay_samples
+    notch = params.get("notch_controller")
+    if notch is not None:
+        base = notch.get("loop_delay_samples", NOTCH_CONTROLLER["loop_delay_samples"].default)
+        notch["loop_delay_samples"] = float(base) + delay_samples
 
 
 def rotor_parameters(scenario: Scenario) -> dict[str, Any]:

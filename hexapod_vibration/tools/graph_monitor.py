@@ -56,6 +56,7 @@ class GraphMonitor:
                                       DIAGNOSTICS_QOS)
         self.clients = {name: AsyncParameterClient(self.node, name)
                         for name in ("pph_driver", "notch_controller", "pointing_controller")}
+        self._shaken: set[str] = set()       # clients whose services answered a handshake
 
     @property
     def sim_time_s(self) -> float:
@@ -86,6 +87,9 @@ class GraphMonitor:
         while time.monotonic() < end:
             self._rclpy.spin_once(self.node, timeout_sec=max(0.0, min(0.05, end -
                                                                       time.monotonic())))
+
+    def _spin_once(self, timeout_s: float) -> None:
+        self._rclpy.spin_once(self.node, timeout_sec=timeout_s)
 
     def graph_ready(self, with_notch: bool) -> bool:
         """Recorder, controllers and driver are all discovered on the loop topics."""
@@ -121,9 +125,16 @@ class GraphMonitor:
         """Set a parameter through the node's parameter service; raise if rejected."""
         from rclpy.parameter import Parameter
 
+        from hexapod_vibration.ros.service_handshake import shake_hands
+
         client = self.clients[node]
         if not client.wait_for_services(timeout_sec=timeout_s):
             raise ExperimentError(f"/{node} parameter services not available")
+        if node not in self._shaken:
+            if silent := shake_hands(client, self._spin_once, timeout_s,
+                                     services=("set_parameters",)):
+                raise ExperimentError(f"/{node}: {', '.join(silent)} did not answer")
+            self._shaken.add(node)
         future = client.set_parameters([Parameter(name, value=value)])
         self._rclpy.spin_until_future_complete(self.node, future, timeout_sec=timeout_s)
         if not future.done():

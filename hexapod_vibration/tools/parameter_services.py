@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import difflib
 import os
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 import rclpy
@@ -21,6 +21,8 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter, parameter_value_to_python
 from rclpy.parameter_client import AsyncParameterClient
 from rclpy.signals import SignalHandlerOptions
+
+from hexapod_vibration.ros.service_handshake import answer_with_resends, shake_hands
 
 _ARRAYS = {ParameterType.PARAMETER_BYTE_ARRAY, ParameterType.PARAMETER_BOOL_ARRAY,
            ParameterType.PARAMETER_INTEGER_ARRAY, ParameterType.PARAMETER_DOUBLE_ARRAY,
@@ -114,11 +116,19 @@ class ParameterServices:
         self.client = AsyncParameterClient(self.node, target)
 
     def __enter__(self) -> ParameterServices:
-        """Wait for the node's parameter services; :class:`Unreachable` after the timeout."""
+        """Wait for the node's parameter services; :class:`Unreachable` after the timeout.
+
+        Requests are then resent until answered, and a set follows a handshake with the set
+        service (:mod:`hexapod_vibration.ros.service_handshake`): Fast DDS can lose a
+        response to a client it has just discovered.
+        """
         if not self.client.wait_for_services(timeout_sec=self.timeout_s):
             self.close()
             raise Unreachable(f"no answer from {self.target} within {self.timeout_s:g} s")
         return self
+
+    def _spin_once(self, timeout_s: float) -> None:
+        self.executor.spin_once(timeout_sec=timeout_s)
 
     def __exit__(self, *exc: object) -> None:
         """Shut the context down."""
@@ -130,16 +140,29 @@ class ParameterServices:
         self.node.destroy_node()
         rclpy.try_shutdown(context=self.context)
 
-    def _call(self, future: Any) -> Any:
-        self.executor.spin_until_future_complete(future, timeout_sec=self.answer_timeout_s)
-        if not future.done():
-            raise Unreachable(f"{self.target} did not answer within "
+    def _call(self, request: Callable[[], Any], name: str) -> Any:
+        """The answer to an idempotent ``request`` (resent until answered, see the handshake)."""
+        answers = answer_with_resends({name: request}, self._spin_once, self.answer_timeout_s)
+        if name not in answers:
+            raise Unreachable(f"{self.target} did not answer {name} within "
                               f"{self.answer_timeout_s:g} s")
-        return future.result()
+        return answers[name]
+
+    def _set(self, parameters: list[Parameter]) -> list[Any]:
+        """Send one SetParameters request (never resent: the handshake goes first)."""
+        silent = shake_hands(self.client, self._spin_once, self.answer_timeout_s,
+                             services=("set_parameters",))
+        future = self.client.set_parameters(parameters)
+        if not silent:
+            self.executor.spin_until_future_complete(future, self.answer_timeout_s)
+        if silent or not future.done():
+            raise Unreachable(f"{self.target} did not answer set_parameters within "
+                              f"{self.answer_timeout_s:g} s")
+        return list(future.result().results)
 
     def names(self) -> list[str]:
         """Every parameter name of the node."""
-        return list(self._call(self.client.list_parameters()).result.names)
+        return list(self._call(self.client.list_parameters, "list_parameters").result.names)
 
     def _known(self, names: Sequence[str]) -> None:
         """:class:`Refused` naming the first of ``names`` the node does not have."""
@@ -151,13 +174,15 @@ class ParameterServices:
     def get(self, names: Sequence[str]) -> list[Any]:
         """The values of ``names`` (plain Python)."""
         self._known(names)
-        values = self._call(self.client.get_parameters(list(names))).values
+        values = self._call(lambda: self.client.get_parameters(list(names)),
+                            "get_parameters").values
         return [_plain(parameter_value_to_python(v)) for v in values]
 
     def describe(self, names: Sequence[str]) -> dict[str, ParameterDescriptor]:
         """The descriptors of ``names`` (type, read-only, ranges)."""
         self._known(names)
-        descriptors = self._call(self.client.describe_parameters(list(names))).descriptors
+        descriptors = self._call(lambda: self.client.describe_parameters(list(names)),
+                                 "describe_parameters").descriptors
         return dict(zip(names, descriptors, strict=True))
 
     def set(self, name: str, text: str) -> tuple[Any, Any]:
@@ -173,7 +198,7 @@ class ParameterServices:
         except yaml.YAMLError:
             value = text                                    # a word, as ros2 param types it
         parameter = _parameter(name, fit_value(value, declared, text), declared, text)
-        result = self._call(self.client.set_parameters([parameter])).results[0]
+        result = self._set([parameter])[0]
         if not result.successful:
             raise Refused(f"{self.target} refused {name} = {text}: "
                           f"{' '.join(result.reason.split()) or 'no reason given'}")
@@ -185,7 +210,7 @@ class ParameterServices:
         skipped = [n for n, d in descriptors.items() if d.read_only]
         parameters = [_parameter(n, fit_value(v, descriptors[n].type), descriptors[n].type)
                       for n, v in values.items() if n not in skipped]
-        results = self._call(self.client.set_parameters(parameters)).results
+        results = self._set(parameters)
         refused = [f"{p.name}: {' '.join(r.reason.split())}"
                    for p, r in zip(parameters, results, strict=True) if not r.successful]
         if refused:

@@ -177,3 +177,78 @@ def test_duplicates_do_not_warn():
     _step(arbiter)
     values, warn, message = arbiter.report(1.0, lockstep=True)
     assert values["notch_duplicate"] == 1 and not warn and message == "ok"
+
+
+def _delayed(delay: int) -> CommandArbiter:
+    arbiter = CommandArbiter(("notch", "pointing"), ("notch",), RUN, LIMIT_N, "notch",
+                             delay_samples=delay)
+    arbiter.refresh_connections({"notch": 1}, TIMEOUT)
+    return arbiter
+
+
+def test_with_a_command_delay_the_answer_to_n_is_applied_at_n_plus_d():
+    arbiter = _delayed(2)
+    applied = []
+    for n in range(6):
+        assert arbiter.due == n - 2
+        arbiter.offer("notch", _force(n + 1.0), n, RUN, 0.0)
+        forces, _ = _step(arbiter, lockstep=False)
+        applied.append(forces["notch"][0])
+    assert applied == [0.0, 0.0, 1.0, 2.0, 3.0, 4.0]
+    assert arbiter.stats.late_commands == 0                  # nothing due at 0 and 1
+    assert arbiter.streams["notch"].late == 0
+
+
+def test_a_command_delay_gives_a_late_answer_its_extra_periods():
+    """Delay 1: an answer to n that comes during n+1 is on time; one that comes later is held."""
+    arbiter = _delayed(1)
+    arbiter.offer("notch", _force(1.0), 0, RUN, 0.0)
+    _step(arbiter, lockstep=False)                            # 0: nothing due
+    _step(arbiter, lockstep=False)                            # 1: answer 0 applied
+    arbiter.offer("notch", _force(2.0), 1, RUN, 0.0)          # answer 1 came during 2
+    forces, _ = _step(arbiter, lockstep=False)
+    assert forces["notch"][0] == 2.0 and arbiter.streams["notch"].late == 0
+    forces, _ = _step(arbiter, lockstep=False)                # 3: answer 2 never came
+    assert forces["notch"][0] == 2.0 and arbiter.streams["notch"].late == 1
+    arbiter.offer("notch", _force(4.0), 3, RUN, 0.0)          # the controller skipped to 3
+    arbiter.offer("notch", _force(5.0), 4, RUN, 0.0)          # and answered 4 early
+    forces, _ = _step(arbiter, lockstep=False)                # 4: answer 3 due
+    assert forces["notch"][0] == 4.0 and arbiter.streams["notch"].late == 1
+    forces, _ = _step(arbiter, lockstep=False)                # 5: answer 4 due
+    assert forces["notch"][0] == 5.0
+
+
+def test_lockstep_with_a_command_delay_waits_for_the_sample_due():
+    arbiter = _delayed(1)
+    arbiter.offer("notch", _force(1.0), 0, RUN, 0.0)
+    assert arbiter.ready(TIMEOUT)
+    _step(arbiter)
+    assert arbiter.ready(TIMEOUT)                             # answer 0 is due: here
+    forces, _ = _step(arbiter)
+    assert forces["notch"][0] == 1.0 and arbiter.stats.missed == 0
+    assert not arbiter.ready(TIMEOUT)                         # answer 1 is due: missing
+
+
+@pytest.mark.parametrize("delay", [-1, 1.5])
+def test_a_command_delay_is_a_whole_number_of_samples(delay):
+    with pytest.raises(ValueError, match="delay_samples"):
+        _delayed(delay)
+
+
+def test_the_held_log_has_the_runs_the_arbiter_held():
+    from hexapod_vibration.core.loop.held_log import ZERO_FORCE, HeldLog
+
+    arbiter, log = _delayed(1), HeldLog()
+    answered = {0, 1, 2, 5, 6, 14, 15}
+    for n in range(17):
+        if n in answered:
+            arbiter.offer("notch", _force(n + 1.0), n, RUN, 0.0)
+        arbiter.close_sample(False, TIMEOUT)
+        stream = arbiter.streams["notch"]
+        log.note(arbiter.due, stream.applied, stream.stale)
+        arbiter.advance()
+    # due 3, 4: the answer to 2 stood in; due 7..10: that of 6; at samples 12 and 13 (due
+    # 11, 12) the newest answer (6) was more than 5 samples old: zero force; at sample 14
+    # the answer to 14 made the stream fresh again, and the answer to 6 stood in for 13.
+    assert log.drain() == [(3, 4, 2), (7, 10, 6), (11, 12, ZERO_FORCE), (13, 13, 6)]
+    assert log.covered == 15 and log.drain() == []

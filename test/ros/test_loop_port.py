@@ -91,3 +91,20 @@ def test_new_run_is_flagged_once_confirmed(port_and_answers):
     assert verdicts[:2] == [None, None]
     assert verdicts[2].new_run and verdicts[2].index == 0 and verdicts[2].run == OTHER_RUN
     assert port.counters["unconfirmed"] == 2 and port.counters["new_runs"] == 1
+
+
+def test_skipped_samples_come_with_the_one_acted_on_and_only_those_before_it(port_and_answers):
+    _, port, _ = port_and_answers
+    assert port.receive(encode_strut_cdr(GRAVITY, 0, RUN)) is not None
+    port.hold_skipped(encode_strut_cdr(GRAVITY, 1, RUN))
+    port.hold_skipped(encode_strut_cdr(GRAVITY, 0, RUN))           # acted on already
+    port.hold_skipped(encode_strut_cdr(GRAVITY, 2, OTHER_RUN))     # another run
+    port.hold_skipped(encode_strut_cdr(np.full(6, 1e300), 2, RUN))  # out of range
+    port.hold_skipped(encode_strut_cdr(GRAVITY * 2.0, 2, RUN))
+    port.hold_skipped(encode_strut_cdr(GRAVITY, 3, RUN))           # the newest again
+    sample = port.receive(encode_strut_cdr(GRAVITY, 3, RUN))
+    assert sample.index == 3 and sample.gap == 2
+    assert [s.index for s in sample.skipped] == [1, 2]
+    np.testing.assert_array_equal(sample.skipped[1].values, GRAVITY * 2.0)
+    assert port.counters["out_of_range"] == 1
+    assert port.receive(encode_strut_cdr(GRAVITY, 4, RUN)).skipped == ()   # used once

@@ -152,3 +152,19 @@ def test_a_latest_only_subscription_gets_the_newest_queued_sample(ros_context):
     indices = [index for _, index in graph.loop_msgs]
     assert indices == [5], indices            # the older ones taken and dropped
     np.testing.assert_array_equal(graph.loop_msgs[-1][0], np.full(6, 5.0))
+
+
+def test_the_samples_a_latest_only_subscription_skips_go_to_its_skipped_callback(ros_context):
+    graph = Graph(ros_context)
+    skipped: list[int] = []
+    spinner = LoopSpinner(
+        ros_context.executor, [graph.loop_sub], True, 10.0, latest_only=[graph.loop_sub],
+        skipped={graph.loop_sub: lambda raw: skipped.append(
+            receive_strut_array(raw, graph.listener.get_logger(), "/spin/loop")[1])})
+    graph.connect(spinner)
+    skipped.clear()
+    for n in range(1, 6):                   # queued while the listener is not served
+        graph.loop_pub.publish(np.full(6, float(n)), n)
+    assert graph.spin_until(spinner, lambda: graph.loop_msgs and graph.loop_msgs[-1][1] == 5)
+    assert [index for _, index in graph.loop_msgs] == [5]
+    assert skipped == [1, 2, 3, 4]            # oldest first, before the newest

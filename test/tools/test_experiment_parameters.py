@@ -107,3 +107,21 @@ def test_a_realtime_priority_goes_to_every_loop_node_and_only_when_asked():
         == {"pph_driver": 50, "pointing_controller": 50, "notch_controller": 50}
     assert all("realtime_priority" not in p["ros__parameters"]
                for p in node_parameters(scenario, "realtime").values())
+
+
+def test_a_realtime_experiment_pipelines_the_commands_and_the_notch_knows_it():
+    from hexapod_vibration.core.sim.scenario import load_scenario
+    from hexapod_vibration.parameter_specs import NOTCH_CONTROLLER
+    from hexapod_vibration.paths import scenario_path
+    from hexapod_vibration.tools.experiment_setup import REALTIME_COMMAND_DELAY_SAMPLES
+
+    scenario = load_scenario(scenario_path("single_tone_harmonic"))
+    base = NOTCH_CONTROLLER["loop_delay_samples"].default
+    realtime = {n: p["ros__parameters"] for n, p in node_parameters(scenario, "realtime").items()}
+    assert REALTIME_COMMAND_DELAY_SAMPLES >= 1
+    assert realtime["pph_driver"]["command_delay_samples"] == REALTIME_COMMAND_DELAY_SAMPLES
+    assert realtime["notch_controller"]["loop_delay_samples"] == \
+        base + REALTIME_COMMAND_DELAY_SAMPLES
+    lockstep = {n: p["ros__parameters"] for n, p in node_parameters(scenario, "lockstep").items()}
+    assert "command_delay_samples" not in lockstep["pph_driver"]
+    assert "loop_delay_samples" not in lockstep["notch_controller"]

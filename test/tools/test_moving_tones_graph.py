@@ -1,5 +1,8 @@
 """Moving tones through the ROS graph (lockstep): frequency tracking and the tachometer.
 
+The nodes composed in one process (``pph_graph``, the same nodes and topics at half the
+CPU of three processes; the layouts' equality is tested in ``test_experiment``).
+
 Short runs of the experiment runner: the driver's rotor and frequency topics, the notch
 node's reference input and estimates, the recorder and the report's following bands, end
 to end. They need the notch supervisor's tracking API (``tone_estimates_hz``,
@@ -57,7 +60,7 @@ def _run(ros_env, tmp_path, scenario: dict) -> dict:
     path = tmp_path / "scenario.yaml"
     path.write_text(yaml.safe_dump(scenario))
     out = tmp_path / "run"
-    result = run_experiment(ros_env, path, out, timeout=600)
+    result = run_experiment(ros_env, path, out, "--composed", timeout=600)
     assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
     report = json.loads((out / "report.json").read_text())
     assert (out / "frequencies.png").stat().st_size > 10_000

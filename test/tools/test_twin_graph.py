@@ -3,7 +3,8 @@
 One short run (6.3 s, control on at 4.3 s, 2 s windows; the uncontrolled window is the
 0.5 s between the identification's ring-down and control-on) and its twin: the twin check passes
 only if the graph is deterministic up to control-on (the z acceleration identical to
-1e-9 m/s^2 on every sample before it), and the comparison is in report.json.
+1e-9 m/s^2 on every sample before it), and the comparison is in report.json. The nodes
+composed in one process (``pph_graph``): half the CPU of three processes.
 """
 
 from __future__ import annotations
@@ -22,7 +23,7 @@ def test_experiment_twin_runs_the_twin_and_compares_the_same_samples(ros_env, tm
     path = tmp_path / "short.yaml"
     path.write_text(yaml.safe_dump(SCENARIO))
     out = tmp_path / "run"
-    result = run_experiment(ros_env, path, out, "--twin", timeout=400)
+    result = run_experiment(ros_env, path, out, "--twin", "--composed", timeout=400)
     assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
     assert "against its twin" in result.stdout
     twin_report = json.loads((out / "twin" / "report.json").read_text())

@@ -136,9 +136,7 @@ class NotchSupervisor:
     def check(self, changes: Mapping[str, Any]) -> None:
         """Check a set of changes (parameter name -> value) as a whole; change nothing.
 
-        Raises:
-            KeyError: a name that is not a notch setting.
-            ValueError: the reason the set is refused (for the caller, one line).
+        Raises KeyError (not a notch setting) or ValueError (the reason, one line).
         """
         self._plan(changes)
 
@@ -181,25 +179,16 @@ class NotchSupervisor:
             self.follower.rebuild()
 
     def start_identification(self, tones: list[float] | None = None) -> str:
-        """Begin measuring G at the tones from the next sample on; the canceller is frozen.
+        """Measure G at ``tones`` (Hz; None: the canceller's) from the next sample, frozen.
 
-        Args:
-            tones: tones to identify (Hz); None: the canceller's tones.
-
-        Returns:
-            A one-line description of the run.
-
-        Raises:
-            ValueError: there are no tones to identify.
+        Returns the run's one-line description; ValueError if there are no tones.
         """
         return self.identification.start(tones, self._clock.last + 1)
 
     def fade_out(self, reason: str, fade_s: float = FADE_S, mu_fall_s: float = 0.0) -> None:
         """Fade control out over ``fade_s`` (s), after mu falls to 0 over ``mu_fall_s`` (s).
 
-        What the safety monitor does when control makes things worse; ``reason`` (one line)
-        is reported and held as the refusal until the settings change or a new
-        identification succeeds.
+        ``reason`` (one line) is reported and held as the refusal (``SafetyMonitor``).
         """
         self.safety.fade_out(reason, fade_s, mu_fall_s)
 
@@ -213,6 +202,7 @@ class NotchSupervisor:
         """
         self._clock.restart_at(first_index)
         self.dc_blocker.reset()
+        self.identification.held.clear()
         self._gate.new_run(first_index)
         self._events.add("warn", f"new run of the loop from sample {first_index}: sequence "
                                  "restarted, identification and weights kept")
@@ -258,6 +248,15 @@ class NotchSupervisor:
             identification.step(error, command)
         return command
 
+    def observe(self, index: int, accel_m_s2: np.ndarray) -> None:
+        """A sample received but skipped for a newer one: to the identification's record."""
+        if self._clock.observe(index):
+            self.identification.observe(int(index), self.dc_blocker.step(accel_m_s2))
+
+    def note_held(self, rows: Sequence[tuple[int, int, int]], covered: int) -> None:
+        """The driver's held commands (``/pph/notch_held``; ``core/control/held_inputs``)."""
+        self.identification.held.add(rows, covered)
+
     def _missed(self, index: int, gap: int) -> None:
         """``gap`` samples before ``index`` never came: left out, the phases move on.
 
@@ -266,7 +265,7 @@ class NotchSupervisor:
         since the last report (``missed_samples`` on /diagnostics counts every one).
         """
         self.canceller.advance(gap)
-        self.identification.skip(gap)
+        self.identification.skip(index - gap, gap)
         self._gaps.add(index, gap, self._events)
 
     def _identify_when_due(self, index: int) -> None:

@@ -41,8 +41,10 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.interpolate import CubicSpline
 from scipy.optimize import minimize_scalar
+from scipy.sparse.linalg import LinearOperator, gmres
 
 from hexapod_vibration.core.control.adaptation import SampledRun, schroeder_phases
+from hexapod_vibration.core.control.held_inputs import held_input_response
 
 DEFAULT_PERIOD_S = 8.0
 DEFAULT_SETTLE_S = 2.0
@@ -54,6 +56,11 @@ DEFAULT_SMOOTHING_HZ = 4.0
 DEFAULT_LINE_FACTOR = 10.0
 STRONG_LINE_FACTOR = 100.0
 """A spectral peak this many times the median power is a disturbance line, removed."""
+HELD_ITERATIONS = 30
+"""Most GMRES iterations of the correction for held inputs (:meth:`BroadbandIdentifier.
+correct_for_held_inputs`)."""
+HELD_SOLVER_TOLERANCE = 1e-4
+"""Relative residual at which the correction's GMRES stops."""
 MAX_REMOVED_LINES = 6
 OFF_GRID_GAIN = 0.1
 """A line counts as off the grid only if the off-grid fit leaves less than this fraction of
@@ -447,6 +454,11 @@ def disturbance_from_periods(design: MultisineDesign, error_periods: np.ndarray,
     return DisturbanceSpectrum(even * design.sample_rate_hz / p, csd)
 
 
+def _median_line_error(response: PlantFrequencyResponse) -> float:
+    """The median relative standard error of every column's lines."""
+    return float(np.median(np.concatenate(response.line_relative_error)))
+
+
 class BroadbandIdentifier(SampledRun):
     """Measure G(f) over 0..fs/2 on a running plant with a periodic multisine.
 
@@ -497,6 +509,8 @@ class BroadbandIdentifier(SampledRun):
         self._max_rel = float(max_relative_error)
         self._u = np.zeros(self._c)
         self._n = 0
+        self._difference: np.ndarray | None = None
+        self._cleaned: tuple[np.ndarray, list[RemovedLine]] | None = None
 
     def step(self, error: np.ndarray) -> np.ndarray:
         """Record the error of sample n (m/s^2, (C,)) and return the command (N, (C,))."""
@@ -529,9 +543,27 @@ class BroadbandIdentifier(SampledRun):
         """
         if not self.done:
             raise RuntimeError(f"identification not finished ({100 * self.progress:.0f} %)")
-        periods, removed = self._cleaned_periods()
+        return self._response(self._cleaned_periods())
+
+    def _response(self, cleaned: tuple[np.ndarray, list[RemovedLine]]
+                  ) -> PlantFrequencyResponse:
+        """G from aligned periods and the lines removed from them (:meth:`_cleaned_periods`)."""
+        periods, removed = cleaned
         return response_from_periods(self.design, periods, self._max_rel,
                                      [line.frequency_hz for line in removed])
+
+    def correct_for_held_inputs(self, difference: np.ndarray) -> None:
+        """The input that went in was the design plus ``difference`` (total, C) (N).
+
+        Commands the driver held (:mod:`~hexapod_vibration.core.control.held_inputs`):
+        the analysis measures G with the input that went in (:meth:`_modelled`).
+        """
+        difference = np.asarray(difference, dtype=float)
+        if difference.shape != (self._total, self._c):
+            raise ValueError(f"difference must have shape ({self._total}, {self._c}), "
+                             f"got {difference.shape}")
+        self._difference = difference if np.any(difference) else None
+        self._cleaned = None
 
     def disturbance(self, smoothing_hz: float = DEFAULT_SMOOTHING_HZ) -> DisturbanceSpectrum:
         """The disturbance's CSD from the same record (:func:`disturbance_from_periods`).
@@ -576,27 +608,88 @@ class BroadbandIdentifier(SampledRun):
         return list(removed) + on_grid
 
     def _cleaned_periods(self) -> tuple[np.ndarray, list[RemovedLine]]:
-        """The aligned periods with the strong disturbance lines removed (cached)."""
-        if getattr(self, "_cleaned", None) is None:
-            record, removed = remove_strong_lines(self._filled_record(), self._fs, self.design)
+        """The aligned periods with the strong disturbance lines removed (cached).
+
+        With held inputs (:meth:`correct_for_held_inputs`) or missing samples, those of the
+        modelled record (:meth:`_modelled`) when it is the better one.
+        """
+        if self._cleaned is None:
+            filled = self._fill(self._record)
+            record, removed = remove_strong_lines(filled, self._fs, self.design)
+            cleaned = (self._align(record), removed)
+            if self._difference is not None or not self._received.all():
+                record, cleaned = self._modelled(filled, record, cleaned)
             self._cleaned_record = record
-            self._cleaned = (self._align(record), removed)
+            self._cleaned = cleaned
         return self._cleaned
 
-    def _filled_record(self) -> np.ndarray:
-        """The record with its missing samples interpolated (cubic, from the received ones).
+    def _modelled(self, filled: np.ndarray, record: np.ndarray,
+                  cleaned: tuple[np.ndarray, list[RemovedLine]]
+                  ) -> tuple[np.ndarray, tuple[np.ndarray, list[RemovedLine]]]:
+        """The record as the designed input would have given it, every sample received.
 
-        The DFT needs every sample of a period. A gap of a few samples at 1 kHz is
-        short against the periods of the strong low-frequency lines, which a cubic
-        interpolation follows closely; what it misses spreads over the record as broadband
-        error, which the detection lines measure with the rest of the noise.
+        The input that went in was the design plus the held inputs' difference, and the
+        missing samples were filled by a cubic spline (:meth:`_fill`), which misses the
+        excitation's response above a few tens of Hz. The lines' values x (G at each line,
+        (L, C)) solve ``E(F(G_x * u)) = E(record)``: E the estimate of the lines from a
+        record (a DFT at the excited bins over the designed phasors), F the fill, ``G_x *
+        u`` the response of the G interpolated from x to the applied input, from rest. A
+        linear system close to the identity, solved by GMRES (the plain fixed point
+        diverges with a few percent of held inputs). The record, less ``F(G_x * u)`` plus
+        the response to the design, is then analysed as any record; kept only if its
+        lines' median standard error is below the unmodelled one's.
+        """
+        settle = self._settle
+        designed = self._table[np.arange(self._total) % self._p]
+        applied = designed if self._difference is None else designed + self._difference
+        lines = self._lines_of(record)
+
+        def model(x: np.ndarray) -> np.ndarray:
+            return self._lines_of(self._fill(self._response_to(x.reshape(lines.shape),
+                                                               applied)[settle:])).ravel()
+
+        operator = LinearOperator((lines.size, lines.size), dtype=complex, matvec=model)
+        solution, _ = gmres(operator, lines.ravel(), x0=lines.ravel(),
+                            rtol=HELD_SOLVER_TOLERANCE, maxiter=HELD_ITERATIONS)
+        x = solution.reshape(lines.shape)
+        modelled = (filled - self._fill(self._response_to(x, applied)[settle:])
+                    + self._response_to(x, designed)[settle:])
+        corrected, removed = remove_strong_lines(modelled, self._fs, self.design)
+        latest = (self._align(corrected), removed)
+        if (_median_line_error(self._response(latest))
+                < _median_line_error(self._response(cleaned))):
+            return corrected, latest
+        return record, cleaned
+
+    def _lines_of(self, record: np.ndarray) -> np.ndarray:
+        """The lines' estimate (L, C) of a record (N, C): E / U at the excited bins."""
+        periods = self._align(record)
+        spectrum = np.fft.fft(periods.mean(axis=0), axis=0) * (2.0 / self._p)
+        return spectrum[self.design.bins] / self.design.phasors_n[:, None]
+
+    def _response_to(self, lines: np.ndarray, inputs: np.ndarray) -> np.ndarray:
+        """The response (total, C) of the G of ``lines`` (L, C) to ``inputs`` (total, C)."""
+        design = self.design
+        columns = [np.flatnonzero(design.channel_of_bin == j) for j in range(self._c)]
+        response = PlantFrequencyResponse(
+            self._fs, tuple(design.frequencies_hz[i] for i in columns),
+            tuple(lines[i] for i in columns), tuple(np.zeros(i.size) for i in columns))
+        return held_input_response(response.at, inputs, self._fs)
+
+    def _fill(self, record: np.ndarray) -> np.ndarray:
+        """``record`` (N, C) with the missing samples interpolated (cubic, from the others).
+
+        The DFT needs every sample of a period. A gap of a few samples at 1 kHz is short
+        against the periods of the strong low-frequency lines, which a cubic interpolation
+        follows closely; the excitation's response it misses is modelled
+        (:meth:`_modelled`).
         """
         if self._received.all():
-            return self._record
+            return record
         received = np.flatnonzero(self._received)
         missing = np.flatnonzero(~self._received)
-        filled = self._record.copy()
-        filled[missing] = CubicSpline(received, self._record[received], axis=0)(missing)
+        filled = record.copy()
+        filled[missing] = CubicSpline(received, record[received], axis=0)(missing)
         return filled
 
     def _align(self, record: np.ndarray) -> np.ndarray:

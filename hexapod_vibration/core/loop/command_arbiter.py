@@ -4,6 +4,11 @@ The driver publishes the sensors of sample ``n`` and applies, over [n, n+1), the
 of its controllers' streams (notch, pointing). :class:`CommandArbiter` decides which
 command of each stream that is:
 
+- **the command delay** ``d`` (``command_delay_samples``): the command answering sample
+  ``n`` is applied over [n+d, n+d+1), so a controller has d+1 periods to answer in
+  realtime (a pipeline; the loop's delay grows by d samples, which the notch's
+  identification measures and its ``loop_delay_samples`` must include). ``d = 0``: the
+  answer to sample n is applied over [n, n+1);
 - **one command per sample, the first valid one**: a command is refused (and counted by
   reason) if it is malformed (counted by the node, :meth:`CommandArbiter.refuse`), beyond
   the actuator's range, of another run, for a sample not published yet, or for a sample at
@@ -69,6 +74,11 @@ class CommandStream:
 
     name: str
     force_n: np.ndarray = field(default_factory=lambda: np.zeros(STRUT_COUNT))
+    """The force applied last (N): the command of sample ``applied``, held while none is due."""
+    applied: int = -1
+    """Sample index of the command applied last (-1: none yet)."""
+    queued: deque = field(default_factory=deque)
+    """Accepted commands not applied yet, as (sample index, force (N)), oldest first."""
     sample: int = -1
     """Sample index of the last accepted command (-1: none yet)."""
     accepted_at: int = -1
@@ -101,11 +111,19 @@ class LoopStats:
     last_publish_s: float = 0.0
 
 
+def _apply_due(stream: CommandStream, due: int) -> None:
+    """Move ``stream``'s newest queued command for a sample <= ``due`` to its applied one."""
+    queued = stream.queued
+    while queued and queued[0][0] <= due:
+        stream.applied, stream.force_n = queued.popleft()
+
+
 class CommandArbiter:
     """Which command of each stream the driver applies at its current sample."""
 
     def __init__(self, streams: Sequence[str], expected: Sequence[str], run: int,
-                 limit_n: float, latency_stream: str | None = None) -> None:
+                 limit_n: float, latency_stream: str | None = None,
+                 delay_samples: int = 0) -> None:
         """Streams by name, the ones lockstep waits for, the driver's run and force range.
 
         Args:
@@ -114,10 +132,14 @@ class CommandArbiter:
             run: The driver's run identity; commands of another run are refused.
             limit_n: Largest command magnitude an actuator can be asked for (N).
             latency_stream: The stream whose answers time the loop's latency.
+            delay_samples: The command delay d (samples, >= 0): the answer to sample n
+                is applied over [n+d, n+d+1).
 
         Raises:
             ValueError: ``expected`` names a stream not in ``streams``.
         """
+        if int(delay_samples) != delay_samples or delay_samples < 0:
+            raise ValueError(f"delay_samples must be an integer >= 0, got {delay_samples!r}")
         unknown = set(expected) - set(streams)
         if unknown:
             raise ValueError(f"lockstep_controllers: unknown {sorted(unknown)}, "
@@ -127,6 +149,7 @@ class CommandArbiter:
         self.run = run
         self.limit_n = limit_n
         self.latency_stream = latency_stream
+        self.delay = int(delay_samples)
         self.sample = 0
         """The current sample: published (or about to be), its commands awaited."""
         self.stats = LoopStats()
@@ -146,7 +169,7 @@ class CommandArbiter:
         if reason is not None:
             stream.refused[reason] += 1
             return reason
-        stream.force_n = np.array(values, dtype=float)
+        stream.queued.append((index, np.array(values, dtype=float)))
         stream.sample = index
         stream.accepted_at = self.sample
         stream.received_s = now_s
@@ -207,9 +230,15 @@ class CommandArbiter:
         return [n for n in self.expected
                 if self.streams[n].connected and self.alive(n, timeout_samples)]
 
+    @property
+    def due(self) -> int:
+        """The sample whose commands are applied at the current sample (``sample - d``)."""
+        return self.sample - self.delay
+
     def ready(self, timeout_samples: int) -> bool:
-        """Lockstep: every waited stream answered the current sample."""
-        return all(self.streams[n].sample == self.sample for n in self.waited(timeout_samples))
+        """Lockstep: every waited stream answered the sample due now (:attr:`due`)."""
+        due = self.due
+        return all(self.streams[n].sample >= due for n in self.waited(timeout_samples))
 
     def unanswered(self) -> list[str]:
         """Expected streams that did not answer the current sample (the handshake's wait)."""
@@ -219,14 +248,19 @@ class CommandArbiter:
                      ) -> tuple[dict[str, np.ndarray], list[str]]:
         """Count what the current sample lacked; the force of every stream to apply.
 
-        Lockstep counts the sample as missed if a connected expected stream did not answer
-        it; realtime counts every connected stream that did not answer it as late.
+        Each stream's command is its answer to the sample due (:attr:`due`), or the one
+        applied before it held in its place. Lockstep counts the sample as missed if a
+        connected expected stream did not answer the sample due; realtime counts every
+        connected stream that did not as late.
 
         Returns:
             ``(forces, newly_stale)``: the force (N) of each stream (its held command, or
             zero once stale), and the streams that went stale at this sample.
         """
-        answered = {n: s.sample == self.sample for n, s in self.streams.items()}
+        due = self.due
+        for stream in self.streams.values():
+            _apply_due(stream, due)
+        answered = {n: s.applied == due or due < 0 for n, s in self.streams.items()}
         if lockstep:
             if any(self.streams[n].connected and not answered[n] for n in self.expected):
                 self.stats.missed += 1

@@ -28,6 +28,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from hexapod_vibration.core.control import adaptation
+from hexapod_vibration.core.control.held_inputs import (
+    HELD_WAIT_SAMPLES,
+    HeldCommands,
+    input_difference,
+)
 from hexapod_vibration.core.control.notch import AdaptiveNotchCanceller
 from hexapod_vibration.core.control.plant_identification import BroadbandIdentifier
 from hexapod_vibration.core.control.supervisor.config import Settings
@@ -90,6 +95,9 @@ class PlantIdentification:
         self.end_sample = -1
         self.analysis: Iterator[None] | None = None
         """The analysis of the finished identification, one piece per sample; None: none."""
+        self.held = HeldCommands()
+        """The driver's reports of the commands it held (a realtime driver)."""
+        self._observed: dict[int, np.ndarray] = {}
 
     @property
     def running(self) -> bool:
@@ -130,15 +138,37 @@ class PlantIdentification:
         self.tones = tones
         self._canceller.set_frozen(True)
         self.start_sample = first_sample
+        self.held.forget_before(first_sample)
         self.end_sample = -1
         text = f"identifying the plant {what} ({self.identifier.duration_s:.1f} s of samples)"
         self._events.add("info", text)
         return text
 
-    def skip(self, samples: int) -> None:
-        """``samples`` samples never came: the running identification leaves them out."""
-        if self.identifier is not None:
-            self.identifier.skip(samples)        # finished by it: analysed at the next step
+    def observe(self, index: int, error: np.ndarray) -> None:
+        """Sample ``index``'s error (C,) (m/s^2), received but not acted on (see skip).
+
+        Kept while an identification runs: when the gap is found, it is recorded, so the
+        gap costs the sample's command only (held by the driver, which reports it).
+        """
+        if self.identifier is not None and self.analysis is None:
+            self._observed[index] = error.copy()
+
+    def skip(self, first: int, samples: int) -> None:
+        """Samples ``first..first+samples-1`` were not acted on.
+
+        The running identification records those observed (:meth:`observe`) and leaves
+        the others out (a run finished by them is analysed at the next step).
+        """
+        observed, self._observed = self._observed, {}
+        identifier = self.identifier
+        if identifier is None or self.analysis is not None:
+            return
+        for index in range(first, first + samples):
+            error = observed.get(index)
+            if error is None:
+                identifier.skip(1)
+            else:
+                identifier.step(error)          # recorded; its command was not sent
 
     def restart(self, first_sample: int) -> None:
         """Start the running identification again from ``first_sample``."""
@@ -169,7 +199,7 @@ class PlantIdentification:
 
         ``error``: the sample's DC-blocked accelerations (C,) (m/s^2).
         """
-        if self.identifier is not None:
+        if self.identifier is not None and self.analysis is None:
             command += self.identifier.step(error)
             if self.identifier.done:
                 self.analysis = self._analyse()
@@ -205,6 +235,8 @@ class PlantIdentification:
         G, its confidence, the coefficients, the bound, the policy and the prediction. The
         canceller stays frozen and off meanwhile (state ``identifying``).
         """
+        if isinstance(self.identifier, BroadbandIdentifier):
+            yield from self._correct_for_held_commands()
         missing = self.identifier.missing_refusal()
         if missing:
             self.identifier = None
@@ -235,6 +267,30 @@ class PlantIdentification:
         if broadband and self._follower.acquires:
             self._follower.acquire(lines)
         yield from self._put_in_force(measured.response, broadband)
+
+    def _correct_for_held_commands(self) -> Iterator[None]:
+        """Wait for the driver's report on the run's last sample; tell the identifier.
+
+        At most ``HELD_WAIT_SAMPLES`` samples, one per piece; without reports (lockstep, a
+        driver that does not report) at once.
+        """
+        identifier, first = self.identifier, self.start_sample
+        total = int(round(identifier.duration_s * self._settings.fs))
+        last = first + total - 1
+        for _ in range(HELD_WAIT_SAMPLES):
+            if self.held.covers(last):
+                break
+            yield
+        rows = self.held.rows(first, last)
+        if not rows:
+            return
+        held = sum(min(b, last) - max(a, first) + 1 for a, b, _ in rows)
+        identifier.correct_for_held_inputs(
+            input_difference(rows, first, identifier.design.period_table(), total))
+        complete = "" if self.held.covers(last) else " (the driver's report on its last " \
+            "samples did not come)"
+        self._events.add("info", f"identification: the driver held {held} of its "
+                                 f"{total} commands; G corrected for them{complete}")
 
     def _put_in_force(self, response: np.ndarray, broadband: bool
                       ) -> Generator[None, None, None]:

@@ -17,6 +17,8 @@ class SampleClock:
         """No sample yet (``first`` and ``last`` are -1)."""
         self.first = -1
         self.last = -1
+        self.observed = -1
+        """The last sample observed but not taken (a loop behind skipped it)."""
         self.counters = {"gaps": 0, "missed_samples": 0, "duplicates": 0}
 
     def take(self, index: int) -> int | None:
@@ -38,9 +40,19 @@ class SampleClock:
         self.last = index
         return gap
 
+    def observe(self, index: int) -> bool:
+        """Sample ``index`` was received but skipped for a newer one; True if it is new.
+
+        New: after the last sample taken or observed (taken later, it is in a gap).
+        """
+        if index <= max(self.last, self.observed):
+            return False
+        self.observed = int(index)
+        return True
+
     def restart_at(self, first_index: int) -> None:
         """A new run of the loop: the next sample is ``first_index`` (no gap counted)."""
-        self.last = int(first_index) - 1
+        self.last = self.observed = int(first_index) - 1
 
 
 class GapReport:
