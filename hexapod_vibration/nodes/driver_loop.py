@@ -35,6 +35,7 @@ class PPHDriver(Protocol):
 
     mode: str
     fs: float
+    outputs: Any
     sample: int
     lockstep_timeout_s: float
 
@@ -52,7 +53,9 @@ class PPHDriver(Protocol):
 
 
 def wait_while_held(node: PPHDriver, spinner: LoopSpinner) -> None:
-    """Lockstep breakpoint: serve callbacks (parameters) until ``hold_at_time_s`` moves on.
+    """The breakpoint: serve callbacks (parameters) until ``hold_at_time_s`` moves on.
+
+    Lockstep at any sample; realtime only before sample 0 (the clock starts once released).
 
     On entering the hold the driver reports ``held: true`` with its sample on
     /diagnostics, so a supervisor (the experiment runner) knows the loop stopped exactly
@@ -166,11 +169,20 @@ def run_realtime(node: PPHDriver, spinner: LoopSpinner) -> None:
         node.apply_and_step()
 
 
+FLUSH_S = 2.0
+"""Longest wait (s, wall) at exit for the readers to acknowledge every sample published."""
+
+
 def run_driver(node: PPHDriver, spinner: LoopSpinner) -> None:
-    """Run the loop of the driver's ``clock_mode`` until shutdown, then report once more."""
+    """Run the loop of the driver's ``clock_mode`` until shutdown, then report once more.
+
+    At exit every published sample is delivered first (at most ``FLUSH_S``): a recorder
+    behind a realtime loop had lost the last 0.6 s of a run when the driver exited.
+    """
     node.restart_stats()
     try:
         (run_lockstep if node.mode == "lockstep" else run_realtime)(node, spinner)
     finally:
         if rclpy.ok():
+            node.outputs.readers.wait_for_acks(FLUSH_S)
             node.publish_diagnostics()

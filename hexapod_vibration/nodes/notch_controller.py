@@ -85,11 +85,11 @@ class NotchControllerNode(Node):
         self._published_sensitivity: object | None = None
         # The tachometer is a loop topic too, served first: the driver publishes sample n's
         # reference before its sensors, so it is taken before sample n is stepped.
-        self.loop_subscriptions = [
-            create_loop_subscription(self, REFERENCE_FREQUENCY_TOPIC, self._on_reference),
-            create_loop_subscription(self, "/pph/accel", self._on_accel)]
+        reference = create_loop_subscription(self, REFERENCE_FREQUENCY_TOPIC, self._on_reference)
+        accel = create_loop_subscription(self, "/pph/accel", self._on_accel)
+        self.loop_subscriptions = [reference, accel]
         self.latest_only_subscriptions = list(self.loop_subscriptions)  # stale samples: skipped
-        self.skipped_message_callbacks = {self.loop_subscriptions[1]: self.port.hold_skipped}
+        self.skipped_message_callbacks = {accel: self.port.hold_skipped}
         self.loop_subscriptions.append(subscribe_held_reports(
             self, lambda: self.port.sequence.run, self.supervisor.note_held))
         self.meter = loop_meter()

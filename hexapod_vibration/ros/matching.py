@@ -15,9 +15,11 @@ on its topic (:func:`unmatched_topics`).
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable, Iterable, Mapping
 from typing import Any
 
+from rclpy.duration import Duration
 from rclpy.event_handler import PublisherEventCallbacks
 from rclpy.node import Node
 from rclpy.publisher import Publisher
@@ -56,6 +58,18 @@ class MatchedReaders:
         """``node.create_publisher(msg_type, topic, qos)``, watched (with :meth:`callbacks`)."""
         return self.watch(node.create_publisher(msg_type, topic, qos,
                                                 event_callbacks=self.callbacks()))
+
+    def wait_for_acks(self, timeout_s: float) -> list[str]:
+        """Wait (at most ``timeout_s`` in all) until every reader acknowledged what was sent.
+
+        Before a node exits: a RELIABLE writer destroyed with unacknowledged samples drops
+        them, and a reader that lags (a recorder on a loaded machine) loses the run's tail.
+        Returns the topics still unacknowledged.
+        """
+        deadline = time.monotonic() + timeout_s
+        return [topic for topic, publisher in self._publishers.items()
+                if not publisher.wait_for_all_acked(
+                    Duration(seconds=max(0.0, deadline - time.monotonic())))]
 
     def values(self) -> dict[str, int]:
         """``{"<topic> readers": matched subscriptions}`` of every watched publisher."""

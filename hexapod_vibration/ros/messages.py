@@ -281,7 +281,9 @@ class ControllerLoopPort:
 
     def receive(self, msg: Float64MultiArray | bytes) -> LoopSample | None:
         """The sample to act on, or None (refused, repeated, late or unconfirmed)."""
-        skipped, self._skipped = self._skipped, []
+        skipped = self._skipped
+        if skipped:                              # rare (a loop behind): no allocation else
+            self._skipped = []
         sample = receive_strut_sample(msg, self.logger, self.topic)
         if sample is None:
             self.counters["malformed"] += 1
@@ -302,8 +304,11 @@ class ControllerLoopPort:
             self.logger.info(f"{self.topic}: new run {sample.run} from sample {verdict.index}")
         if self.counts_gaps:
             self.counters["missed_samples"] += verdict.gap
-        return LoopSample(sample.values, verdict.index, sample.run, verdict.gap, new_run,
-                          tuple(s for s in skipped if not new_run and s.index < verdict.index))
+        if skipped and not new_run:
+            skipped = tuple(s for s in skipped if s.index < verdict.index)
+            return LoopSample(sample.values, verdict.index, sample.run, verdict.gap, new_run,
+                              skipped)
+        return LoopSample(sample.values, verdict.index, sample.run, verdict.gap, new_run)
 
     def hold_skipped(self, msg: Float64MultiArray | bytes) -> None:
         """An older queued message skipped for a newer one (a loop behind).

@@ -37,6 +37,7 @@ from hexapod_vibration.core.control import sensitivity
 from hexapod_vibration.core.model.config import ModelConfig
 from hexapod_vibration.core.sim.closed_loop import LoopRecord
 from hexapod_vibration.core.sim.scenario import Scenario, notch_config
+from hexapod_vibration.parameter_specs import moving_tones, update_lowpass_corner_hz
 from hexapod_vibration.sweep.loop_model import canceller_plant, response_function
 
 # The notch accepts mu in [0, 1): the model's bound is searched up to 1.
@@ -56,11 +57,10 @@ def predicted_bounds(record: LoopRecord, scenario: Scenario, config: ModelConfig
         return out
     if math.isfinite(record.mu_bound):
         out["mu_bound_identified"] = float(record.mu_bound)
-    moving = notch.frequency_tracking or bool(notch.reference_harmonics)
-    if not moving:
+    if not moving_tones(vars(notch)):
         tones = tuple(float(f) for f in scenario.notch.tone_frequencies_hz)
         out["mu_bound_model"] = model_bound(config, tones, np.asarray(record.coefficients),
-                                            notch.update_lowpass_hz)
+                                            update_lowpass_corner_hz(vars(notch)))
     out["mu_limit_sensitivity"] = predicted_sensitivity_mu_limit(record, scenario, config)
     return out
 

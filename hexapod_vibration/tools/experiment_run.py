@@ -223,7 +223,7 @@ class ExperimentRun:
         self.start()
         self._wait(lambda: self.graph.graph_ready(self.has_notch), "waiting for the graph")
         # Discovery is not matching: the recorder itself must report every publisher matched
-        # (lockstep: before the driver leaves its start breakpoint, so the bag has sample 0).
+        # (before the driver leaves its start breakpoint, so the bag has sample 0).
         self._wait(lambda: not self.graph.recorder_unmatched(self.recorded_topics()),
                    "recorder matching every publisher")
         # and every publisher matching the recorder: see writers_unmatched

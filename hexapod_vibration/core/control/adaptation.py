@@ -379,6 +379,11 @@ class SampledRun:
         return min(1.0, self._n / self._total)
 
     @property
+    def total_samples(self) -> int:
+        """Samples of the whole run (settling included)."""
+        return self._total
+
+    @property
     def duration_s(self) -> float:
         """Total duration of the run (s)."""
         return self._total / self._fs

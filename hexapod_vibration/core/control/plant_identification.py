@@ -56,11 +56,11 @@ DEFAULT_SMOOTHING_HZ = 4.0
 DEFAULT_LINE_FACTOR = 10.0
 STRONG_LINE_FACTOR = 100.0
 """A spectral peak this many times the median power is a disturbance line, removed."""
-HELD_ITERATIONS = 30
-"""Most GMRES iterations of the correction for held inputs (:meth:`BroadbandIdentifier.
-correct_for_held_inputs`)."""
-HELD_SOLVER_TOLERANCE = 1e-4
-"""Relative residual at which the correction's GMRES stops."""
+MODEL_ITERATIONS = 30
+"""Most GMRES iterations of the modelled record (held inputs, missing samples:
+:meth:`BroadbandIdentifier._modelled`)."""
+MODEL_TOLERANCE = 1e-4
+"""Relative residual at which the modelled record's GMRES stops."""
 MAX_REMOVED_LINES = 6
 OFF_GRID_GAIN = 0.1
 """A line counts as off the grid only if the off-grid fit leaves less than this fraction of
@@ -98,6 +98,10 @@ class MultisineDesign:
     def frequencies_hz(self) -> np.ndarray:
         """Frequency of each line (Hz)."""
         return self.bins * self.sample_rate_hz / self.period_samples
+
+    def channel_lines(self) -> list[np.ndarray]:
+        """The indices (into ``bins``) of each channel's lines, channel by channel."""
+        return [np.flatnonzero(self.channel_of_bin == j) for j in range(self.n_channels)]
 
     def period_table(self) -> np.ndarray:
         """The commands of one period (P, C) (N), exactly periodic."""
@@ -347,6 +351,11 @@ def detection_line_noise(spectrum: np.ndarray, bins: np.ndarray,
     return out
 
 
+def period_spectrum(error_periods: np.ndarray) -> np.ndarray:
+    """The phasors (P, C) of the mean period of ``error_periods`` (M, P, C): DFT x 2/P."""
+    return np.fft.fft(error_periods.mean(axis=0), axis=0) * (2.0 / error_periods.shape[1])
+
+
 def response_from_periods(design: MultisineDesign, error_periods: np.ndarray,
                           max_relative_error: float = DEFAULT_MAX_RELATIVE_ERROR,
                           removed_hz: Sequence[float] = ()) -> PlantFrequencyResponse:
@@ -372,7 +381,7 @@ def response_from_periods(design: MultisineDesign, error_periods: np.ndarray,
     if p != design.period_samples or c != design.n_channels:
         raise ValueError(f"error_periods must be (M, {design.period_samples}, "
                          f"{design.n_channels}), got {e.shape}")
-    spectrum = np.fft.fft(e.mean(axis=0), axis=0) * (2.0 / p)           # (P, C) phasors
+    spectrum = period_spectrum(e)                                        # (P, C) phasors
     mean = spectrum[design.bins] / design.phasors_n[:, None]             # (L, C) = E / U
     noise = detection_line_noise(spectrum, design.bins) / np.abs(design.phasors_n)[:, None]
     rel = (np.linalg.norm(noise, axis=1)
@@ -383,8 +392,7 @@ def response_from_periods(design: MultisineDesign, error_periods: np.ndarray,
         rel[np.abs(freqs - f_line) <= 1.5 * max(record_bin_hz, design.sample_rate_hz / p)
             ] = np.inf
     lines_f, lines_g, lines_e = [], [], []
-    for j in range(c):
-        idx = np.flatnonzero(design.channel_of_bin == j)
+    for idx in design.channel_lines():
         good = idx[~(rel[idx] > max_relative_error)]
         if good.size < 4:
             good = np.sort(idx[np.argsort(rel[idx])[:4]])
@@ -511,6 +519,7 @@ class BroadbandIdentifier(SampledRun):
         self._n = 0
         self._difference: np.ndarray | None = None
         self._cleaned: tuple[np.ndarray, list[RemovedLine]] | None = None
+        self._columns = self.design.channel_lines()
 
     def step(self, error: np.ndarray) -> np.ndarray:
         """Record the error of sample n (m/s^2, (C,)) and return the command (N, (C,))."""
@@ -650,7 +659,7 @@ class BroadbandIdentifier(SampledRun):
 
         operator = LinearOperator((lines.size, lines.size), dtype=complex, matvec=model)
         solution, _ = gmres(operator, lines.ravel(), x0=lines.ravel(),
-                            rtol=HELD_SOLVER_TOLERANCE, maxiter=HELD_ITERATIONS)
+                            rtol=MODEL_TOLERANCE, maxiter=MODEL_ITERATIONS)
         x = solution.reshape(lines.shape)
         modelled = (filled - self._fill(self._response_to(x, applied)[settle:])
                     + self._response_to(x, designed)[settle:])
@@ -663,14 +672,12 @@ class BroadbandIdentifier(SampledRun):
 
     def _lines_of(self, record: np.ndarray) -> np.ndarray:
         """The lines' estimate (L, C) of a record (N, C): E / U at the excited bins."""
-        periods = self._align(record)
-        spectrum = np.fft.fft(periods.mean(axis=0), axis=0) * (2.0 / self._p)
+        spectrum = period_spectrum(self._align(record))
         return spectrum[self.design.bins] / self.design.phasors_n[:, None]
 
     def _response_to(self, lines: np.ndarray, inputs: np.ndarray) -> np.ndarray:
         """The response (total, C) of the G of ``lines`` (L, C) to ``inputs`` (total, C)."""
-        design = self.design
-        columns = [np.flatnonzero(design.channel_of_bin == j) for j in range(self._c)]
+        design, columns = self.design, self._columns
         response = PlantFrequencyResponse(
             self._fs, tuple(design.frequencies_hz[i] for i in columns),
             tuple(lines[i] for i in columns), tuple(np.zeros(i.size) for i in columns))

@@ -139,6 +139,7 @@ class PlantIdentification:
         self._canceller.set_frozen(True)
         self.start_sample = first_sample
         self.held.forget_before(first_sample)
+        self._observed.clear()                   # of a run started before (a new loop run)
         self.end_sample = -1
         text = f"identifying the plant {what} ({self.identifier.duration_s:.1f} s of samples)"
         self._events.add("info", text)
@@ -275,7 +276,7 @@ class PlantIdentification:
         driver that does not report) at once.
         """
         identifier, first = self.identifier, self.start_sample
-        total = int(round(identifier.duration_s * self._settings.fs))
+        total = identifier.total_samples
         last = first + total - 1
         for _ in range(HELD_WAIT_SAMPLES):
             if self.held.covers(last):

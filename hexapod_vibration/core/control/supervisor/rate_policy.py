@@ -32,6 +32,7 @@ from hexapod_vibration.core.control.notch import AdaptiveNotchCanceller
 from hexapod_vibration.core.control.supervisor.config import NotchConfig, Settings
 from hexapod_vibration.core.control.supervisor.events import EventLog
 from hexapod_vibration.core.control.supervisor.plant_knowledge import PlantKnowledge
+from hexapod_vibration.parameter_specs import moving_tones
 
 MOVING_TONE_DAMPING = 0.7
 """Damping ratio of the type-2 weight update that moving tones (tracking or a reference)
@@ -56,8 +57,7 @@ def moving_tone_integral_ratio(config: NotchConfig) -> float:
 
     Non-zero when the tones may move (tracking or a reference); 0: the paper's update.
     """
-    moving = bool(config.tone_frequencies_hz) and (config.frequency_tracking
-                                                   or bool(config.reference_harmonics))
+    moving = bool(config.tone_frequencies_hz) and moving_tones(vars(config))
     return MOVING_TONE_INTEGRAL_RATIO if moving else 0.0
 
 
