@@ -182,14 +182,11 @@ def run(args: list[str] | None = None) -> int:
         return cli.interrupted_exit_code()
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     try:
-        try:
-            recorder = BagRecorder()
-        except (RecordingError, ValueError) as err:
-            print(f"{NODE_NAME}: error: {err}", file=sys.stderr)
-            return 2
-        record(recorder, stop)
-    finally:
-        rclpy.try_shutdown()
+        recorder = BagRecorder()
+    except (RecordingError, ValueError) as err:
+        print(f"{NODE_NAME}: error: {err}", file=sys.stderr)
+        return 2
+    record(recorder, stop)          # the bag closed; main() exits at once, no DDS teardown
     return 128 + stop.signum if stop.is_set() else 0
 
 

@@ -68,7 +68,12 @@ def install_stop_flag() -> StopFlag:
 
 
 def record(recorder: Any, stop: StopFlag) -> None:
-    """Record until ``stop``, then write what is queued and close the bag."""
+    """Record until ``stop``, then write what is queued and close the bag.
+
+    Nothing is torn down after: the caller exits at once (``cli.exit_now``). Once, the
+    teardown (the node's destruction, rclpy's shutdown) hung for more than 90 s after the
+    bag was closed, and the recorder outlived a SIGKILLed experiment (CI).
+    """
     executor = SingleThreadedExecutor()
     executor.add_node(recorder)
     # The recorded topics are waited on in one persistent wait set and taken directly
@@ -84,7 +89,5 @@ def record(recorder: Any, stop: StopFlag) -> None:
         _drain(spinner, recorder)
     finally:
         recorder.close_bag()
-        executor.remove_node(recorder)
-        recorder.destroy_node()
 
 
