@@ -76,6 +76,29 @@ HELD_ROWS_LABEL = "held:first_due,last_due,applied"
 HELD_REPORT_EVERY_SAMPLES = 100
 """Samples between two reports on ``NOTCH_HELD_TOPIC`` (10 Hz, empty ones included)."""
 
+NOTCH_FORECAST_TOPIC = "/pph/notch_forecast"
+POINTING_FORECAST_TOPIC = "/pph/pointing_forecast"
+"""A controller's commands (N) for its next ``FORECAST_SAMPLES`` samples, every
+``FORECAST_EVERY_SAMPLES`` while a subscriber listens (a realtime driver, which applies a
+row when the command of its sample is late): ``layout.dim[0] = (FORECAST_ROWS_LABEL, 6 K,
+6 K)``, rows of six struts, then the sample label (the first row's sample) and the run.
+The notch controller forecasts its sinusoids, the pointing controller (a few Hz) holds."""
+
+FORECAST_TOPICS = {"notch": NOTCH_FORECAST_TOPIC, "pointing": POINTING_FORECAST_TOPIC}
+"""The forecast topic of each command stream."""
+
+FORECAST_ROWS_LABEL = "forecast:sample,strut"
+
+FORECAST_SAMPLES = 200
+"""Samples a forecast covers (200 ms; beyond, the driver holds, then the watchdog zeroes).
+
+With one core of the two busy, the controllers fell up to 73 samples behind; at 50 the
+watchdog zeroed the pointing controller's 45 N seven times in a run. A message of 200 rows
+is 9.6 kB, 1 MB/s at 100 Hz."""
+
+FORECAST_EVERY_SAMPLES = 10
+"""Samples between two forecasts (100 Hz; each covers the next ``FORECAST_SAMPLES``)."""
+
 FREQUENCY_LABEL = "frequency_hz"
 """``layout.dim[0]`` label of the frequency topics (values in Hz)."""
 
@@ -84,6 +107,15 @@ SENSITIVITY_ROWS_PREFIX = "rows:"
 FREQUENCIES_EVERY_SAMPLES = 10
 """Samples between two messages of /pph/disturbance_frequencies and /pph/notch_frequencies
 (100 Hz: tones move by at most a few Hz per second)."""
+
+DIAGNOSTICS_EVERY_SAMPLES = 1000
+"""Samples between two ``/diagnostics`` statuses of a 1 kHz node (once per simulated second)."""
+
+DIAGNOSTICS_PHASE_SAMPLES = {"pph_driver": 0, "notch_controller": 250, "pointing_controller": 500}
+"""Sample within each second at which each node publishes its status: at the same sample
+(every whole second) the three nodes, the recorder and the runner all worked at once, and
+the realtime loop missed the samples after whole seconds (87 of 477 gaps in a run began in
+the first 100 ms of a second, about 45 in each other tenth)."""
 
 DRIVER_STATUS = "pph_driver: loop"
 """``/diagnostics`` status name of the driver's loop."""

@@ -7,7 +7,8 @@ newer one is only observed); parameters are checked in the on-set callback and a
 the post-set one. Out: the weights (100 Hz), each tone's frequency now, the predicted
 sensitivity after each identification (transient local), ``/diagnostics``. In, besides:
 the tachometer (``/pph/reference_frequency``, served before ``/pph/accel``) and the driver's
-held commands (``/pph/notch_held``).
+held commands (``/pph/notch_held``); out to it, every 10 samples while it listens, the next
+200 samples' commands (``/pph/notch_forecast``).
 """
 
 from __future__ import annotations
@@ -21,7 +22,10 @@ from std_srvs.srv import Trigger
 
 from hexapod_vibration.cdr import UnsupportedCdr, decode_strut_cdr
 from hexapod_vibration.contract import (
+    DIAGNOSTICS_EVERY_SAMPLES,
+    DIAGNOSTICS_PHASE_SAMPLES,
     FREQUENCIES_EVERY_SAMPLES,
+    NOTCH_FORECAST_TOPIC,
     NOTCH_FREQUENCIES_TOPIC,
     NOTCH_SENSITIVITY_TOPIC,
     NOTCH_STATUS,
@@ -34,6 +38,7 @@ from hexapod_vibration.core.loop.signal_ranges import SignalRanges
 from hexapod_vibration.core.model.config import load_model_config
 from hexapod_vibration.parameter_specs import NOTCH_CONTROLLER
 from hexapod_vibration.paths import config_path
+from hexapod_vibration.ros.command_forecasts import ForecastPublisher, notch_rows
 from hexapod_vibration.ros.diagnostics import diagnostic_array, publish_status_periodically
 from hexapod_vibration.ros.executors import loop_meter
 from hexapod_vibration.ros.held_reports import subscribe_held_reports
@@ -48,7 +53,12 @@ from hexapod_vibration.ros.messages import (
 )
 from hexapod_vibration.ros.node_runner import run_node
 from hexapod_vibration.ros.parameters import NodeParameters
-from hexapod_vibration.ros.qos import DIAGNOSTICS_QOS, LATCHED_QOS, LOOP_PUBLISHER_QOS
+from hexapod_vibration.ros.qos import (
+    DIAGNOSTICS_QOS,
+    LATCHED_QOS,
+    LOOP_PUBLISHER_QOS,
+    OBSERVED_LOOP_QOS,
+)
 
 WEIGHTS_EVERY_SAMPLES = 10
 """Samples between two /pph/notch_weights messages (100 Hz)."""
@@ -80,13 +90,15 @@ class NotchControllerNode(Node):
         self._pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", DIAGNOSTICS_QOS)
         publish_status_periodically(self, self.publish_diagnostics)
         self._pub_frequencies = arrays[NOTCH_FREQUENCIES_TOPIC]
+        self._forecasts = ForecastPublisher(self, NOTCH_FORECAST_TOPIC)  # for late samples
+        self._forecast_rows = notch_rows(self.supervisor)
         self._pub_sensitivity = self.create_publisher(
             Float64MultiArray, NOTCH_SENSITIVITY_TOPIC, LATCHED_QOS)
         self._published_sensitivity: object | None = None
         # The tachometer is a loop topic too, served first: the driver publishes sample n's
         # reference before its sensors, so it is taken before sample n is stepped.
         reference = create_loop_subscription(self, REFERENCE_FREQUENCY_TOPIC, self._on_reference)
-        accel = create_loop_subscription(self, "/pph/accel", self._on_accel)
+        accel = create_loop_subscription(self, "/pph/accel", self._on_accel, OBSERVED_LOOP_QOS)
         self.loop_subscriptions = [reference, accel]
         self.latest_only_subscriptions = list(self.loop_subscriptions)  # stale samples: skipped
         self.skipped_message_callbacks = {accel: self.port.hold_skipped}
@@ -141,6 +153,7 @@ class NotchControllerNode(Node):
         if command is None:
             return
         self.port.answer(command, sample)
+        self._forecasts.after(sample.index, sample.run, self._forecast_rows)
         meter.lap(stage["publish"])
         self._count()
         index = sample.index
@@ -149,7 +162,7 @@ class NotchControllerNode(Node):
         if index % FREQUENCIES_EVERY_SAMPLES == 0:
             self._pub_frequencies.publish(make_vector_array(self.supervisor.tone_estimates_hz,
                                                             index, sample.run))
-        if index % int(self.fs) == 0:
+        if index % DIAGNOSTICS_EVERY_SAMPLES == DIAGNOSTICS_PHASE_SAMPLES["notch_controller"]:
             self.publish_diagnostics()
         self._report()
         meter.lap(stage["report"])

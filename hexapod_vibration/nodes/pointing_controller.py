@@ -20,7 +20,13 @@ from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.node import Node
 from std_msgs.msg import Float64MultiArray
 
-from hexapod_vibration.contract import POINTING_STATUS, STRUT_COUNT
+from hexapod_vibration.contract import (
+    DIAGNOSTICS_EVERY_SAMPLES,
+    DIAGNOSTICS_PHASE_SAMPLES,
+    POINTING_FORECAST_TOPIC,
+    POINTING_STATUS,
+    STRUT_COUNT,
+)
 from hexapod_vibration.core.control.pointing import PointingGains, validate_target_pose
 from hexapod_vibration.core.loop.signal_ranges import SignalRanges
 from hexapod_vibration.core.model.config import load_model_config
@@ -28,6 +34,7 @@ from hexapod_vibration.core.model.sensors import EddySensorArray
 from hexapod_vibration.core.sim.closed_loop import make_pointing_controller
 from hexapod_vibration.parameter_specs import POINTING_CONTROLLER
 from hexapod_vibration.paths import config_path
+from hexapod_vibration.ros.command_forecasts import ForecastPublisher, held_rows
 from hexapod_vibration.ros.diagnostics import diagnostic_array, publish_status_periodically
 from hexapod_vibration.ros.executors import loop_meter
 from hexapod_vibration.ros.matching import MatchedReaders
@@ -43,7 +50,6 @@ from hexapod_vibration.ros.qos import DIAGNOSTICS_QOS, LOOP_PUBLISHER_QOS
 TARGET_PARAMS = ("target_tilt_x_deg", "target_tilt_y_deg", "target_twist_deg",
                  "target_translation_m")
 GAIN_PARAMS = ("bandwidth_hz", "damping_ratio", "output_lowpass_hz")
-DIAGNOSTICS_EVERY_SAMPLES = 1000
 
 
 class PointingControllerNode(Node):
@@ -69,6 +75,7 @@ class PointingControllerNode(Node):
             StrutArrayPublisher(self.readers.publisher(
                 self, Float64MultiArray, "/pph/pointing_command", LOOP_PUBLISHER_QOS)),
             self.get_logger())
+        self._forecasts = ForecastPublisher(self, POINTING_FORECAST_TOPIC)  # for late samples
         self._pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", DIAGNOSTICS_QOS)
         publish_status_periodically(self, self.publish_diagnostics)
         self.loop_subscriptions = [create_loop_subscription(self, "/pph/eddy", self._on_eddy)]
@@ -123,9 +130,11 @@ class PointingControllerNode(Node):
         force = self.law.step(sample.values) if self.enabled else np.zeros(STRUT_COUNT)
         meter.lap(stage["law"])
         self.port.answer(force, sample)
+        self._forecasts.after(sample.index, sample.run, held_rows(force))
         meter.lap(stage["publish"])
         self._count()
-        if sample.index % DIAGNOSTICS_EVERY_SAMPLES == 0:
+        phase = DIAGNOSTICS_PHASE_SAMPLES["pointing_controller"]
+        if sample.index % DIAGNOSTICS_EVERY_SAMPLES == phase:
             self.publish_diagnostics()
             meter.lap(stage["report"])
 

@@ -14,7 +14,9 @@ statistics and the CPU budget go to ``/diagnostics`` once per simulated second.
 With ``rotor_tachometer`` on, the rotor's speed for sample n (Hz) goes out on
 ``/pph/reference_frequency`` before the sample's sensors; the true frequency of every sounding
 tone goes out on ``/pph/disturbance_frequencies`` every ``FREQUENCIES_EVERY_SAMPLES`` samples.
-A realtime driver reports the notch commands it held on ``/pph/notch_held``.
+A realtime driver applies a controller's forecast (``/pph/notch_forecast``,
+``/pph/pointing_forecast``) for a sample whose command is late, and reports the notch
+commands it held on ``/pph/notch_held``.
 """
 
 from __future__ import annotations
@@ -25,7 +27,14 @@ from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.node import Node
 from std_msgs.msg import Float64MultiArray
 
-from hexapod_vibration.contract import DRIVER_STATUS, FREQUENCIES_EVERY_SAMPLES, new_run_id
+from hexapod_vibration.contract import (
+    DIAGNOSTICS_EVERY_SAMPLES,
+    DIAGNOSTICS_PHASE_SAMPLES,
+    DRIVER_STATUS,
+    FORECAST_TOPICS,
+    FREQUENCIES_EVERY_SAMPLES,
+    new_run_id,
+)
 from hexapod_vibration.core.loop.command_arbiter import CommandArbiter
 from hexapod_vibration.core.loop.signal_ranges import SignalRanges
 from hexapod_vibration.core.model.actuation import ActuatedPlant
@@ -36,6 +45,7 @@ from hexapod_vibration.nodes.driver_outputs import DriverOutputs
 from hexapod_vibration.nodes.driver_settings import DriverSettings
 from hexapod_vibration.parameter_specs import LOCKSTEP_STREAMS, PPH_DRIVER
 from hexapod_vibration.paths import config_path
+from hexapod_vibration.ros.command_forecasts import subscribe_forecasts
 from hexapod_vibration.ros.diagnostics import diagnostic_array
 from hexapod_vibration.ros.executors import loop_meter
 from hexapod_vibration.ros.messages import create_loop_subscription, receive_strut_sample
@@ -72,6 +82,10 @@ class PPHDriver(Node):
             create_loop_subscription(self, topic, lambda msg, n=name: self._on_command(n, msg),
                                      COMMAND_QOS)
             for name, topic in self.topics.items()]
+        if self.mode == "realtime":         # lockstep waits for every command: none is late
+            self.loop_subscriptions += [subscribe_forecasts(
+                self, FORECAST_TOPICS[name], lambda rows, first, run, n=name:
+                self.arbiter.forecast(n, first, rows, run)) for name in self.topics]
         self.meter = loop_meter()
         self._count = self.meter.counter("pph_driver")
         self._stage = {name: self.meter.stage(f"driver {name}")
@@ -171,15 +185,15 @@ class PPHDriver(Node):
         if self.mode == "realtime":
             self.outputs.note_held(self.arbiter, self.run_id)
         for name in newly_stale:
-            self.get_logger().warn(f"{self.topics[name]}: no command for {timeout} samples, "
-                                   "force set to zero")
+            self.get_logger().warn(f"{self.topics[name]}: no command for {timeout} samples "
+                                   "(nor a forecast), force set to zero")
         applied = self.actuated.apply(self.sample, forces["notch"], forces["pointing"])
         self.meter.lap(self._stage["plant"])
         self.outputs.force(applied, self.sample, self.run_id)
         self.meter.lap(self._stage["publish"])
         self.arbiter.advance()
         self._count()
-        if self.sample % int(self.fs) == 0:
+        if self.sample % DIAGNOSTICS_EVERY_SAMPLES == DIAGNOSTICS_PHASE_SAMPLES["pph_driver"]:
             self.publish_diagnostics()
             self.meter.lap(self._stage["report"])
 

@@ -468,6 +468,18 @@ class ToneResponseIdentifier(SampledRun):
         self._n += 1
         return self._u.copy()
 
+    def excitation_ahead(self, samples: int) -> np.ndarray:
+        """The commands (N, (samples, C)) of the run's next ``samples`` samples (0 past its end)."""
+        steps = np.arange(int(samples))
+        ahead = self._n + steps
+        segment = ahead // self._seg_len
+        phases = self._phi + np.outer(steps, self._dphi)                  # (samples, T) rad
+        value = (self._x * np.exp(1j * phases)).real.sum(axis=1)
+        rows = np.zeros((steps.size, self._c))
+        on = (segment >= 1) & (segment <= self._c) & (ahead < self._total)
+        rows[np.flatnonzero(on), segment[on] - 1] = value[on]
+        return rows
+
     def _skip_one(self, seg: int, k: int) -> None:
         """A missing sample: a zero row (no equation) in the segment's fit, phase moved on."""
         if k >= self._settle:

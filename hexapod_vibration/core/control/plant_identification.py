@@ -533,6 +533,13 @@ class BroadbandIdentifier(SampledRun):
         self._n += 1
         return self._u.copy()
 
+    def excitation_ahead(self, samples: int) -> np.ndarray:
+        """The commands (N, (samples, C)) of the run's next ``samples`` samples (0 past its end)."""
+        ahead = np.arange(self._n, self._n + int(samples))
+        rows = self._table[ahead % self._p]
+        rows[ahead >= self._total] = 0.0
+        return rows
+
     def _skip_one(self, seg: int, k: int) -> None:
         """A missing sample: marked in the record, filled in before the analysis."""
         if k >= self._settle:

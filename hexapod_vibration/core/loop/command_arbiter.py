@@ -18,12 +18,17 @@ command of each stream that is:
   connected (a publisher on the graph, or a recent command) and alive (a command accepted
   within the last ``timeout_samples`` samples, even one for an older sample: a restarted
   controller working through its queue is waited for again at once);
+- **forecast** (realtime, a stream that publishes one): when a stream's command for the
+  sample due is late, its forecast's row for that sample is applied instead of the held
+  command (:meth:`CommandArbiter.forecast`, :mod:`~hexapod_vibration.core.loop.
+  forecast_buffer`), counted as ``<stream>_forecast_applied``; the command is still late;
 - **watchdog**: a stream whose last accepted command is more than ``timeout_samples``
-  samples old contributes zero force (stale) until it commands again; until then its last
-  command is held (zero-order hold);
+  samples old, and whose forecast does not cover the sample due, contributes zero force
+  (stale) until it commands again; until then its last command is held (zero-order hold);
 - **statistics**: samples, lockstep timeouts and missed samples, realtime late commands,
   offers repeated, the latency from a sample's publication to its notch command and the
-  period between publications (wall clock, percentiles over the last minute).
+  period between publications (wall clock, percentiles over the last minute,
+  :mod:`~hexapod_vibration.core.loop.rolling_percentiles`).
 
 Wall-clock times are passed in (seconds, any monotonic origin); nothing here reads a clock
 or the ROS graph, so every rule is unit-tested directly (``test/core/test_command_arbiter.py``).
@@ -38,7 +43,9 @@ from enum import StrEnum
 
 import numpy as np
 
-from hexapod_vibration.contract import SAMPLE_RATE_HZ, STRUT_COUNT
+from hexapod_vibration.contract import STRUT_COUNT
+from hexapod_vibration.core.loop.forecast_buffer import ForecastBuffer
+from hexapod_vibration.core.loop.rolling_percentiles import RollingPercentiles
 from hexapod_vibration.core.loop.signal_ranges import out_of_range
 
 NO_FORCE_N = np.zeros(STRUT_COUNT)
@@ -47,9 +54,6 @@ NO_FORCE_N.flags.writeable = False
 
 PUBLISH_HISTORY = 1024
 """Samples whose publication time is kept for the latency."""
-
-STATS_WINDOW = int(60 * SAMPLE_RATE_HZ)
-"""Latencies and periods kept for the percentiles (the last minute at 1 kHz)."""
 
 
 class Refusal(StrEnum):
@@ -84,6 +88,8 @@ class CommandStream:
     accepted_at: int = -1
     """The driver's current sample when that command was accepted."""
     received_s: float = 0.0
+    forecast: ForecastBuffer = field(default_factory=ForecastBuffer)
+    """The stream's newest forecast (empty unless its controller publishes one)."""
     refused: Counter = field(default_factory=Counter)
     late: int = 0
     stale: bool = True
@@ -106,8 +112,8 @@ class LoopStats:
     late_commands: int = 0
     offers_repeated: int = 0
     start_s: float = 0.0
-    latencies_ms: deque = field(default_factory=lambda: deque(maxlen=STATS_WINDOW))
-    periods_ms: deque = field(default_factory=lambda: deque(maxlen=STATS_WINDOW))
+    latencies_ms: RollingPercentiles = field(default_factory=RollingPercentiles)
+    periods_ms: RollingPercentiles = field(default_factory=RollingPercentiles)
     last_publish_s: float = 0.0
 
 
@@ -177,7 +183,7 @@ class CommandArbiter:
         if (name == self.latency_stream and self.sample - index < PUBLISH_HISTORY
                 and published > 0.0):
             # publication of sample index to reception of its command, late ones included
-            self.stats.latencies_ms.append((now_s - published) * 1e3)
+            self.stats.latencies_ms.add((now_s - published) * 1e3)
         return None
 
     def _check(self, stream: CommandStream, values: np.ndarray, index: int,
@@ -193,6 +199,24 @@ class CommandArbiter:
         if index < stream.sample:
             return Refusal.OUT_OF_ORDER
         return None
+
+    def forecast(self, name: str, first: int, rows: np.ndarray,
+                 run: int | None) -> Refusal | None:
+        """Take stream ``name``'s forecast: forces ((K, C) N) for samples ``first``...
+
+        Refused (counted) beyond the actuator's range or of another run; an older forecast
+        than the one kept is dropped silently.
+        """
+        stream = self.streams[name]
+        if out_of_range(rows, self.limit_n):
+            reason = Refusal.OUT_OF_RANGE
+        elif run is not None and run != self.run:
+            reason = Refusal.OTHER_RUN
+        else:
+            stream.forecast.take(first, rows)
+            return None
+        stream.refused[reason] += 1
+        return reason
 
     def refuse(self, name: str, reason: Refusal = Refusal.MALFORMED) -> None:
         """Count a message of stream ``name`` refused before it could be offered."""
@@ -248,14 +272,16 @@ class CommandArbiter:
                      ) -> tuple[dict[str, np.ndarray], list[str]]:
         """Count what the current sample lacked; the force of every stream to apply.
 
-        Each stream's command is its answer to the sample due (:attr:`due`), or the one
-        applied before it held in its place. Lockstep counts the sample as missed if a
-        connected expected stream did not answer the sample due; realtime counts every
-        connected stream that did not as late.
+        Each stream's command is its answer to the sample due (:attr:`due`); in realtime
+        without one, its forecast's row for that sample; else the one applied before, held.
+        Lockstep counts the sample as missed if a connected expected stream did not answer
+        the sample due; realtime counts every connected stream that did not as late (a
+        forecast applied or not).
 
         Returns:
-            ``(forces, newly_stale)``: the force (N) of each stream (its held command, or
-            zero once stale), and the streams that went stale at this sample.
+            ``(forces, newly_stale)``: the force (N) of each stream (its command, forecast
+            or held one, or zero once stale), and the streams that went stale at this
+            sample.
         """
         due = self.due
         for stream in self.streams.values():
@@ -271,7 +297,11 @@ class CommandArbiter:
             self.stats.late_commands += bool(late)
         forces, newly_stale = {}, []
         for name, stream in self.streams.items():
-            stale = not self.fresh(name, timeout_samples)
+            forecast = None if answered[name] or lockstep else stream.forecast.row(due)
+            if forecast is not None:
+                stream.force_n, stream.applied = forecast, due
+                stream.forecast.applied += 1
+            stale = forecast is None and not self.fresh(name, timeout_samples)
             if stale and not stream.stale and stream.sample >= 0:
                 stream.stale_events += 1
                 newly_stale.append(name)
@@ -290,7 +320,7 @@ class CommandArbiter:
         self._published_s[self.sample % PUBLISH_HISTORY] = now_s
         stats = self.stats
         if stats.last_publish_s:
-            stats.periods_ms.append((now_s - stats.last_publish_s) * 1e3)
+            stats.periods_ms.add((now_s - stats.last_publish_s) * 1e3)
         stats.last_publish_s = now_s
 
     def offered_again(self) -> None:
@@ -309,8 +339,8 @@ class CommandArbiter:
         """Key/values for /diagnostics, whether to warn, and the status message."""
         st = self.stats
         wall = max(now_s - st.start_s, 1e-9)
-        lat = np.array(st.latencies_ms) if st.latencies_ms else np.array([np.nan])
-        per = np.array(st.periods_ms) if st.periods_ms else np.array([np.nan])
+        lat50, lat99 = st.latencies_ms.percentiles((50, 99))
+        per50, per99 = st.periods_ms.percentiles((50, 99))
         # Stale: connected, or sent commands before (a controller that went away).
         stale = [n for n, s in self.streams.items()
                  if s.stale and (s.connected or s.sample >= 0)]
@@ -320,14 +350,15 @@ class CommandArbiter:
             "late_commands": st.late_commands,
             "missed_samples": st.missed if lockstep else st.late_commands,
             "offers_repeated": st.offers_repeated,
-            "latency_ms_p50": np.percentile(lat, 50), "latency_ms_p99": np.percentile(lat, 99),
-            "latency_ms_max": np.max(lat), "period_ms_p50": np.percentile(per, 50),
-            "period_ms_p99": np.percentile(per, 99), "period_ms_max": np.max(per),
+            "latency_ms_p50": lat50, "latency_ms_p99": lat99,
+            "latency_ms_max": st.latencies_ms.maximum(), "period_ms_p50": per50,
+            "period_ms_p99": per99, "period_ms_max": st.periods_ms.maximum(),
         }
         for name, s in self.streams.items():
             values.update({f"{name}_last_sample": s.sample, f"{name}_invalid": s.invalid,
                            f"{name}_stale_events": s.stale_events,
-                           f"{name}_late": s.late, f"{name}_connected": s.connected})
+                           f"{name}_late": s.late, f"{name}_connected": s.connected,
+                           f"{name}_forecast_applied": s.forecast.applied})
             values.update({f"{name}_{reason}": s.refused[reason] for reason in Refusal})
         invalid = any(s.invalid for s in self.streams.values())
         warn = bool(stale or st.timeouts or st.missed or invalid)

@@ -1,0 +1,108 @@
+"""``/pph/*_forecast``: a controller publishes its next commands, a realtime driver takes them.
+
+The controller's end (:class:`ForecastPublisher`) publishes, every
+``FORECAST_EVERY_SAMPLES`` and only while a subscriber listens (a realtime driver), the
+commands of its next ``FORECAST_SAMPLES`` samples: the notch controller's sinusoids
+(:mod:`hexapod_vibration.core.control.command_forecast`), the pointing controller's command
+held (its few Hz move little in 0.2 s; zero force instead, the watchdog's, is a step of
+tens of N). The driver's end (:func:`subscribe_forecasts`) checks each message (its bytes,
+label, whole rows of six, finite values) and hands the rows and run to the arbiter, which
+applies one when the command of its sample is late; a bad one is refused with a throttled
+warning and changes nothing. A loop subscription of the driver (raw, every wake-up).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+from rclpy.node import Node
+from rclpy.serialization import deserialize_message
+from rclpy.subscription import Subscription
+from std_msgs.msg import Float64MultiArray
+
+from hexapod_vibration.contract import (
+    FORECAST_EVERY_SAMPLES,
+    FORECAST_ROWS_LABEL,
+    FORECAST_SAMPLES,
+    STRUT_COUNT,
+    InvalidStrutMessage,
+)
+from hexapod_vibration.core.control.command_forecast import notch_forecast
+from hexapod_vibration.core.control.notch_supervisor import NotchSupervisor
+from hexapod_vibration.ros.messages import (
+    create_loop_subscription,
+    make_vector_array,
+    parse_vector_sample,
+)
+from hexapod_vibration.ros.qos import LOOP_QOS
+
+
+class ForecastPublisher:
+    """A controller's forecasts on ``topic``, published while someone listens."""
+
+    def __init__(self, node: Node, topic: str) -> None:
+        """Create the publisher (:data:`~hexapod_vibration.ros.qos.LOOP_QOS`)."""
+        self._publisher = node.create_publisher(Float64MultiArray, topic, LOOP_QOS)
+
+    def after(self, index: int, run: int | None, rows: Callable[[int], np.ndarray]) -> None:
+        """Sample ``index`` was answered: every 10th, ``rows(50)``, the next samples' (N)."""
+        if index % FORECAST_EVERY_SAMPLES or not self._publisher.get_subscription_count():
+            return
+        self._publisher.publish(make_vector_array(rows(FORECAST_SAMPLES).reshape(-1),
+                                                  index + 1, run, label=FORECAST_ROWS_LABEL))
+
+
+def notch_rows(supervisor: NotchSupervisor) -> Callable[[int], np.ndarray]:
+    """The notch controller's forecast, as :meth:`ForecastPublisher.after` asks for it.
+
+    :func:`~hexapod_vibration.core.control.command_forecast.notch_forecast` of the
+    supervisor's canceller and running identification.
+    """
+    return lambda samples: notch_forecast(supervisor.canceller,
+                                          supervisor.identification.identifier, samples)
+
+
+def held_rows(command: np.ndarray) -> Callable[[int], np.ndarray]:
+    """``command`` (N, (C,)) held over the samples asked for."""
+    return lambda samples: np.tile(command, (samples, 1))
+
+
+def parse_forecast(msg: Float64MultiArray) -> tuple[np.ndarray, int, int | None]:
+    """``(rows (K, 6) N, first sample, run)`` of a ``/pph/notch_forecast`` message.
+
+    Raises:
+        InvalidStrutMessage: another label, no sample label, not whole rows of six, none,
+            or a non-finite value.
+    """
+    sample = parse_vector_sample(msg)
+    label = msg.layout.dim[0].label if msg.layout.dim else ""
+    if label != FORECAST_ROWS_LABEL or sample.index is None:
+        raise InvalidStrutMessage(f"expected dim[0] {FORECAST_ROWS_LABEL!r} and a sample "
+                                  f"label, got {label!r}")
+    values = sample.values
+    if values.size == 0 or values.size % STRUT_COUNT:
+        raise InvalidStrutMessage(f"expected rows of {STRUT_COUNT} forces, got {values.size} "
+                                  "values")
+    return values.reshape(-1, STRUT_COUNT), sample.index, sample.run
+
+
+def subscribe_forecasts(node: Node, topic: str,
+                        on_forecast: Callable[[np.ndarray, int, int | None], None]
+                        ) -> Subscription:
+    """Subscribe ``node`` to ``topic``; ``on_forecast(rows, first, run)`` for each good one.
+
+    Returns the (raw) subscription, for the node's loop subscriptions.
+    """
+    def callback(msg: Float64MultiArray | bytes) -> None:
+        try:
+            if isinstance(msg, bytes | bytearray | memoryview):
+                msg = deserialize_message(bytes(msg), Float64MultiArray)
+            rows, first, run = parse_forecast(msg)
+        except (InvalidStrutMessage, RuntimeError) as exc:    # RMWError: undecodable bytes
+            node.get_logger().warn(f"{topic}: rejected message ({exc})",
+                                   throttle_duration_sec=1.0)
+            return
+        on_forecast(rows, first, run)
+
+    return create_loop_subscription(node, topic, callback, LOOP_QOS)
