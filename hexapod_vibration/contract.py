@@ -82,7 +82,8 @@ POINTING_FORECAST_TOPIC = "/pph/pointing_forecast"
 ``FORECAST_EVERY_SAMPLES`` while a subscriber listens (a realtime driver, which applies a
 row when the command of its sample is late): ``layout.dim[0] = (FORECAST_ROWS_LABEL, 6 K,
 6 K)``, rows of six struts, then the sample label (the first row's sample) and the run.
-The notch controller forecasts its sinusoids, the pointing controller (a few Hz) holds."""
+The notch controller forecasts its sinusoids, the pointing controller continues the
+oscillation of its last commands."""
 
 FORECAST_TOPICS = {"notch": NOTCH_FORECAST_TOPIC, "pointing": POINTING_FORECAST_TOPIC}
 """The forecast topic of each command stream."""

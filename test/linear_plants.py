@@ -67,3 +67,29 @@ def simulate_with_gaps(plant, controller, dist, missing, sent=None):
         x = a @ x + b @ u
     if pending:
         controller.skip(pending)
+
+
+def late_notch_rig(samples: int):
+    """A notch supervisor on a coupled 6-strut plant, its driver's arbiter, late commands.
+
+    The plant: six resonances, inputs mixed by a random 20 % coupling. The arbiter applies
+    the answer to sample n at n+1 (``delay_samples`` 1). ``late[n]``: the command of sample
+    n comes after its deadline (1 % single samples and stalls of 20 ms).
+
+    Returns ``((a, b, c), supervisor, arbiter, late, rng)``, ``rng`` for what the test
+    draws next (the shaker's noise).
+    """
+    from hexapod_vibration.core.control.notch_supervisor import NotchConfig, NotchSupervisor
+    from hexapod_vibration.core.loop.command_arbiter import CommandArbiter
+
+    a, b, c = resonance_bank([22.0, 35.0, 48.0, 61.0, 95.0, 140.0], 0.05, 1.0)
+    b = b @ (np.eye(6) + 0.2 * np.random.default_rng(3).normal(size=(6, 6)))
+    supervisor = NotchSupervisor(NotchConfig().replaced(
+        {"tone_frequencies_hz": [40.0], "identify_delay_s": 0.0}))
+    arbiter = CommandArbiter(("notch",), (), 1, 1e3, delay_samples=1)
+    arbiter.refresh_connections({"notch": 1}, 5)
+    rng = np.random.default_rng(11)
+    late = rng.random(samples) < 0.01
+    for start in np.flatnonzero(rng.random(samples) < 0.0005):
+        late[start:start + 20] = True                 # stalls of 20 ms
+    return (a, b, c), supervisor, arbiter, late, rng

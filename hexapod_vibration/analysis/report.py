@@ -205,7 +205,8 @@ def loop_statistics(signals: BagSignals) -> dict[str, Any]:
     ``missed_samples`` adds the samples of the run ``[0, samples)`` absent from
     ``/pph/accel`` in the bag to the driver's own count (in realtime: the samples whose
     commands came late); ``notch_missed_samples``: the samples the notch controller never
-    received (its gaps).
+    received (its gaps); ``forecast_rows``: the late commands a controller's forecast stood
+    in for (a realtime driver's ``<stream>_forecast_applied``, summed over the streams).
     """
     accel, st = signals.accel, signals.driver_status
     run = signals.run_samples()
@@ -213,6 +214,9 @@ def loop_statistics(signals: BagSignals) -> dict[str, Any]:
     notch = signals.notch_statuses[-1] if signals.notch_statuses else {}
     own = {"notch_missed_samples": int(notch["missed_samples"])} \
         if "missed_samples" in notch else {}
+    forecasts = [int(v) for k, v in st.items() if k.endswith("_forecast_applied")]
+    if any(forecasts):
+        own["forecast_rows"] = sum(forecasts)
     if st:
         return {"mode": st.get("mode", "unknown"),
                 "samples": run,

@@ -71,10 +71,11 @@ def control_headline(report: dict[str, Any]) -> str:
 
 
 def loop_missed_text(loop: dict[str, Any]) -> str:
-    """``N missed`` and, where the notch missed samples of its own, how many."""
-    text = f"{loop['missed_samples']} missed"
-    own = loop.get("notch_missed_samples")
-    return f"{text} ({own} not received by the notch)" if own else text
+    """``N missed``, with how many the notch never received and forecasts stood in for."""
+    own, forecast = loop.get("notch_missed_samples"), loop.get("forecast_rows")
+    notes = [f"{own} not received by the notch"] if own else []
+    notes += [f"{forecast} late commands stood in for by forecasts"] if forecast else []
+    return f"{loop['missed_samples']} missed" + (f" ({'; '.join(notes)})" if notes else "")
 
 
 def format_following(report: dict[str, Any]) -> str:

@@ -28,13 +28,14 @@ from hexapod_vibration.contract import (
     STRUT_COUNT,
 )
 from hexapod_vibration.core.control.pointing import PointingGains, validate_target_pose
+from hexapod_vibration.core.control.tone_continuation import ToneContinuation
 from hexapod_vibration.core.loop.signal_ranges import SignalRanges
 from hexapod_vibration.core.model.config import load_model_config
 from hexapod_vibration.core.model.sensors import EddySensorArray
 from hexapod_vibration.core.sim.closed_loop import make_pointing_controller
 from hexapod_vibration.parameter_specs import POINTING_CONTROLLER
 from hexapod_vibration.paths import config_path
-from hexapod_vibration.ros.command_forecasts import ForecastPublisher, held_rows
+from hexapod_vibration.ros.command_forecasts import ForecastPublisher
 from hexapod_vibration.ros.diagnostics import diagnostic_array, publish_status_periodically
 from hexapod_vibration.ros.executors import loop_meter
 from hexapod_vibration.ros.matching import MatchedReaders
@@ -76,6 +77,7 @@ class PointingControllerNode(Node):
                 self, Float64MultiArray, "/pph/pointing_command", LOOP_PUBLISHER_QOS)),
             self.get_logger())
         self._forecasts = ForecastPublisher(self, POINTING_FORECAST_TOPIC)  # for late samples
+        self._continuation = ToneContinuation(STRUT_COUNT)
         self._pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", DIAGNOSTICS_QOS)
         publish_status_periodically(self, self.publish_diagnostics)
         self.loop_subscriptions = [create_loop_subscription(self, "/pph/eddy", self._on_eddy)]
@@ -130,7 +132,8 @@ class PointingControllerNode(Node):
         force = self.law.step(sample.values) if self.enabled else np.zeros(STRUT_COUNT)
         meter.lap(stage["law"])
         self.port.answer(force, sample)
-        self._forecasts.after(sample.index, sample.run, held_rows(force))
+        self._continuation.add(force)
+        self._forecasts.after(sample.index, sample.run, self._continuation.forecast)
         meter.lap(stage["publish"])
         self._count()
         phase = DIAGNOSTICS_PHASE_SAMPLES["pointing_controller"]

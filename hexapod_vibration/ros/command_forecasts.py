@@ -3,12 +3,13 @@
 The controller's end (:class:`ForecastPublisher`) publishes, every
 ``FORECAST_EVERY_SAMPLES`` and only while a subscriber listens (a realtime driver), the
 commands of its next ``FORECAST_SAMPLES`` samples: the notch controller's sinusoids
-(:mod:`hexapod_vibration.core.control.command_forecast`), the pointing controller's command
-held (its few Hz move little in 0.2 s; zero force instead, the watchdog's, is a step of
-tens of N). The driver's end (:func:`subscribe_forecasts`) checks each message (its bytes,
-label, whole rows of six, finite values) and hands the rows and run to the arbiter, which
-applies one when the command of its sample is late; a bad one is refused with a throttled
-warning and changes nothing. A loop subscription of the driver (raw, every wake-up).
+(:mod:`hexapod_vibration.core.control.command_forecast`), the pointing controller's last
+commands continued (:mod:`hexapod_vibration.core.control.tone_continuation`: they oscillate
+with the shaker's tone; zero force instead, the watchdog's, is a step of tens of N). The
+driver's end (:func:`subscribe_forecasts`) checks each message (its bytes, label, whole
+rows of six, finite values) and hands the rows and run to the arbiter, which applies one
+when the command of its sample is late; a bad one is refused with a throttled warning and
+changes nothing. A loop subscription of the driver (raw, every wake-up).
 """
 
 from __future__ import annotations
@@ -17,7 +18,6 @@ from collections.abc import Callable
 
 import numpy as np
 from rclpy.node import Node
-from rclpy.serialization import deserialize_message
 from rclpy.subscription import Subscription
 from std_msgs.msg import Float64MultiArray
 
@@ -31,7 +31,7 @@ from hexapod_vibration.contract import (
 from hexapod_vibration.core.control.command_forecast import notch_forecast
 from hexapod_vibration.core.control.notch_supervisor import NotchSupervisor
 from hexapod_vibration.ros.messages import (
-    create_loop_subscription,
+    create_parsed_subscription,
     make_vector_array,
     parse_vector_sample,
 )
@@ -63,10 +63,6 @@ def notch_rows(supervisor: NotchSupervisor) -> Callable[[int], np.ndarray]:
                                           supervisor.identification.identifier, samples)
 
 
-def held_rows(command: np.ndarray) -> Callable[[int], np.ndarray]:
-    """``command`` (N, (C,)) held over the samples asked for."""
-    return lambda samples: np.tile(command, (samples, 1))
-
 
 def parse_forecast(msg: Float64MultiArray) -> tuple[np.ndarray, int, int | None]:
     """``(rows (K, 6) N, first sample, run)`` of a ``/pph/notch_forecast`` message.
@@ -94,15 +90,4 @@ def subscribe_forecasts(node: Node, topic: str,
 
     Returns the (raw) subscription, for the node's loop subscriptions.
     """
-    def callback(msg: Float64MultiArray | bytes) -> None:
-        try:
-            if isinstance(msg, bytes | bytearray | memoryview):
-                msg = deserialize_message(bytes(msg), Float64MultiArray)
-            rows, first, run = parse_forecast(msg)
-        except (InvalidStrutMessage, RuntimeError) as exc:    # RMWError: undecodable bytes
-            node.get_logger().warn(f"{topic}: rejected message ({exc})",
-                                   throttle_duration_sec=1.0)
-            return
-        on_forecast(rows, first, run)
-
-    return create_loop_subscription(node, topic, callback, LOOP_QOS)
+    return create_parsed_subscription(node, topic, parse_forecast, on_forecast, LOOP_QOS)

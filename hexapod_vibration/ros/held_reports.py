@@ -15,12 +15,11 @@ from collections.abc import Callable
 
 import numpy as np
 from rclpy.node import Node
-from rclpy.serialization import deserialize_message
 from rclpy.subscription import Subscription
 from std_msgs.msg import Float64MultiArray
 
 from hexapod_vibration.contract import HELD_ROWS_LABEL, NOTCH_HELD_TOPIC, InvalidStrutMessage
-from hexapod_vibration.ros.messages import create_loop_subscription, parse_vector_sample
+from hexapod_vibration.ros.messages import create_parsed_subscription, parse_vector_sample
 from hexapod_vibration.ros.qos import HELD_QOS
 
 Rows = list[tuple[int, int, int]]
@@ -48,24 +47,17 @@ def parse_held_report(msg: Float64MultiArray) -> tuple[Rows, int, int | None]:
 
 
 def subscribe_held_reports(node: Node, current_run: Callable[[], int | None],
-                           on_report: Callable[[Rows, int], None]) -> Subscription:
-    """Subscribe ``node`` to the reports; ``on_report(rows, covered)`` for each good one.
+                           on_rows: Callable[[Rows, int], None]) -> Subscription:
+    """Subscribe ``node`` to the reports; ``on_rows(rows, covered)`` for each good one.
 
     A report of another run than ``current_run()`` (a driver restarted since) is dropped.
     Returns the (raw) subscription, for the node's loop subscriptions (not latest-only:
     every report counts).
     """
-    def callback(msg: Float64MultiArray | bytes) -> None:
-        try:
-            if isinstance(msg, bytes | bytearray | memoryview):
-                msg = deserialize_message(bytes(msg), Float64MultiArray)
-            rows, covered, run = parse_held_report(msg)
-        except (InvalidStrutMessage, RuntimeError) as exc:    # RMWError: undecodable bytes
-            node.get_logger().warn(f"{NOTCH_HELD_TOPIC}: rejected message ({exc})",
-                                   throttle_duration_sec=1.0)
-            return
+    def on_report(rows: Rows, covered: int, run: int | None) -> None:
         ours = current_run()
         if run is None or ours is None or run == ours:
-            on_report(rows, covered)
+            on_rows(rows, covered)
 
-    return create_loop_subscription(node, NOTCH_HELD_TOPIC, callback, HELD_QOS)
+    return create_parsed_subscription(node, NOTCH_HELD_TOPIC, parse_held_report, on_report,
+                                      HELD_QOS)

@@ -34,6 +34,7 @@ from typing import Any
 import numpy as np
 from rclpy.node import Node
 from rclpy.qos import QoSProfile
+from rclpy.serialization import deserialize_message
 from rclpy.subscription import Subscription
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
@@ -62,6 +63,7 @@ __all__ = [
     "StrutSample",
     "UnsupportedCdr",
     "create_loop_subscription",
+    "create_parsed_subscription",
     "make_strut_array",
     "make_table_array",
     "make_vector_array",
@@ -192,6 +194,30 @@ def create_loop_subscription(node: Node, topic: str, callback: Callable[[bytes],
     :mod:`hexapod_vibration.cdr`): the callback decodes the bytes.
     """
     return node.create_subscription(Float64MultiArray, topic, callback, qos, raw=True)
+
+
+def create_parsed_subscription(node: Node, topic: str,
+                               parse: Callable[[Float64MultiArray], tuple],
+                               on_parsed: Callable[..., None], qos: QoSProfile
+                               ) -> Subscription:
+    """A raw loop subscription that deserializes, checks with ``parse`` and hands it on.
+
+    ``on_parsed(*parse(msg))`` for each good message; a message rclpy cannot deserialize or
+    ``parse`` refuses (:class:`InvalidStrutMessage`) is logged (throttled) and changes
+    nothing.
+    """
+    def callback(msg: Float64MultiArray | bytes) -> None:
+        try:
+            if isinstance(msg, bytes | bytearray | memoryview):
+                msg = deserialize_message(bytes(msg), Float64MultiArray)
+            parsed = parse(msg)
+        except (InvalidStrutMessage, RuntimeError) as exc:    # RMWError: undecodable bytes
+            node.get_logger().warn(f"{topic}: rejected message ({exc})",
+                                   throttle_duration_sec=1.0)
+            return
+        on_parsed(*parsed)
+
+    return create_loop_subscription(node, topic, callback, qos)
 
 
 def receive_strut_sample(msg: Float64MultiArray | bytes, logger: Any, topic: str

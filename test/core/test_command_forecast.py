@@ -18,7 +18,7 @@ from hexapod_vibration.core.control.plant_identification import BroadbandIdentif
 from hexapod_vibration.core.loop.command_arbiter import CommandArbiter, Refusal
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from linear_plants import FS, resonance_bank  # noqa: E402
+from linear_plants import FS, late_notch_rig  # noqa: E402
 
 pytestmark = pytest.mark.unit
 AHEAD = 50
@@ -61,18 +61,7 @@ def _stalled_loop(forecasts: bool, samples: int = 16_000):
     Returns the supervisor, the commands it computed and the notch forces applied (N, by
     sample), and the late samples.
     """
-    from hexapod_vibration.core.control.notch_supervisor import NotchConfig, NotchSupervisor
-
-    a, b, c = resonance_bank([22.0, 35.0, 48.0, 61.0, 95.0, 140.0], 0.05, 1.0)
-    b = b @ (np.eye(6) + 0.2 * np.random.default_rng(3).normal(size=(6, 6)))
-    supervisor = NotchSupervisor(NotchConfig().replaced(
-        {"tone_frequencies_hz": [40.0], "identify_delay_s": 0.0}))
-    arbiter = CommandArbiter(("notch",), (), 1, 1e3, delay_samples=1)
-    arbiter.refresh_connections({"notch": 1}, 5)
-    rng = np.random.default_rng(11)
-    late = rng.random(samples) < 0.01
-    for start in np.flatnonzero(rng.random(samples) < 0.0005):
-        late[start:start + 20] = True                 # stalls of 20 ms
+    (a, b, c), supervisor, arbiter, late, rng = late_notch_rig(samples)
     x = np.zeros(a.shape[0])
     shaker = (0.02 * np.sin(2 * np.pi * 40.0 * np.arange(samples) / FS)[:, None]
               + 1e-4 * rng.normal(size=(samples, 6)))

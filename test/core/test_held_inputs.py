@@ -19,7 +19,12 @@ from hexapod_vibration.core.control.held_inputs import (
 from hexapod_vibration.core.control.plant_identification import BroadbandIdentifier
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from linear_plants import FS, frequency_response, resonance_bank  # noqa: E402
+from linear_plants import (  # noqa: E402
+    FS,
+    frequency_response,
+    late_notch_rig,
+    resonance_bank,
+)
 
 FREQUENCIES_HZ = np.arange(20.0, 300.0, 0.37)
 
@@ -136,21 +141,10 @@ def _supervised_identification(report: bool):
     Its driver holds 2 % of its commands (single samples and runs of 20), and reports them
     (or not).
     """
-    from hexapod_vibration.core.control.notch_supervisor import NotchConfig, NotchSupervisor
-    from hexapod_vibration.core.loop.command_arbiter import CommandArbiter
     from hexapod_vibration.core.loop.held_log import HeldLog
 
-    a, b, c = resonance_bank([22.0, 35.0, 48.0, 61.0, 95.0, 140.0], 0.05, 1.0)
-    b = b @ (np.eye(6) + 0.2 * np.random.default_rng(3).normal(size=(6, 6)))
-    supervisor = NotchSupervisor(NotchConfig().replaced(
-        {"tone_frequencies_hz": [40.0], "identify_delay_s": 0.0}))
-    arbiter = CommandArbiter(("notch",), (), 1, 1e3, delay_samples=1)
-    arbiter.refresh_connections({"notch": 1}, 5)
+    (a, b, c), supervisor, arbiter, late, rng = late_notch_rig(14_000)
     log = HeldLog()
-    rng = np.random.default_rng(11)
-    late = rng.random(14_000) < 0.01
-    for start in np.flatnonzero(rng.random(14_000) < 0.0005):
-        late[start:start + 20] = True                 # stalls of 20 ms
     x = np.zeros(a.shape[0])
     t = np.arange(14_000) / FS
     shaker = 0.02 * np.sin(2 * np.pi * 40.0 * t)[:, None] + 1e-4 * rng.normal(size=(14_000, 6))
