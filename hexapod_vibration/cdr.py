@@ -174,11 +174,12 @@ def decode_strut_cdr(raw: bytes, count: int = STRUT_COUNT) -> StrutSample:
     return StrutSample(values, index, run)
 
 
-def decode_float64_array(raw: bytes) -> tuple[np.ndarray, list[str]]:
+def decode_float64_array(raw: bytes, max_values: int = MAX_ARRAY_VALUES
+                         ) -> tuple[np.ndarray, list[str]]:
     """Values and every dimension label of a little-endian CDR Float64MultiArray.
 
     Laxer than :func:`decode_strut_cdr`, as a bag's other topics need: any number of
-    values up to :data:`MAX_ARRAY_VALUES`, bytes after the data ignored, labels not
+    values up to ``max_values``, bytes after the data ignored, labels not
     interpreted (each one must still be a terminated UTF-8 string inside the bytes).
 
     Raises:
@@ -191,7 +192,7 @@ def decode_float64_array(raw: bytes) -> tuple[np.ndarray, list[str]]:
     (count,) = _LE32.unpack_from(raw, pos)
     pos += 4
     pos += -(pos - CDR_HEADER) % 8
-    if count > MAX_ARRAY_VALUES or pos + 8 * count > len(raw):
+    if count > max_values or pos + 8 * count > len(raw):
         raise UnsupportedCdr(f"{count} values in {len(raw)} bytes")
     return np.frombuffer(raw, "<f8", count, pos).astype(np.float64), labels
 

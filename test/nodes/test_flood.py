@@ -44,6 +44,7 @@ start = time.monotonic()
 for _ in range({FLOOD_MESSAGES}):
     pub.publish(raw)
 print(f'sent {FLOOD_MESSAGES} in {{time.monotonic() - start:.3f}} s', flush=True)
+time.sleep(1.0)   # RELIABLE: the writer's history is delivered before it is destroyed
 node.destroy_node()
 rclpy.shutdown()
 """
