@@ -46,7 +46,7 @@ class ForecastPublisher:
         self._publisher = node.create_publisher(Float64MultiArray, topic, LOOP_QOS)
 
     def after(self, index: int, run: int | None, rows: Callable[[int], np.ndarray]) -> None:
-        """Sample ``index`` was answered: every 10th, ``rows(50)``, the next samples' (N)."""
+        """Sample ``index`` was answered: every 10th, ``rows(FORECAST_SAMPLES)`` (N) after it."""
         if index % FORECAST_EVERY_SAMPLES or not self._publisher.get_subscription_count():
             return
         self._publisher.publish(make_vector_array(rows(FORECAST_SAMPLES).reshape(-1),
@@ -63,9 +63,8 @@ def notch_rows(supervisor: NotchSupervisor) -> Callable[[int], np.ndarray]:
                                           supervisor.identification.identifier, samples)
 
 
-
 def parse_forecast(msg: Float64MultiArray) -> tuple[np.ndarray, int, int | None]:
-    """``(rows (K, 6) N, first sample, run)`` of a ``/pph/notch_forecast`` message.
+    """``(rows (K, 6) N, first sample, run)`` of a ``/pph/*_forecast`` message.
 
     Raises:
         InvalidStrutMessage: another label, no sample label, not whole rows of six, none,
