@@ -62,6 +62,7 @@ from hexapod_vibration.ros.qos import (
 
 WEIGHTS_EVERY_SAMPLES = 10
 """Samples between two /pph/notch_weights messages (100 Hz)."""
+DIAGNOSTICS_PHASE = DIAGNOSTICS_PHASE_SAMPLES["notch_controller"]
 SETTINGS = frozenset(NotchConfig.__dataclass_fields__)
 """Parameters that are notch settings (the rest, e.g. executor, are the node's own)."""
 
@@ -162,7 +163,7 @@ class NotchControllerNode(Node):
         if index % FREQUENCIES_EVERY_SAMPLES == 0:
             self._pub_frequencies.publish(make_vector_array(self.supervisor.tone_estimates_hz,
                                                             index, sample.run))
-        if index % DIAGNOSTICS_EVERY_SAMPLES == DIAGNOSTICS_PHASE_SAMPLES["notch_controller"]:
+        if index % DIAGNOSTICS_EVERY_SAMPLES == DIAGNOSTICS_PHASE:
             self.publish_diagnostics()
         self._report()
         meter.lap(stage["report"])

@@ -51,6 +51,7 @@ from hexapod_vibration.ros.qos import DIAGNOSTICS_QOS, LOOP_PUBLISHER_QOS
 TARGET_PARAMS = ("target_tilt_x_deg", "target_tilt_y_deg", "target_twist_deg",
                  "target_translation_m")
 GAIN_PARAMS = ("bandwidth_hz", "damping_ratio", "output_lowpass_hz")
+DIAGNOSTICS_PHASE = DIAGNOSTICS_PHASE_SAMPLES["pointing_controller"]
 
 
 class PointingControllerNode(Node):
@@ -136,8 +137,7 @@ class PointingControllerNode(Node):
         self._forecasts.after(sample.index, sample.run, self._continuation.forecast)
         meter.lap(stage["publish"])
         self._count()
-        phase = DIAGNOSTICS_PHASE_SAMPLES["pointing_controller"]
-        if sample.index % DIAGNOSTICS_EVERY_SAMPLES == phase:
+        if sample.index % DIAGNOSTICS_EVERY_SAMPLES == DIAGNOSTICS_PHASE:
             self.publish_diagnostics()
             meter.lap(stage["report"])
 

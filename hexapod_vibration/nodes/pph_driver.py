@@ -52,6 +52,8 @@ from hexapod_vibration.ros.messages import create_loop_subscription, receive_str
 from hexapod_vibration.ros.node_runner import run_node
 from hexapod_vibration.ros.qos import COMMAND_QOS, DIAGNOSTICS_QOS
 
+DIAGNOSTICS_PHASE = DIAGNOSTICS_PHASE_SAMPLES["pph_driver"]
+
 
 class PPHDriver(Node):
     """Simulated hexapod: plant stepping, sensor publishing, commands through the arbiter."""
@@ -193,7 +195,7 @@ class PPHDriver(Node):
         self.meter.lap(self._stage["publish"])
         self.arbiter.advance()
         self._count()
-        if self.sample % DIAGNOSTICS_EVERY_SAMPLES == DIAGNOSTICS_PHASE_SAMPLES["pph_driver"]:
+        if self.sample % DIAGNOSTICS_EVERY_SAMPLES == DIAGNOSTICS_PHASE:
             self.publish_diagnostics()
             self.meter.lap(self._stage["report"])
 

@@ -33,7 +33,7 @@ from hexapod_vibration.core.control.notch_supervisor import NotchSupervisor
 from hexapod_vibration.ros.messages import (
     create_parsed_subscription,
     make_vector_array,
-    parse_vector_sample,
+    parse_labelled_sample,
 )
 from hexapod_vibration.ros.qos import LOOP_QOS
 
@@ -70,16 +70,10 @@ def parse_forecast(msg: Float64MultiArray) -> tuple[np.ndarray, int, int | None]
         InvalidStrutMessage: another label, no sample label, not whole rows of six, none,
             or a non-finite value.
     """
-    sample = parse_vector_sample(msg)
-    label = msg.layout.dim[0].label if msg.layout.dim else ""
-    if label != FORECAST_ROWS_LABEL or sample.index is None:
-        raise InvalidStrutMessage(f"expected dim[0] {FORECAST_ROWS_LABEL!r} and a sample "
-                                  f"label, got {label!r}")
-    values = sample.values
-    if values.size == 0 or values.size % STRUT_COUNT:
-        raise InvalidStrutMessage(f"expected rows of {STRUT_COUNT} forces, got {values.size} "
-                                  "values")
-    return values.reshape(-1, STRUT_COUNT), sample.index, sample.run
+    sample = parse_labelled_sample(msg, FORECAST_ROWS_LABEL, STRUT_COUNT)
+    if sample.values.size == 0:
+        raise InvalidStrutMessage("a forecast without a row")
+    return sample.values.reshape(-1, STRUT_COUNT), sample.index, sample.run
 
 
 def subscribe_forecasts(node: Node, topic: str,

@@ -19,7 +19,7 @@ from rclpy.subscription import Subscription
 from std_msgs.msg import Float64MultiArray
 
 from hexapod_vibration.contract import HELD_ROWS_LABEL, NOTCH_HELD_TOPIC, InvalidStrutMessage
-from hexapod_vibration.ros.messages import create_parsed_subscription, parse_vector_sample
+from hexapod_vibration.ros.messages import create_parsed_subscription, parse_labelled_sample
 from hexapod_vibration.ros.qos import HELD_QOS
 
 Rows = list[tuple[int, int, int]]
@@ -31,13 +31,9 @@ def parse_held_report(msg: Float64MultiArray) -> tuple[Rows, int, int | None]:
     Raises:
         InvalidStrutMessage: another label, not whole rows of integers, no sample label.
     """
-    sample = parse_vector_sample(msg)
-    label = msg.layout.dim[0].label if msg.layout.dim else ""
+    sample = parse_labelled_sample(msg, HELD_ROWS_LABEL, 3)
     values = sample.values
-    if label != HELD_ROWS_LABEL or sample.index is None:
-        raise InvalidStrutMessage(f"expected dim[0] {HELD_ROWS_LABEL!r} and a sample label, "
-                                  f"got {label!r}")
-    if values.size % 3 or np.any(values != np.round(values)) or np.any(values < -1):
+    if np.any(values != np.round(values)) or np.any(values < -1):
         raise InvalidStrutMessage(f"expected rows of 3 sample indices, got {values.size} "
                                   "values")
     rows = [(int(a), int(b), int(c)) for a, b, c in values.reshape(-1, 3)]

@@ -73,6 +73,7 @@ __all__ = [
     "make_table_array",
     "make_vector_array",
     "make_weights_array",
+    "parse_labelled_sample",
     "parse_vector_sample",
     "parse_strut_array",
     "parse_strut_sample",
@@ -455,6 +456,27 @@ def parse_vector_sample(msg: Float64MultiArray, length: int | None = None) -> St
         raise InvalidStrutMessage(f"non-finite value in {values.tolist()}")
     index, run = parse_layout_labels([d.label for d in msg.layout.dim[:3]])
     return StrutSample(values, index, run)
+
+
+def parse_labelled_sample(msg: Float64MultiArray, label: str, width: int) -> StrutSample:
+    """:func:`parse_vector_sample` of a message of rows of ``width`` values (N x width).
+
+    ``layout.dim[0]`` must be labelled ``label`` and a sample label present; no row is a
+    whole number of rows.
+
+    Raises:
+        InvalidStrutMessage: another label, no sample label, a partial row, a non-finite
+            value or a garbled label.
+    """
+    sample = parse_vector_sample(msg)
+    found = msg.layout.dim[0].label if msg.layout.dim else ""
+    if found != label or sample.index is None:
+        raise InvalidStrutMessage(f"expected dim[0] {label!r} and a sample label, "
+                                  f"got {found!r}")
+    if sample.values.size % width:
+        raise InvalidStrutMessage(f"expected rows of {width} values, got "
+                                  f"{sample.values.size} values")
+    return sample
 
 
 def make_table_array(rows: dict[str, np.ndarray], sample_index: int) -> Float64MultiArray:

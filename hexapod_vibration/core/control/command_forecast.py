@@ -23,7 +23,6 @@ from __future__ import annotations
 import numpy as np
 
 from hexapod_vibration.core.control.notch import AdaptiveNotchCanceller
-from hexapod_vibration.core.control.phasor import TWO_PI
 
 
 def canceller_ahead(canceller: AdaptiveNotchCanceller, samples: int) -> np.ndarray:
@@ -32,8 +31,8 @@ def canceller_ahead(canceller: AdaptiveNotchCanceller, samples: int) -> np.ndarr
     Row 0 is the sample its next :meth:`~AdaptiveNotchCanceller.step` answers, with the
     weights and output gain frozen at their present values.
     """
-    dphi = TWO_PI * canceller.tone_frequencies_hz / canceller.sample_rate_hz       # rad
-    phases = canceller.phases_rad + np.outer(np.arange(int(samples)), dphi)  # (samples, T)
+    steps = np.outer(np.arange(int(samples)), canceller.phase_steps_rad)
+    phases = canceller.phases_rad + steps                                   # (samples, T) rad
     return canceller.output_gain * (np.exp(1j * phases) @ canceller.weights).real
 
 

@@ -393,6 +393,11 @@ class AdaptiveNotchCanceller(NotchWeights):
         return self._osc.phases_rad
 
     @property
+    def phase_steps_rad(self) -> np.ndarray:
+        """The oscillators' phase increments dphi_t (rad per sample), a copy."""
+        return self._osc.dphi_rad
+
+    @property
     def enabled(self) -> bool:
         """Whether the output is (ramping) on."""
         return self._enabled

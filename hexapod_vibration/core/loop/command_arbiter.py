@@ -186,12 +186,19 @@ class CommandArbiter:
             self.stats.latencies_ms.add((now_s - published) * 1e3)
         return None
 
-    def _check(self, stream: CommandStream, values: np.ndarray, index: int,
-               run: int | None) -> Refusal | None:
+    def _foreign(self, values: np.ndarray, run: int | None) -> Refusal | None:
+        """Why forces (N) of a command or forecast cannot be this driver's, or None."""
         if out_of_range(values, self.limit_n):
             return Refusal.OUT_OF_RANGE
         if run is not None and run != self.run:
             return Refusal.OTHER_RUN
+        return None
+
+    def _check(self, stream: CommandStream, values: np.ndarray, index: int,
+               run: int | None) -> Refusal | None:
+        reason = self._foreign(values, run)
+        if reason is not None:
+            return reason
         if index > self.sample:
             return Refusal.FUTURE
         if index == stream.sample:
@@ -208,14 +215,11 @@ class CommandArbiter:
         than the one kept is dropped silently.
         """
         stream = self.streams[name]
-        if out_of_range(rows, self.limit_n):
-            reason = Refusal.OUT_OF_RANGE
-        elif run is not None and run != self.run:
-            reason = Refusal.OTHER_RUN
-        else:
+        reason = self._foreign(rows, run)
+        if reason is None:
             stream.forecast.take(first, rows)
-            return None
-        stream.refused[reason] += 1
+        else:
+            stream.refused[reason] += 1
         return reason
 
     def refuse(self, name: str, reason: Refusal = Refusal.MALFORMED) -> None:

@@ -14,6 +14,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from hexapod_vibration.contract import STRUT_COUNT
+
 CAPACITY_SAMPLES = 512
 """Samples of rows kept (a ring); a forecast longer than this keeps its first ones."""
 
@@ -21,11 +23,11 @@ CAPACITY_SAMPLES = 512
 class ForecastBuffer:
     """Forecast forces (N) by sample, from the newest forecast covering each sample."""
 
-    def __init__(self) -> None:
-        """No forecast yet."""
+    def __init__(self, channels: int = STRUT_COUNT) -> None:
+        """No forecast yet; rows of ``channels`` forces."""
         self.first = -1
         """The first sample of the newest forecast taken (-1: none yet)."""
-        self._rows: np.ndarray | None = None
+        self._rows = np.zeros((CAPACITY_SAMPLES, int(channels)))
         self._samples = np.full(CAPACITY_SAMPLES, -1, dtype=np.int64)
         self.applied = 0
         """Rows applied in place of a late command (counted by the arbiter)."""
@@ -35,9 +37,6 @@ class ForecastBuffer:
         if first <= self.first:
             return False
         rows = np.asarray(rows, dtype=float)[:CAPACITY_SAMPLES]
-        if self._rows is None or self._rows.shape[1] != rows.shape[1]:
-            self._rows = np.zeros((CAPACITY_SAMPLES, rows.shape[1]))
-            self._samples[:] = -1
         samples = first + np.arange(rows.shape[0])
         slots = samples % CAPACITY_SAMPLES
         self._rows[slots] = rows
