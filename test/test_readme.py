@@ -290,7 +290,8 @@ def test_readme_tuning_with_hexapod_param(node_processes, ros_env, tmp_path):
             assert len(lines) == 1 and lines[0].startswith("hexapod_param: error:"), lines
             assert f"refused {command.words[3]}" in lines[0], lines
         else:
-            assert result.returncode == 0, (command.text, result.stderr)
+            # The graph's log with a failure: a set once went unanswered for 60 s in CI.
+            assert result.returncode == 0, (command.text, result.stderr, process.output())
             assert result.stdout.strip(), command.text
         if command.words[1] == "set" and not command.refused:
             assert result.stdout.startswith(f"{command.words[2]}: {command.words[3]} = ")
