@@ -6,6 +6,8 @@ supervisor derives (G, the bound) follows from ``K`` by hand. The settings are t
 (``config/presets/paper.yaml``: test tones, eq. 18, mu at every tone) unless a test says.
 """
 
+from collections.abc import Callable
+
 import numpy as np
 import pytest
 from scipy import signal
@@ -28,12 +30,18 @@ def coupled_gain(coupling: float, gain: float = 0.1) -> np.ndarray:
 
 
 def run(sup: NotchSupervisor, k: np.ndarray, samples: int, start: int = 0,
-        amplitude: float = 0.05, skip: frozenset[int] = frozenset()) -> np.ndarray:
-    """Close the loop for ``samples`` samples; returns the disturbance-free error per sample."""
+        amplitude: float = 0.05, skip: frozenset[int] = frozenset(),
+        until: Callable[[NotchSupervisor], bool] | None = None) -> np.ndarray:
+    """Close the loop for ``samples`` samples; returns the disturbance-free error per sample.
+
+    ``until``: stop before the first sample at which it holds (the rows so far returned).
+    """
     u = np.zeros(6)
     residual = np.zeros((samples, 6))
     mix = np.linspace(0.5, 1.5, 6)
     for i, n in enumerate(range(start, start + samples)):
+        if until is not None and until(sup):
+            return residual[:i]
         d = amplitude * mix * np.cos(2 * np.pi * TONE * n / FS + 0.3)
         accel = GRAVITY + d + k @ u
         residual[i] = d + k @ u
@@ -350,3 +358,37 @@ def test_switching_control_off_by_hand_fades_along_the_same_curve():
     assert gains[1500] == pytest.approx(0.5, abs=0.01) and gains[2000] == 0.0
     assert np.all(np.diff(gains[1000:2001]) <= 0.0)
     assert _splatter_db(commands, (44.7, 56.2)) < -75.0
+
+
+
+def test_new_tones_during_the_analysis_stop_it_and_take_over():
+    """Tones set while a broadband identification is analysed (one piece per sample).
+
+    The analysis worked on the old tones' coefficients: finished after the change it put a
+    (1, 6, 6) P on two oscillators and the node died (a README tuning run in CI). Now it
+    stops, at whichever of its samples the change comes, and the new tones take over: G(f)
+    known (control adapts at both) or, before the measurement, identified again.
+    """
+    k, broadband = coupled_gain(0.0), config(identification="broadband", enabled=True)
+
+    def analysing(sup: NotchSupervisor) -> bool:
+        return sup.identification.analysis is not None
+
+    reference = NotchSupervisor(broadband)
+    first = len(run(reference, k, 20_000, until=analysing))
+    pieces = len(run(reference, k, 1000, first, until=lambda sup: not analysing(sup)))
+    assert pieces >= 3 and reference.state == NotchState.ADAPTING  # held wait, Nyquist
+    for offset in (0, pieces // 2, pieces - 1):
+        sup = NotchSupervisor(broadband)
+        n = len(run(sup, k, 20_000, until=analysing))
+        run(sup, k, offset, n)
+        assert analysing(sup)
+        sup.apply({"tone_frequencies_hz": [40.0, 80.0]})
+        assert not analysing(sup)
+        run(sup, k, 500, n + offset)
+        assert sup.canceller.coefficients.shape == (2, 6, 6)
+        if sup.plant_response is None:
+            assert sup.state == NotchState.IDENTIFYING
+        else:
+            assert sup.plant_response.shape == (2, 6, 6)
+            assert sup.state == NotchState.ADAPTING

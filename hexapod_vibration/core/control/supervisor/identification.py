@@ -126,6 +126,7 @@ class PlantIdentification:
                                     else self._canceller.tone_frequencies_hz)]
         if not tones:
             raise ValueError("no tones to identify")
+        self._abandon_analysis("a new identification starts")
         cfg, settings = self._settings.config, self._settings
         if cfg.identification == "broadband":
             self.identifier = BroadbandIdentifier(settings.channels, settings.fs)
@@ -181,10 +182,12 @@ class PlantIdentification:
         Known tones (or ``raw``, or no tones) need none: a running one stops, bumplessly.
         Otherwise a new mode freezes the weights (a normalised mode must not adapt with
         another mode's P) and, with ``auto_identify``, the new tones are identified from the
-        next sample (unless they are being identified already).
+        next sample (unless they are being identified already). An analysis in progress
+        stops first (see :meth:`_abandon_analysis`).
         """
+        analysed = self._abandon_analysis("the tones or the adaptation changed")
         if plan.response is not None or plan.mode == "raw" or not plan.tones:
-            if self.identifier is not None:
+            if self.identifier is not None or analysed:
                 self._events.add("info", "identification no longer needed: stopped")
                 self.identifier = None
                 self._gate.resume()
@@ -194,6 +197,20 @@ class PlantIdentification:
         running = self.identifier is not None and np.array_equal(self.tones, plan.tones)
         if self._settings.config.auto_identify and self._clock.first >= 0 and not running:
             self.start(plan.tones, self._clock.last + 1)
+
+    def _abandon_analysis(self, why: str) -> bool:
+        """Stop an analysis in progress (it works for the tones and mode it began with).
+
+        Its pieces hold those tones' coefficients across samples: finished after a change
+        they would put them on oscillators that no longer match. What it already learned
+        (G in the plant's knowledge) stays. Returns True if one was stopped.
+        """
+        if self.analysis is None:
+            return False
+        self.analysis.close()
+        self.analysis = self.identifier = None
+        self._events.add("info", f"the identification's analysis stopped: {why}")
+        return True
 
     def step(self, error: np.ndarray, command: np.ndarray) -> None:
         """Add the excitation to ``command`` (C,) (N); analyse once the record is complete.
