@@ -392,3 +392,36 @@ def test_new_tones_during_the_analysis_stop_it_and_take_over():
         else:
             assert sup.plant_response.shape == (2, 6, 6)
             assert sup.state == NotchState.ADAPTING
+
+
+def test_a_broadband_identification_goes_on_for_new_tones():
+    """A broadband identification's G(f) covers 0..fs/2: no new 10 s record for new tones.
+
+    Neither while it runs nor while its analysis waits for the driver's report on held
+    commands (a realtime driver).
+    """
+    k, broadband = coupled_gain(0.0), config(identification="broadband", enabled=True)
+    for waiting in (False, True):
+        sup = NotchSupervisor(broadband)
+        run(sup, k, 5000)
+        start = sup.status()["identification_start_sample"]
+        assert sup.identification.running
+        if waiting:
+            sup.note_held([], 4999)                 # a realtime driver reports, then not
+            n = 5000 + len(run(sup, k, 20_000, 5000,
+                               until=lambda s: s.identification.analysis is not None))
+            run(sup, k, 50, n)
+            assert sup.identification.analysis is not None      # waits for the report
+            n += 50
+        else:
+            n = 5000
+        sup.apply({"tone_frequencies_hz": [40.0, 80.0]})
+        assert sup.state == NotchState.IDENTIFYING
+        if waiting:
+            run(sup, k, 50, n)
+            sup.note_held([], n + 49)               # the report on its last samples came
+            n += 50
+        run(sup, k, 12_000 - n, n)
+        assert sup.status()["identification_start_sample"] == start
+        assert sup.plant_response.shape == (2, 6, 6)
+        assert sup.state == NotchState.ADAPTING

@@ -179,14 +179,15 @@ class PlantIdentification:
     def retarget(self, plan: Plan, mode_changed: bool) -> None:
         """New tones or mode: identify what they need; stop an identification they do not.
 
-        Known tones (or ``raw``, or no tones) need none: a running one stops, bumplessly.
-        Otherwise a new mode freezes the weights (a normalised mode must not adapt with
-        another mode's P) and, with ``auto_identify``, the new tones are identified from the
-        next sample (unless they are being identified already). An analysis in progress
-        stops first (see :meth:`_abandon_analysis`).
+        Known tones (or ``raw``, or no tones) need none: a running one stops, bumplessly
+        (an analysis in progress too, :meth:`_abandon_analysis`). Otherwise a new mode
+        freezes the weights (a normalised mode must not adapt with another mode's P); a
+        broadband identification, running or waiting for its analysis, goes on for the new
+        tones (its G(f) covers 0..fs/2); else, with ``auto_identify``, the new tones are
+        identified from the next sample (unless they are being identified already).
         """
-        analysed = self._abandon_analysis("the tones or the adaptation changed")
         if plan.response is not None or plan.mode == "raw" or not plan.tones:
+            analysed = self._abandon_analysis("the tones or the adaptation changed")
             if self.identifier is not None or analysed:
                 self._events.add("info", "identification no longer needed: stopped")
                 self.identifier = None
@@ -194,9 +195,26 @@ class PlantIdentification:
             return
         if mode_changed:
             self._canceller.set_frozen(True)
+        if isinstance(self.identifier, BroadbandIdentifier):
+            self._follow_tones(plan.tones)
+            return
+        self._abandon_analysis("the tones or the adaptation changed")
         running = self.identifier is not None and np.array_equal(self.tones, plan.tones)
         if self._settings.config.auto_identify and self._clock.first >= 0 and not running:
             self.start(plan.tones, self._clock.last + 1)
+
+    def _follow_tones(self, tones: list[float]) -> None:
+        """The running broadband identification measures G at ``tones`` (Hz) instead.
+
+        Its record is the same for any tones; an analysis waiting for the driver's report
+        (it has measured nothing yet) starts again for them.
+        """
+        self.tones = [float(f) for f in tones]
+        if self.analysis is not None:
+            self.analysis.close()
+            self.analysis = self._analyse()
+        self._events.add("info", f"the broadband identification goes on for the tones "
+                                 f"{self.tones} Hz")
 
     def _abandon_analysis(self, why: str) -> bool:
         """Stop an analysis in progress (it works for the tones and mode it began with).
