@@ -47,14 +47,15 @@ BIN_DIR = Path(sys.executable).parent
 
 SCENARIO_TESTS = (
     "test_never_worse_core_loop.py", "test_sensitivity_core_loop.py", "test_harmonic_rise.py",
-    "test_tracking_range_core_loop.py",
+    "test_tracking_range_core_loop.py", "test_notch_settings_at_any_moment.py",
     "test_closed_loop.py::test_table1_reduces_40hz_by_60db_and_80hz_by_40db",
     "test_closed_loop.py::test_table2_close_tones_each_reduced_by_55db",
     "test_fxlms.py::test_bench_quick_writes_positive_finite_numbers",
 )
 """The ``scenario`` tier: core closed-loop runs of a shipped scenario, 30-240 s each on a
-quiet 2-core machine (a file name: all its tests; ``file::test``: that test, every
-parametrization)."""
+quiet 2-core machine, and the notch's settings changed at every moment of its sequence
+(~1 s of Nyquist tests per case; 22 s) (a file name: all its tests; ``file::test``: that
+test, every parametrization)."""
 
 LONG_FIRST = ("test_moving_tones_graph.py", "test_experiment.py", "test_twin_graph.py",
               "test_sensitivity_core_loop.py", "test_params_file.py", "test_fxlms.py",

@@ -1,16 +1,15 @@
 """The notch supervisor alone: sequencing, bounds, clamping, refusal and missing samples.
 
-The plant is static with a one-sample command hold: ``a_n = g + d_n + K u_{n-1}`` (m/s^2),
-with gravity ``g`` on every strut and a 40 Hz disturbance ``d``, so every number the
-supervisor derives (G, the bound) follows from ``K`` by hand. The settings are the paper's
-(``config/presets/paper.yaml``: test tones, eq. 18, mu at every tone) unless a test says.
+The plant is static with a one-sample command hold (``test/static_rig.py``), so every
+number the supervisor derives (G, the bound) follows from ``K`` by hand. The settings are
+the paper's (``config/presets/paper.yaml``: test tones, eq. 18, mu at every tone) unless a
+test says.
 """
-
-from collections.abc import Callable
 
 import numpy as np
 import pytest
 from scipy import signal
+from static_rig import FS, GRAVITY, TONE, coupled_gain, run, tone_rms
 
 from hexapod_vibration.contract import NotchState
 from hexapod_vibration.core.control import adaptation
@@ -18,46 +17,6 @@ from hexapod_vibration.core.control.notch import FADE_S
 from hexapod_vibration.core.control.notch_supervisor import NotchConfig, NotchSupervisor
 from hexapod_vibration.core.control.supervisor import fader
 from hexapod_vibration.core.sim.scenario import notch_preset
-
-FS = 1000.0
-GRAVITY = 9.80665
-TONE = 40.0
-
-
-def coupled_gain(coupling: float, gain: float = 0.1) -> np.ndarray:
-    """K (6x6, (m/s^2)/N): ``gain`` on the diagonal, ``coupling * gain`` elsewhere."""
-    return gain * (np.eye(6) + coupling * (np.ones((6, 6)) - np.eye(6)))
-
-
-def run(sup: NotchSupervisor, k: np.ndarray, samples: int, start: int = 0,
-        amplitude: float = 0.05, skip: frozenset[int] = frozenset(),
-        until: Callable[[NotchSupervisor], bool] | None = None) -> np.ndarray:
-    """Close the loop for ``samples`` samples; returns the disturbance-free error per sample.
-
-    ``until``: stop before the first sample at which it holds (the rows so far returned).
-    """
-    u = np.zeros(6)
-    residual = np.zeros((samples, 6))
-    mix = np.linspace(0.5, 1.5, 6)
-    for i, n in enumerate(range(start, start + samples)):
-        if until is not None and until(sup):
-            return residual[:i]
-        d = amplitude * mix * np.cos(2 * np.pi * TONE * n / FS + 0.3)
-        accel = GRAVITY + d + k @ u
-        residual[i] = d + k @ u
-        if n in skip:
-            continue
-        command = sup.step(n, accel)
-        u = np.zeros(6) if command is None else command.copy()
-    return residual
-
-
-def tone_rms(x: np.ndarray) -> float:
-    """RMS (m/s^2) of the 40 Hz component of x (samples x 6), by least squares."""
-    n = np.arange(x.shape[0])
-    basis = np.column_stack([np.cos(2 * np.pi * TONE * n / FS), np.sin(2 * np.pi * TONE * n / FS)])
-    coef, *_ = np.linalg.lstsq(basis, x, rcond=None)
-    return float(np.sqrt(np.mean(np.sum(coef**2, axis=0) / 2)))
 
 
 def config(**changes) -> NotchConfig:
@@ -425,3 +384,32 @@ def test_a_broadband_identification_goes_on_for_new_tones():
         assert sup.status()["identification_start_sample"] == start
         assert sup.plant_response.shape == (2, 6, 6)
         assert sup.state == NotchState.ADAPTING
+
+
+@pytest.mark.parametrize("changes", [{"mu": 0.0}, {"adaptation": "raw"}])
+def test_a_setting_changed_while_identifying_waits_for_the_identification(changes):
+    """A mu of 0 (nothing adapts) or ``raw`` set during the start-up identification.
+
+    mu 0 once killed the analysis (the mu policy divided by it); ``raw`` stopped the
+    identification as not needed and then adapted blind: on this rig P = I diverges (G's
+    phase, a one-sample delay from a positive gain, is not what ``raw`` assumes), +24 dB in
+    15 s with nothing to stop it. Now the identification goes on: mu 0 takes G and waits
+    for a rate, and ``raw`` is refused by the bound it finds.
+    """
+    k = coupled_gain(0.2)
+    sup = NotchSupervisor(NotchConfig().replaced({"tone_frequencies_hz": [TONE],
+                                                  "identify_delay_s": 0.1}))
+    run(sup, k, 3000)
+    sup.apply(changes)
+    n = 3000 + len(run(sup, k, 12_000, 3000, until=lambda s: not s.identification.busy))
+    assert sup.plant_response is not None
+    if "mu" in changes:
+        assert sup.state == NotchState.ADAPTING and sup.status()["tone_mu"] == []
+        sup.apply({"mu": 0.002})                     # the policy chooses now
+        assert len(sup.status()["tone_mu"]) == 1
+        off = NotchSupervisor(NotchConfig().replaced({"tone_frequencies_hz": [TONE],
+                                                      "enabled": False}))
+        on = run(sup, k, 4000, n)[-1000:]
+        assert tone_rms(on) < 0.1 * tone_rms(run(off, k, 1000))
+    else:
+        assert sup.state == NotchState.REFUSED and "bound is 0" in sup.status()["refusal"]

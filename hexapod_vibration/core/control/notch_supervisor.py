@@ -168,6 +168,8 @@ class NotchSupervisor:
                                            ramp_samples=settings.ramp_samples)
         elif mode_changed and plan.coefficients is not None:
             canceller.set_coefficients(plan.coefficients)
+        if (tones_changed or mode_changed) and plan.response is not None:
+            self._rates.defer(plan.coefficients)       # the policy chooses again, below
         self._plant.put_in_force(plan.response, plan.tones)
         self._rates.bound = plan.bound
         if "enabled" in changes:
@@ -177,6 +179,8 @@ class NotchSupervisor:
             self.identification.retarget(plan, mode_changed)
         if tones_changed or any(name in changes for name in FOLLOW_SETTINGS):
             self.follower.rebuild()
+        if not self.identification.busy:
+            self._rates.choose_pending()
 
     def start_identification(self, tones: list[float] | None = None) -> str:
         """Measure G at ``tones`` (Hz; None: the canceller's) from the next sample, frozen.

@@ -115,6 +115,9 @@ class RatePolicy:
         """The largest ``mu`` the type-2 update of sweeping tones is allowed at: the ``mu``
         the Nyquist test found it stable at, 0 where it found it unstable, inf untested
         (no G(f))."""
+        self.unchosen: np.ndarray | None = None
+        """Normalised P (T, C, C) in force without the policy's choice (it needs ``mu`` > 0,
+        and new tones or a new mode bring a new P): :meth:`choose_pending` makes it."""
 
     def normalised_bound(self) -> float:
         """The bound of a normalised mode (M = I) with the loop delay."""
@@ -178,7 +181,7 @@ class RatePolicy:
 
     def forget_choice(self) -> None:
         """A new identification: no policy result and no prediction until it is analysed."""
-        self.sensitivity = self.choice = None
+        self.sensitivity = self.choice = self.unchosen = None
         self.type2_max_mu = float("inf")
 
     def check_type2(self, tones: list[float]) -> Generator[None, None, None]:
@@ -192,8 +195,11 @@ class RatePolicy:
         canceller, cfg = self._canceller, self._settings.config
         mu = canceller.mu
         yield
-        ratio = MOVING_TONE_INTEGRAL_RATIO * self.tone_rates() / max(mu, 1e-300)
-        stable = mu > 0.0 and sensitivity.closed_loop_is_stable(
+        if not mu > 0.0:                    # nothing adapts: tested once mu is set
+            self.type2_max_mu = 0.0
+            return
+        ratio = MOVING_TONE_INTEGRAL_RATIO * self.tone_rates() / mu
+        stable = sensitivity.closed_loop_is_stable(
             self._plant.frequency_response.at, tones, self._settings.fs,
             canceller.coefficients, mu, integral_ratio=ratio,
             update_lowpass_hz=self._settings.update_lowpass_hz)
@@ -205,8 +211,18 @@ class RatePolicy:
                                      "update")
 
     def choose(self, tones: list[float], coefficients: np.ndarray) -> None:
-        """Per-tone rates of ``mu_policy`` folded into P; the predicted sensitivity."""
+        """Per-tone rates of ``mu_policy`` folded into P; the predicted sensitivity.
+
+        The rates are shares of ``mu``: at ``mu`` 0 (nothing adapts) P goes in force as it
+        is and the choice waits for a ``mu`` above 0 (:meth:`choose_pending`).
+        """
         cfg, mu = self._settings.config, self._canceller.mu
+        if not mu > 0.0:
+            self.defer(coefficients)
+            self._events.add("info", "mu is 0: nothing adapts; the mu policy chooses the "
+                                     "tones' rates once mu is set above 0")
+            return
+        self.unchosen = None
         fs = self._settings.fs
         pfr, phi = self._plant.frequency_response, self._plant.disturbance
         choice = mu_policy.choose_tone_rates(pfr.at, tones, fs, coefficients, mu,
@@ -226,6 +242,31 @@ class RatePolicy:
                          choice.warning or f"mu_policy {choice.policy}: tone rates "
                          f"{np.round(choice.tone_mu, 6).tolist()}, predicted rise "
                          f"{choice.predicted_rise_db:.2f} dB at {choice.rise_at_hz:.2f} Hz")
+
+    def defer(self, coefficients: np.ndarray) -> None:
+        """Normalised P (T, C, C) in force as it is; the policy's choice made later."""
+        self.choice = self.sensitivity = None
+        self.unchosen = np.array(coefficients, dtype=complex)
+        self._canceller.set_coefficients(self.unchosen)
+
+    def choose_pending(self) -> None:
+        """The policy's choice for a P put in force without one, once it can be made.
+
+        With G(f) known and ``mu`` above 0 (a tone identification gives no G(f): then every
+        tone adapts at ``mu``, as the policy ``manual``); then the type-2 test of sweeping
+        tones (:meth:`check_type2`) at the rates chosen. Dropped if the oscillators changed.
+        """
+        canceller, unchosen = self._canceller, self.unchosen
+        if (unchosen is None or not canceller.mu > 0.0
+                or self._plant.frequency_response is None):
+            return
+        if unchosen.shape[0] != canceller.n_tones:
+            self.unchosen = None
+            return
+        tones = [float(f) for f in canceller.tone_frequencies_hz]
+        self.choose(tones, unchosen)
+        for _ in self.check_type2(tones):
+            pass
 
     def tone_rates(self) -> np.ndarray:
         """Each oscillator's rate in force (1/sample): the policy's, scaled to ``mu`` now.
