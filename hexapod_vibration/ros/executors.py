@@ -53,6 +53,12 @@ One service (an executor ``spin_once`` over every entity of the process's nodes)
 answered within 50 ms."""
 IDLE_SPIN_S = 0.01
 """Longest single wait (s) of a node's main loop, so shutdown is noticed promptly."""
+ANSWERED_SAMPLES = 2
+"""Of the messages a ``latest_only`` subscription has queued at a wake-up, how many its
+callback gets (the newest, oldest first); the older ones are skipped. A realtime driver
+with ``command_delay_samples`` 1 (the experiment's pipeline) applies the answer to sample
+m only when it steps m + 1: a controller that wakes with m and m + 1 queued still answers
+m in time. With no delay that answer comes late and the driver drops it (counted late)."""
 
 
 _LOOP_METER = LoopCostMeter()
@@ -105,10 +111,11 @@ class LoopSpinner:
         """Bind to ``executor`` (which holds the node) and its loop ``subscriptions``.
 
         ``latest_only``: subscriptions (among ``subscriptions``) whose callback gets only the
-        newest of the messages queued at a wake-up, the older ones taken and dropped. A
-        controller that fell behind (a realtime loop after a stall) answers the sample the
-        driver waits for now instead of working through samples whose deadlines passed:
-        what it skipped is a gap in its sequence, counted as missed samples.
+        newest :data:`ANSWERED_SAMPLES` of the messages queued at a wake-up, oldest first,
+        the older ones taken and dropped. A controller that fell behind (a realtime loop
+        after a stall) answers the samples the driver can still apply instead of working
+        through samples whose deadlines passed: what it skipped is a gap in its sequence,
+        counted as missed samples.
         ``skipped``: for some of those, a callable that gets each skipped (older) message,
         oldest first, before the callback gets the newest (e.g. to record a sample it will
         not answer).
@@ -159,13 +166,16 @@ class LoopSpinner:
     def _take_all_of(self, sub: Subscription) -> None:
         """Take every queued message of ``sub``; call its callback with each (or the newest)."""
         if sub in self._latest_only:
-            newest, on_skipped = None, self._skipped.get(sub)
+            newest: list[bytes] = []
+            on_skipped = self._skipped.get(sub)
             while (raw := self._take(sub)) is not None:
-                if newest is not None and on_skipped is not None:
-                    on_skipped(newest)
-                newest = raw
-            if newest is not None:
-                sub.callback(newest)
+                if len(newest) == ANSWERED_SAMPLES:
+                    oldest = newest.pop(0)
+                    if on_skipped is not None:
+                        on_skipped(oldest)
+                newest.append(raw)
+            for raw in newest:
+                sub.callback(raw)
             return
         while (raw := self._take(sub)) is not None:
             sub.callback(raw)

@@ -31,9 +31,10 @@ def run_node(name: str, factory: Callable[[], object],
     """Init rclpy, build the node(s), run ``loop`` (default: serve them), exit the process.
 
     The node's 1 kHz subscriptions are those it lists in ``loop_subscriptions`` (those it
-    also lists in ``latest_only_subscriptions`` get only the newest queued message, the
-    older ones going to its ``skipped_message_callbacks`` by subscription, if any); its
-    ``executor`` parameter chooses how they are served (``ros/executors.py``).
+    also lists in ``latest_only_subscriptions`` get only the newest queued messages
+    (``executors.ANSWERED_SAMPLES``), the older ones going to its
+    ``skipped_message_callbacks`` by subscription, if any); its ``executor`` parameter
+    chooses how they are served (``ros/executors.py``).
     ``companions`` are more nodes composed into the same process and thread.
     ``nodes``: the node names whose parameters ``--help`` lists (default: ``name``).
     Never returns: exits 0, 2 (bad parameter, file or argument), or 128 + signal.
