@@ -23,12 +23,16 @@ from hexapod_vibration.cdr import (
     decode_float64_array,
     decode_strut_cdr,
     encode_strut_cdr,
+    encode_vector_cdr,
+    encode_weights_cdr,
     sample_index_of_cdr,
 )
 from hexapod_vibration.contract import MAX_SAMPLE_INDEX, InvalidStrutMessage
 from hexapod_vibration.ros.diagnostics import sample_time
 from hexapod_vibration.ros.messages import (
     make_strut_array,
+    make_vector_array,
+    make_weights_array,
     parse_strut_array,
     parse_strut_sample,
     receive_strut_array,
@@ -268,3 +272,32 @@ def test_the_sample_index_is_found_in_any_dimension():
     assert sample_index_of_cdr(encode_strut_cdr(VALUES, MAX_BAG_SAMPLE_INDEX, RUN)) is None
     assert sample_index_of_cdr(encode_strut_cdr(VALUES, MAX_BAG_SAMPLE_INDEX - 1)) == (
         MAX_BAG_SAMPLE_INDEX - 1)
+
+
+@pytest.mark.parametrize("size", [0, 1, 5, 6, 1200])
+@pytest.mark.parametrize("index, run, label", [(None, None, "frequency_hz"),
+                                               (0, None, "frequency_hz"),
+                                               (12345, RUN, "forecast:sample,strut"),
+                                               (7, 3, "abc"), (None, 3, "ab")])
+def test_encode_vector_cdr_is_what_rclpy_serializes(size, index, run, label):
+    """Every label length (alignment), size, and index/run present or not."""
+    values = np.linspace(-3.0, 7.0, size)
+    _assert_is_rclpy_serialization(encode_vector_cdr(values, index, run, label),
+                                   make_vector_array(values, index, run, label=label))
+
+
+def _assert_is_rclpy_serialization(raw: bytes, msg: Float64MultiArray) -> None:
+    """rclpy reads ``raw`` as ``msg``, and serializes ``msg`` into as many bytes.
+
+    Not byte for byte: rclpy leaves its buffer's old bytes in the alignment padding.
+    """
+    assert deserialize_message(raw, Float64MultiArray) == msg
+    assert len(raw) == len(serialize_message(msg))
+
+
+@pytest.mark.parametrize("tones", [1, 2, 16])
+def test_encode_weights_cdr_is_what_rclpy_serializes(tones):
+    rng = np.random.default_rng(tones)
+    weights = rng.normal(size=(tones, 6)) + 1j * rng.normal(size=(tones, 6))
+    _assert_is_rclpy_serialization(encode_weights_cdr(weights, 40_001),
+                                   make_weights_array(weights, 40_001))

@@ -15,7 +15,7 @@ from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
 from std_msgs.msg import Float64MultiArray
 
-from hexapod_vibration.cdr import clock_cdr
+from hexapod_vibration.cdr import clock_cdr, encode_vector_cdr
 from hexapod_vibration.contract import (
     DISTURBANCE_FREQUENCIES_TOPIC,
     HELD_REPORT_EVERY_SAMPLES,
@@ -27,7 +27,7 @@ from hexapod_vibration.core.loop.command_arbiter import CommandArbiter
 from hexapod_vibration.core.loop.held_log import HeldLog
 from hexapod_vibration.core.model.plant import PlantSample
 from hexapod_vibration.ros.matching import MatchedReaders
-from hexapod_vibration.ros.messages import StrutArrayPublisher, make_vector_array
+from hexapod_vibration.ros.messages import StrutArrayPublisher
 from hexapod_vibration.ros.qos import CLOCK_QOS, HELD_QOS, LOOP_PUBLISHER_QOS
 from hexapod_vibration.ros.rclpy_internals import serialized_publish
 
@@ -54,14 +54,15 @@ class DriverOutputs:
         self._accel = StrutArrayPublisher(arrays["/pph/accel"])
         self._eddy = StrutArrayPublisher(arrays["/pph/eddy"])
         self._force = StrutArrayPublisher(arrays["/pph/actuator_force"])
-        self._reference = arrays[REFERENCE_FREQUENCY_TOPIC]
-        self._frequencies = arrays[DISTURBANCE_FREQUENCIES_TOPIC]
+        self._reference = serialized_publish(arrays[REFERENCE_FREQUENCY_TOPIC])
+        self._frequencies = serialized_publish(arrays[DISTURBANCE_FREQUENCIES_TOPIC])
         self._clock = serialized_publish(self.readers.publisher(node, Clock, "/clock",
                                                                 CLOCK_QOS))
-        self._held = node.create_publisher(Float64MultiArray, NOTCH_HELD_TOPIC, HELD_QOS)
+        self._held = serialized_publish(node.create_publisher(Float64MultiArray,
+                                                              NOTCH_HELD_TOPIC, HELD_QOS))
         self._held_log = HeldLog()
         self._offer: tuple[bytes, bytes, bytes] | None = None
-        self._reference_msg: Float64MultiArray | None = None
+        self._reference_msg: bytes | None = None
 
     def offer(self, n: int, run: int, sensors: PlantSample,
               reference_hz: float | None) -> None:
@@ -69,14 +70,14 @@ class DriverOutputs:
         self._offer = (clock_cdr(n, self.fs), self._accel.encode(sensors.accel_m_s2, n, run),
                        self._eddy.encode(sensors.eddy_m, n, run))
         self._reference_msg = (None if reference_hz is None
-                               else make_vector_array([reference_hz], n, run))
+                               else encode_vector_cdr([reference_hz], n, run))
         self.offer_again()
 
     def offer_again(self) -> None:
         """Publish the current sample's messages again, as they were."""
         clock, accel, eddy = self._offer
         if self._reference_msg is not None:
-            self._reference.publish(self._reference_msg)
+            self._reference(self._reference_msg)
         self._clock(clock)
         self._accel.publish_bytes(accel)
         self._eddy.publish_bytes(eddy)
@@ -87,7 +88,7 @@ class DriverOutputs:
 
     def frequencies(self, frequencies_hz, n: int, run: int) -> None:
         """Publish the true frequency (Hz) of every sounding tone at sample ``n``."""
-        self._frequencies.publish(make_vector_array(frequencies_hz, n, run))
+        self._frequencies(encode_vector_cdr(frequencies_hz, n, run))
 
     def note_held(self, arbiter: CommandArbiter, run: int) -> None:
         """Log the notch command applied now; report the held ones every 100 samples.
@@ -99,4 +100,4 @@ class DriverOutputs:
         log.note(arbiter.due, notch.applied, notch.stale)
         if arbiter.sample % HELD_REPORT_EVERY_SAMPLES == 0 and log.covered >= 0:
             flat = [float(v) for row in log.drain() for v in row]
-            self._held.publish(make_vector_array(flat, log.covered, run, label=HELD_ROWS_LABEL))
+            self._held(encode_vector_cdr(flat, log.covered, run, label=HELD_ROWS_LABEL))

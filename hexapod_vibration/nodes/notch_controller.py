@@ -20,7 +20,12 @@ from rclpy.parameter import Parameter
 from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import Trigger
 
-from hexapod_vibration.cdr import UnsupportedCdr, decode_strut_cdr
+from hexapod_vibration.cdr import (
+    UnsupportedCdr,
+    decode_strut_cdr,
+    encode_vector_cdr,
+    encode_weights_cdr,
+)
 from hexapod_vibration.contract import (
     DIAGNOSTICS_EVERY_SAMPLES,
     DIAGNOSTICS_PHASE_SAMPLES,
@@ -48,8 +53,6 @@ from hexapod_vibration.ros.messages import (
     StrutArrayPublisher,
     create_loop_subscription,
     make_table_array,
-    make_vector_array,
-    make_weights_array,
 )
 from hexapod_vibration.ros.node_runner import run_node
 from hexapod_vibration.ros.parameters import NodeParameters
@@ -59,6 +62,7 @@ from hexapod_vibration.ros.qos import (
     LOOP_PUBLISHER_QOS,
     OBSERVED_LOOP_QOS,
 )
+from hexapod_vibration.ros.rclpy_internals import serialized_publish
 
 WEIGHTS_EVERY_SAMPLES = 10
 """Samples between two /pph/notch_weights messages (100 Hz)."""
@@ -87,10 +91,10 @@ class NotchControllerNode(Node):
                                 NOTCH_FREQUENCIES_TOPIC)}
         self.port = ControllerLoopPort("/pph/accel", accel_range, StrutArrayPublisher(
             arrays["/pph/notch_command"]), self.get_logger(), counts_gaps=False)
-        self._pub_w = arrays["/pph/notch_weights"]
+        self._pub_w = serialized_publish(arrays["/pph/notch_weights"])   # CDR bytes
         self._pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", DIAGNOSTICS_QOS)
         publish_status_periodically(self, self.publish_diagnostics)
-        self._pub_frequencies = arrays[NOTCH_FREQUENCIES_TOPIC]
+        self._pub_frequencies = serialized_publish(arrays[NOTCH_FREQUENCIES_TOPIC])
         self._forecasts = ForecastPublisher(self, NOTCH_FORECAST_TOPIC)  # for late samples
         self._forecast_rows = notch_rows(self.supervisor)
         self._pub_sensitivity = self.create_publisher(
@@ -159,10 +163,10 @@ class NotchControllerNode(Node):
         self._count()
         index = sample.index
         if index % WEIGHTS_EVERY_SAMPLES == 0:
-            self._pub_w.publish(make_weights_array(self.supervisor.canceller.weights, index))
+            self._pub_w(encode_weights_cdr(self.supervisor.canceller.weights, index))
         if index % FREQUENCIES_EVERY_SAMPLES == 0:
-            self._pub_frequencies.publish(make_vector_array(self.supervisor.tone_estimates_hz,
-                                                            index, sample.run))
+            self._pub_frequencies(encode_vector_cdr(self.supervisor.tone_estimates_hz,
+                                                    index, sample.run))
         if index % DIAGNOSTICS_EVERY_SAMPLES == DIAGNOSTICS_PHASE:
             self.publish_diagnostics()
         self._report()

@@ -21,6 +21,7 @@ from rclpy.node import Node
 from rclpy.subscription import Subscription
 from std_msgs.msg import Float64MultiArray
 
+from hexapod_vibration.cdr import encode_vector_cdr
 from hexapod_vibration.contract import (
     FORECAST_EVERY_SAMPLES,
     FORECAST_ROWS_LABEL,
@@ -32,10 +33,10 @@ from hexapod_vibration.core.control.command_forecast import notch_forecast
 from hexapod_vibration.core.control.notch_supervisor import NotchSupervisor
 from hexapod_vibration.ros.messages import (
     create_parsed_subscription,
-    make_vector_array,
     parse_labelled_sample,
 )
 from hexapod_vibration.ros.qos import LOOP_QOS
+from hexapod_vibration.ros.rclpy_internals import serialized_publish
 
 
 class ForecastPublisher:
@@ -44,13 +45,14 @@ class ForecastPublisher:
     def __init__(self, node: Node, topic: str) -> None:
         """Create the publisher (:data:`~hexapod_vibration.ros.qos.LOOP_QOS`)."""
         self._publisher = node.create_publisher(Float64MultiArray, topic, LOOP_QOS)
+        self._publish = serialized_publish(self._publisher)       # CDR bytes
 
     def after(self, index: int, run: int | None, rows: Callable[[int], np.ndarray]) -> None:
         """Sample ``index`` was answered: every 10th, ``rows(FORECAST_SAMPLES)`` (N) after it."""
         if index % FORECAST_EVERY_SAMPLES or not self._publisher.get_subscription_count():
             return
-        self._publisher.publish(make_vector_array(rows(FORECAST_SAMPLES).reshape(-1),
-                                                  index + 1, run, label=FORECAST_ROWS_LABEL))
+        self._publish(encode_vector_cdr(rows(FORECAST_SAMPLES).reshape(-1), index + 1, run,
+                                        label=FORECAST_ROWS_LABEL))
 
 
 def notch_rows(supervisor: NotchSupervisor) -> Callable[[int], np.ndarray]:

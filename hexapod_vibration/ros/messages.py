@@ -39,10 +39,14 @@ from rclpy.subscription import Subscription
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
 from hexapod_vibration.cdr import (
+    Dimension,
     UnsupportedCdr,
     decode_float64_array,
     decode_strut_cdr,
     encode_strut_cdr,
+    vector_layout,
+    weights_data,
+    weights_layout,
 )
 from hexapod_vibration.contract import (
     FREQUENCY_LABEL,
@@ -413,13 +417,14 @@ def make_vector_array(values: np.ndarray | Sequence[float], sample_index: int | 
     1)`` as on the strut topics (each left out when None; a run needs an index).
     """
     flat = np.ascontiguousarray(values, dtype=_FLOAT64).reshape(-1)
-    dims = [MultiArrayDimension(label=label, size=flat.size, stride=flat.size)]
-    if sample_index is not None:
-        dims.append(MultiArrayDimension(label=sample_label(sample_index), size=1, stride=1))
-        if run is not None:
-            dims.append(MultiArrayDimension(label=run_label(run), size=1, stride=1))
+    return _float64_array(flat, vector_layout(flat.size, sample_index, run, label))
+
+
+def _float64_array(flat: np.ndarray, dims: Sequence[Dimension]) -> Float64MultiArray:
+    """The message of float64 ``flat`` with ``dims`` (the layouts of :mod:`..cdr`)."""
     msg = Float64MultiArray()
-    msg.layout.dim = dims
+    msg.layout.dim = [MultiArrayDimension(label=label, size=size, stride=stride)
+                      for label, size, stride in dims]
     msg.data = array.array("d", flat.tobytes())
     return msg
 
@@ -430,14 +435,8 @@ def make_weights_array(weights: np.ndarray, sample_index: int) -> Float64MultiAr
     Layout ``("tone", T), ("strut", C), ("a_b", 2), ("sample:<n>", 1)``; data (a, b) per tone
     and strut (N).
     """
-    tones, struts = weights.shape
-    msg = Float64MultiArray()
-    msg.layout.dim = [MultiArrayDimension(label="tone", size=tones, stride=tones * 2 * struts),
-                      MultiArrayDimension(label="strut", size=struts, stride=2 * struts),
-                      MultiArrayDimension(label="a_b", size=2, stride=2),
-                      MultiArrayDimension(label=sample_label(sample_index), size=1, stride=1)]
-    msg.data = np.stack([weights.real, -weights.imag], axis=-1).ravel().tolist()
-    return msg
+    return _float64_array(np.ascontiguousarray(weights_data(weights), dtype=_FLOAT64),
+                          weights_layout(*weights.shape, sample_index))
 
 
 def parse_vector_sample(msg: Float64MultiArray, length: int | None = None) -> StrutSample:
