@@ -265,7 +265,13 @@ CPU_AFFINITY = ParameterSpec(
     "cpu_affinity", "int[]", [], "CPUs the process's threads may run on (empty: every CPU it "
     "may use); refused at start-up if one is not available to it", low=0, high=1023,
     max_length=1024, distinct=True, read_only=True)
-LOOP_SCHEDULING = (EXECUTOR, REALTIME_PRIORITY, CPU_AFFINITY)
+COMMAND_DELAY = ParameterSpec(
+    "command_delay_samples", "int", 0, "the driver applies the command answering sample n "
+    "over [n+d, n+d+1): a controller has d+1 periods to answer (a realtime pipeline), and "
+    "one behind its loop answers the newest d+1 samples queued (the older ones are past "
+    "their deadline); the same d on the driver and the controllers; the notch's "
+    "loop_delay_samples must grow by d", unit="samples", low=0, high=10, read_only=True)
+LOOP_SCHEDULING = (EXECUTOR, REALTIME_PRIORITY, CPU_AFFINITY, COMMAND_DELAY)
 """The parameters of every 1 kHz node on how its loop is served and scheduled."""
 MODEL_FILE = ParameterSpec(
     "model_file", "string", "", "physical model YAML (empty: the packaged "
@@ -415,10 +421,6 @@ PPH_DRIVER = NodeSpec("pph_driver", summary="the simulated hexapod (plant, senso
     ParameterSpec("command_timeout_samples", "int", 5, "watchdog: a command stream older "
                   "than this many samples (1 ms each) is dropped to zero force",
                   unit="samples", low=1, high=1000),
-    ParameterSpec("command_delay_samples", "int", 0, "the command answering sample n is "
-                  "applied over [n+d, n+d+1): a controller has d+1 periods to answer (a "
-                  "realtime pipeline); the notch's loop_delay_samples must grow by d",
-                  unit="samples", low=0, high=10, read_only=True),
     ParameterSpec("lockstep_timeout_s", "double", 2.0, "lockstep: longest wait for the "
                   "commands of one sample before advancing without them", unit="s",
                   low=0.001, high=10.0),

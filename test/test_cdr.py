@@ -287,7 +287,7 @@ def test_encode_vector_cdr_is_what_rclpy_serializes(size, index, run, label):
 
 
 def _assert_is_rclpy_serialization(raw: bytes, msg: Float64MultiArray) -> None:
-    """rclpy reads ``raw`` as ``msg``, and serializes ``msg`` into as many bytes.
+    """Rclpy reads ``raw`` as ``msg``, and serializes ``msg`` into as many bytes.
 
     Not byte for byte: rclpy leaves its buffer's old bytes in the alignment padding.
     """

@@ -36,7 +36,7 @@ def test_spec_constants_are_the_cores():
     for name, value in vars(NotchConfig()).items():
         expected = list(value) if isinstance(value, tuple) else value
         assert notch[name] == expected, name
-    own = {"executor", "realtime_priority", "cpu_affinity"}        # the loop's scheduling
+    own = {spec.name for spec in specs.LOOP_SCHEDULING}             # the loop's scheduling
     assert set(vars(NotchConfig())) == set(notch) - own
     assert analyze.DEFAULT_WINDOW_S == DEFAULT_WINDOW_S
     from hexapod_vibration.analysis import twin

@@ -53,12 +53,6 @@ One service (an executor ``spin_once`` over every entity of the process's nodes)
 answered within 50 ms."""
 IDLE_SPIN_S = 0.01
 """Longest single wait (s) of a node's main loop, so shutdown is noticed promptly."""
-ANSWERED_SAMPLES = 2
-"""Of the messages a ``latest_only`` subscription has queued at a wake-up, how many its
-callback gets (the newest, oldest first); the older ones are skipped. A realtime driver
-with ``command_delay_samples`` 1 (the experiment's pipeline) applies the answer to sample
-m only when it steps m + 1: a controller that wakes with m and m + 1 queued still answers
-m in time. With no delay that answer comes late and the driver drops it (counted late)."""
 
 
 _LOOP_METER = LoopCostMeter()
@@ -106,16 +100,19 @@ class LoopSpinner:
     def __init__(self, executor: Executor, subscriptions: Sequence[Subscription],
                  fast: bool, service_period_s: float = SERVICE_PERIOD_S,
                  latest_only: Sequence[Subscription] = (),
-                 skipped: Mapping[Subscription, Callable[[bytes], None]] | None = None
-                 ) -> None:
+                 skipped: Mapping[Subscription, Callable[[bytes], None]] | None = None,
+                 answered: int = 1) -> None:
         """Bind to ``executor`` (which holds the node) and its loop ``subscriptions``.
 
         ``latest_only``: subscriptions (among ``subscriptions``) whose callback gets only the
-        newest :data:`ANSWERED_SAMPLES` of the messages queued at a wake-up, oldest first,
-        the older ones taken and dropped. A controller that fell behind (a realtime loop
-        after a stall) answers the samples the driver can still apply instead of working
-        through samples whose deadlines passed: what it skipped is a gap in its sequence,
-        counted as missed samples.
+        newest ``answered`` of the messages queued at a wake-up, oldest first, the older
+        ones taken and dropped. A controller that fell behind (a realtime loop after a
+        stall) answers the samples the driver can still apply instead of working through
+        samples whose deadlines passed: what it skipped is a gap in its sequence, counted
+        as missed samples. A driver with ``command_delay_samples`` d applies the answer to
+        sample m when it steps m + d: while m + d is the newest sample published, m is
+        still in time, so a controller answers d + 1 (the node's own
+        ``command_delay_samples`` + 1, :func:`~hexapod_vibration.ros.node_runner.run_node`).
         ``skipped``: for some of those, a callable that gets each skipped (older) message,
         oldest first, before the callback gets the newest (e.g. to record a sample it will
         not answer).
@@ -124,6 +121,7 @@ class LoopSpinner:
         self.subscriptions = list(subscriptions)
         self._latest_only = frozenset(latest_only)
         self._skipped = dict(skipped or {})
+        self._answered = max(int(answered), 1)
         self.fast = fast and bool(self.subscriptions) and fast_path()
         self.service_period_s = service_period_s
         self.meter = loop_meter()
@@ -169,7 +167,7 @@ class LoopSpinner:
             newest: list[bytes] = []
             on_skipped = self._skipped.get(sub)
             while (raw := self._take(sub)) is not None:
-                if len(newest) == ANSWERED_SAMPLES:
+                if len(newest) == self._answered:
                     oldest = newest.pop(0)
                     if on_skipped is not None:
                         on_skipped(oldest)

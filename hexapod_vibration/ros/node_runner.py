@@ -31,8 +31,8 @@ def run_node(name: str, factory: Callable[[], object],
     """Init rclpy, build the node(s), run ``loop`` (default: serve them), exit the process.
 
     The node's 1 kHz subscriptions are those it lists in ``loop_subscriptions`` (those it
-    also lists in ``latest_only_subscriptions`` get only the newest queued messages
-    (``executors.ANSWERED_SAMPLES``), the older ones going to its
+    also lists in ``latest_only_subscriptions`` get only the newest ``d + 1`` queued
+    messages, ``d`` its ``command_delay_samples``, the older ones going to its
     ``skipped_message_callbacks`` by subscription, if any); its ``executor`` parameter
     chooses how they are served (``ros/executors.py``).
     ``companions`` are more nodes composed into the same process and thread.
@@ -84,7 +84,8 @@ def _run(name: str, factory, loop, args, companions) -> int:
             for node in built:
                 executor.add_node(node)
             spinner = LoopSpinner(executor, subscriptions, fast=executor_name == "waitset",
-                                  latest_only=latest, skipped=skipped)
+                                  latest_only=latest, skipped=skipped,
+                                  answered=_command_delay(built[0]) + 1)
         _schedule(built[0], apply_scheduling)
         # One BLAS thread: a node's computation (an identification's analysis) must not
         # spread over the cores the loop runs on; under SCHED_FIFO, OpenBLAS's spinning
@@ -108,6 +109,13 @@ def _run(name: str, factory, loop, args, companions) -> int:
     if code == cli.EXIT_OK and cli.stop_requested() is not None:
         code = cli.interrupted_exit_code()
     return code
+
+
+def _command_delay(node) -> int:
+    """The node's ``command_delay_samples`` (0 if it has none: not a 1 kHz loop node)."""
+    if not node.has_parameter("command_delay_samples"):
+        return 0
+    return int(node.get_parameter("command_delay_samples").value)
 
 
 def _schedule(node, apply_scheduling) -> None:

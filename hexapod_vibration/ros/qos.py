@@ -58,8 +58,8 @@ OBSERVED_LOOP_QOS = QoSProfile(
 )
 """The notch controller's ``/pph/accel``: as LOOP_QOS, but 1000 deep.
 
-The controller answers only the newest two samples queued (``executors.ANSWERED_SAMPLES``)
-and records the older ones into a running identification (a latest-only loop subscription
+The controller answers only the newest ``command_delay_samples`` + 1 samples queued and
+records the older ones into a running identification (a latest-only loop subscription
 with a skipped-message callback), so depth costs no latency, and a stall of up to 1 s
 costs the identification no sample. At 10 deep every sample beyond the tenth of a stall
 was lost: 535 of 41 123 samples in one realtime run, which the identification can only

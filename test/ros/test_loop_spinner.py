@@ -14,7 +14,7 @@ from rclpy.parameter import Parameter
 from rclpy.serialization import deserialize_message
 from std_msgs.msg import Float64MultiArray, String
 
-from hexapod_vibration.ros.executors import ANSWERED_SAMPLES, LoopSpinner
+from hexapod_vibration.ros.executors import LoopSpinner
 from hexapod_vibration.ros.messages import (
     StrutArrayPublisher,
     make_strut_array,
@@ -141,17 +141,18 @@ def test_strut_array_publisher_rejects_bad_input_and_sends_nothing(ros_context, 
     assert graph.loop_msgs[0][1] == 5
 
 
-def test_a_latest_only_subscription_gets_the_newest_queued_samples(ros_context):
-    """The newest ANSWERED_SAMPLES (2) of those queued, oldest first; the rest dropped."""
+@pytest.mark.parametrize("answered", [1, 2, 3])
+def test_a_latest_only_subscription_gets_the_newest_queued_samples(ros_context, answered):
+    """The newest ``answered`` of those queued (command delay + 1), oldest first."""
     graph = Graph(ros_context)
     spinner = LoopSpinner(ros_context.executor, [graph.loop_sub], True, 10.0,
-                          latest_only=[graph.loop_sub])
+                          latest_only=[graph.loop_sub], answered=answered)
     graph.connect(spinner)
     for n in range(1, 6):                   # queued while the listener is not served
         graph.loop_pub.publish(np.full(6, float(n)), n)
     assert graph.spin_until(spinner, lambda: graph.loop_msgs and graph.loop_msgs[-1][1] == 5)
     indices = [index for _, index in graph.loop_msgs]
-    assert ANSWERED_SAMPLES == 2 and indices == [4, 5], indices
+    assert indices == list(range(6 - answered, 6)), indices
     np.testing.assert_array_equal(graph.loop_msgs[-1][0], np.full(6, 5.0))
 
 
@@ -160,7 +161,7 @@ def test_the_samples_a_latest_only_subscription_skips_go_to_its_skipped_callback
     skipped: list[int] = []
     spinner = LoopSpinner(
         ros_context.executor, [graph.loop_sub], True, 10.0, latest_only=[graph.loop_sub],
-        skipped={graph.loop_sub: lambda raw: skipped.append(
+        answered=2, skipped={graph.loop_sub: lambda raw: skipped.append(
             receive_strut_array(raw, graph.listener.get_logger(), "/spin/loop")[1])})
     graph.connect(spinner)
     skipped.clear()

@@ -119,7 +119,8 @@ def test_a_realtime_experiment_pipelines_the_commands_and_the_notch_knows_it():
     base = NOTCH_CONTROLLER["loop_delay_samples"].default
     realtime = {n: p["ros__parameters"] for n, p in node_parameters(scenario, "realtime").items()}
     assert REALTIME_COMMAND_DELAY_SAMPLES >= 1
-    assert realtime["pph_driver"]["command_delay_samples"] == REALTIME_COMMAND_DELAY_SAMPLES
+    for node in ("pph_driver", "notch_controller", "pointing_controller"):
+        assert realtime[node]["command_delay_samples"] == REALTIME_COMMAND_DELAY_SAMPLES
     assert realtime["notch_controller"]["loop_delay_samples"] == \
         base + REALTIME_COMMAND_DELAY_SAMPLES
     lockstep = {n: p["ros__parameters"] for n, p in node_parameters(scenario, "lockstep").items()}
