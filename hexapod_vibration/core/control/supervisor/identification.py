@@ -180,19 +180,15 @@ class PlantIdentification:
         """New tones or mode: identify what they need; stop an identification they do not.
 
         Known tones (or no tones) need none: a running one stops, bumplessly (an analysis
-        in progress too, :meth:`_abandon_analysis`); nor does ``raw``, but one running at
-        its tones goes on, for the bound it gives (P = I diverges where G's phase is
-        beyond +-90 degrees, and nothing else would say so). Otherwise a new mode
-        freezes the weights (a normalised mode must not adapt with another mode's P); a
-        broadband identification, running or waiting for its analysis, goes on for the new
-        tones (its G(f) covers 0..fs/2); else, with ``auto_identify``, the new tones are
+        in progress too, :meth:`_abandon_analysis`). Unknown tones do, in every mode:
+        ``raw`` too, as at start-up, for the bound (P = I diverges where G's phase is
+        beyond +-90 degrees, and nothing else would say so). A new mode freezes the
+        weights (a normalised mode must not adapt with another mode's P); a broadband
+        identification, running or waiting for its analysis, goes on for the new tones
+        (its G(f) covers 0..fs/2); else, with ``auto_identify``, the new tones are
         identified from the next sample (unless they are being identified already).
         """
-        measuring = self.identifier is not None and (
-            np.array_equal(self.tones, plan.tones)
-            or isinstance(self.identifier, BroadbandIdentifier))
-        if plan.response is not None or not plan.tones or (plan.mode == "raw"
-                                                            and not measuring):
+        if plan.response is not None or not plan.tones:
             analysed = self._abandon_analysis("the tones or the adaptation changed")
             if self.identifier is not None or analysed:
                 self._events.add("info", "identification no longer needed: stopped")
