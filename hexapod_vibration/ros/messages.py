@@ -435,8 +435,7 @@ def make_weights_array(weights: np.ndarray, sample_index: int) -> Float64MultiAr
     Layout ``("tone", T), ("strut", C), ("a_b", 2), ("sample:<n>", 1)``; data (a, b) per tone
     and strut (N).
     """
-    return _float64_array(np.ascontiguousarray(weights_data(weights), dtype=_FLOAT64),
-                          weights_layout(*weights.shape, sample_index))
+    return _float64_array(weights_data(weights), weights_layout(*weights.shape, sample_index))
 
 
 def parse_vector_sample(msg: Float64MultiArray, length: int | None = None) -> StrutSample:

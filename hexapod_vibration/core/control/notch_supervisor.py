@@ -48,15 +48,14 @@ from hexapod_vibration.core.control.supervisor.fader import OutputFader
 from hexapod_vibration.core.control.supervisor.gate import ControlGate
 from hexapod_vibration.core.control.supervisor.identification import PlantIdentification
 from hexapod_vibration.core.control.supervisor.planning import (
-    Plan,
     bank_frequencies,
-    plan_changes,
 )
 from hexapod_vibration.core.control.supervisor.plant_knowledge import PlantKnowledge
 from hexapod_vibration.core.control.supervisor.rate_policy import RatePolicy
 from hexapod_vibration.core.control.supervisor.safety import SafetyMonitor
 from hexapod_vibration.core.control.supervisor.sample_clock import GapReport, SampleClock
-from hexapod_vibration.core.control.supervisor.tone_follower import FOLLOW_SETTINGS, ToneFollower
+from hexapod_vibration.core.control.supervisor.settings_change import SettingsChange
+from hexapod_vibration.core.control.supervisor.tone_follower import ToneFollower
 
 __all__ = ["NotchConfig", "NotchSupervisor", "SupervisorEvent"]
 
@@ -120,9 +119,12 @@ class NotchSupervisor:
             settings, canceller, self._clock, self._plant, self._rates, self._gate,
             self.safety, self.follower, events)
         """The plant's identification (running, its span)."""
+        self._changes = SettingsChange(settings, canceller, self._clock, self._plant,
+                                       self._rates, self._gate, self.safety, self.follower,
+                                       self.identification)
         first = {"mu": config.mu, "tone_frequencies_hz": list(config.tone_frequencies_hz),
                  "adaptation": config.adaptation, "harmonics": config.harmonics}
-        self._rates.bound = self._plan(first).bound
+        self._rates.bound = self._changes.plan(first).bound
         self.follower.rebuild()
         if config.adaptation == "raw" or not config.auto_identify:
             canceller.set_enabled(config.enabled, ramp_samples=0)
@@ -138,49 +140,15 @@ class NotchSupervisor:
 
         Raises KeyError (not a notch setting) or ValueError (the reason, one line).
         """
-        self._plan(changes)
-
-    def _plan(self, changes: Mapping[str, Any]) -> Plan:
-        return plan_changes(self._settings, changes, self.canceller.mu, self._plant,
-                            self._rates)
+        self._changes.plan(changes)
 
     def apply(self, changes: Mapping[str, Any]) -> None:
-        """Apply a set of changes that :meth:`check` accepted.
+        """Apply a set of changes that :meth:`check` accepted (:class:`SettingsChange`).
 
         Raises:
             KeyError, ValueError: refused (nothing changed), as :meth:`check` would say.
         """
-        plan = self._plan(changes)
-        canceller, settings = self.canceller, self._settings
-        settings.config = plan.config
-        # The node mirrors a mu the supervisor lowered into its ROS parameter, which comes
-        # back here: only a different mu is the user's new choice.
-        new_mu = "mu" in changes and float(changes["mu"]) != canceller.mu
-        if "mu" in changes:
-            canceller.set_mu(changes["mu"])
-        tones_changed = "tone_frequencies_hz" in changes or "harmonics" in changes
-        mode_changed = "adaptation" in changes
-        self.safety.apply(changes, plan.tones if tones_changed else None)
-        if tones_changed or mode_changed or new_mu:
-            self.safety.retry(self.identification.busy)
-        if tones_changed:
-            canceller.set_tone_frequencies(plan.tones, coefficients=plan.coefficients,
-                                           ramp_samples=settings.ramp_samples)
-        elif mode_changed and plan.coefficients is not None:
-            canceller.set_coefficients(plan.coefficients)
-        if (tones_changed or mode_changed) and plan.response is not None:
-            self._rates.defer(plan.coefficients)       # the policy chooses again, below
-        self._plant.put_in_force(plan.response, plan.tones)
-        self._rates.bound = plan.bound
-        if "enabled" in changes:
-            self._gate.switch(bool(changes["enabled"]), self.identification.busy,
-                              self._clock.last + 1)
-        if tones_changed or mode_changed:
-            self.identification.retarget(plan, mode_changed)
-        if tones_changed or any(name in changes for name in FOLLOW_SETTINGS):
-            self.follower.rebuild()
-        if not self.identification.busy:
-            self._rates.choose_pending()
+        self._changes.apply(changes)
 
     def start_identification(self, tones: list[float] | None = None) -> str:
         """Measure G at ``tones`` (Hz; None: the canceller's) from the next sample, frozen.

@@ -16,13 +16,14 @@ and its output stays as it was.
   :data:`MAX_IDENTIFICATION_UNCERTAINTY` at the tones.
 
 The analysis of a finished identification runs one piece per sample
-(:meth:`PlantIdentification.step`): with G(f) each Nyquist test takes ~0.1 s, and the
+(:meth:`PlantIdentification.step`), ending with what it measured put in force
+(:class:`~.engagement.ControlEngagement`): with G(f) each Nyquist test takes ~0.1 s, and the
 lockstep driver waits at most ``lockstep_timeout_s`` for a sample's command.
 """
 
 from __future__ import annotations
 
-from collections.abc import Generator, Iterator
+from collections.abc import Iterator
 from dataclasses import dataclass
 
 import numpy as np
@@ -36,6 +37,7 @@ from hexapod_vibration.core.control.held_inputs import (
 from hexapod_vibration.core.control.notch import AdaptiveNotchCanceller
 from hexapod_vibration.core.control.plant_identification import BroadbandIdentifier
 from hexapod_vibration.core.control.supervisor.config import Settings
+from hexapod_vibration.core.control.supervisor.engagement import ControlEngagement
 from hexapod_vibration.core.control.supervisor.events import EventLog
 from hexapod_vibration.core.control.supervisor.gate import ControlGate
 from hexapod_vibration.core.control.supervisor.planning import Plan
@@ -87,6 +89,8 @@ class PlantIdentification:
         self._settings, self._canceller, self._clock = settings, canceller, clock
         self._plant, self._rates, self._gate = plant, rates, gate
         self._safety, self._follower, self._events = safety, follower, events
+        self._engagement = ControlEngagement(settings, canceller, clock, plant, rates, gate,
+                                             safety, follower, events)
         self.identifier: adaptation.ToneResponseIdentifier | BroadbandIdentifier | None = None
         """The identification injecting its excitation, None: none."""
         self.tones: list[float] = []
@@ -304,7 +308,7 @@ class PlantIdentification:
         self._plant.lines_hz = np.array([line.frequency_hz for line in lines])
         if broadband and self._follower.acquires:
             self._follower.acquire(lines)
-        yield from self._put_in_force(measured.response, broadband)
+        yield from self._engagement.engage(self.tones, measured.response, broadband)
 
     def _correct_for_held_commands(self) -> Iterator[None]:
         """Wait for the driver's report on the run's last sample; tell the identifier.
@@ -329,46 +333,3 @@ class PlantIdentification:
             "samples did not come)"
         self._events.add("info", f"identification: the driver held {held} of its "
                                  f"{total} commands; G corrected for them{complete}")
-
-    def _put_in_force(self, response: np.ndarray, broadband: bool
-                      ) -> Generator[None, None, None]:
-        """Coefficients and bound at the oscillators; control on, or refused with why."""
-        canceller, rates = self._canceller, self._rates
-        tones = [float(f) for f in canceller.tone_frequencies_hz]
-        mode = self._settings.config.adaptation
-        current = response if tones == self.tones else self._plant.known_response(tones)
-        try:
-            if current is None:
-                raise ValueError(f"no identified response at {tones} Hz")
-            if broadband:
-                coefficients = adaptation.normalized_coefficients(current, mode)
-            else:
-                coefficients, bound = rates.coefficients_for(tones, current, mode)
-        except ValueError as exc:
-            self._gate.refuse(f"identification unusable for {mode}: {exc}; not adapting")
-            return
-        if broadband:
-            bound = yield from rates.limit_steps(tones, coefficients)
-        self._plant.put_in_force(current, tones)
-        rates.bound = rates.mu_limit = bound
-        canceller.set_coefficients(coefficients)
-        gains = np.abs(np.diagonal(current, axis1=1, axis2=2)).mean(axis=1)
-        source = "Nyquist on G(f)" if broadband else "eq. 18"
-        self._events.add("info", f"identified: |G_ii| {np.round(gains, 4)} (m/s^2)/N, "
-                                 f"confidence {self._plant.confidence:.3f}, mu bound "
-                                 f"{bound:.4g} ({source})")
-        if bound <= 0.0:
-            rates.clamp(0.0)
-            self._gate.refuse(f"identified mu bound is 0 ({mode} adaptation at {tones} Hz): "
-                              "no stable rate, control stays off")
-            return
-        self._gate.release()
-        rates.clamp(bound)
-        if broadband:
-            yield
-            rates.choose(tones, coefficients)
-            yield from rates.check_type2(tones)
-        self._follower.limit_bandwidth()
-        self._safety.restart()
-        self._gate.resume()
-        self._gate.started(self._clock.last + 1)

@@ -218,6 +218,7 @@ class RatePolicy:
         """
         cfg, mu = self._settings.config, self._canceller.mu
         if not mu > 0.0:
+            self._canceller.set_coefficients(coefficients)
             self.defer(coefficients)
             self._events.add("info", "mu is 0: nothing adapts; the mu policy chooses the "
                                      "tones' rates once mu is set above 0")
@@ -244,10 +245,9 @@ class RatePolicy:
                          f"{choice.predicted_rise_db:.2f} dB at {choice.rise_at_hz:.2f} Hz")
 
     def defer(self, coefficients: np.ndarray) -> None:
-        """Normalised P (T, C, C) in force as it is; the policy's choice made later."""
+        """Normalised P (T, C, C), in force at the canceller: the policy's choice made later."""
         self.choice = self.sensitivity = None
         self.unchosen = np.array(coefficients, dtype=complex)
-        self._canceller.set_coefficients(self.unchosen)
 
     def choose_pending(self) -> None:
         """The policy's choice for a P put in force without one, once it can be made.

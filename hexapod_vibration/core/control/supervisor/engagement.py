@@ -1,0 +1,87 @@
+"""After an accepted identification: P and the bound at the oscillators, control on or refused.
+
+:class:`ControlEngagement` puts what an identification measured in force, one piece per
+sample (a generator driven by :class:`~.identification.PlantIdentification`): the
+coefficients P of the adaptation mode at the oscillators' tones (from the measured G, or
+from what is known at tones that moved meanwhile), the bound on ``mu`` (eq. 18 after a tone
+identification; the Nyquist test on G(f), one test per piece, after a broadband one), the
+clamp, and, after a broadband identification, the mu policy and the type-2 test. A response
+unusable for the mode, or a bound of 0, refuses control with the reason.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Generator
+
+import numpy as np
+
+from hexapod_vibration.core.control import adaptation
+from hexapod_vibration.core.control.notch import AdaptiveNotchCanceller
+from hexapod_vibration.core.control.supervisor.config import Settings
+from hexapod_vibration.core.control.supervisor.events import EventLog
+from hexapod_vibration.core.control.supervisor.gate import ControlGate
+from hexapod_vibration.core.control.supervisor.plant_knowledge import PlantKnowledge
+from hexapod_vibration.core.control.supervisor.rate_policy import RatePolicy
+from hexapod_vibration.core.control.supervisor.safety import SafetyMonitor
+from hexapod_vibration.core.control.supervisor.sample_clock import SampleClock
+from hexapod_vibration.core.control.supervisor.tone_follower import ToneFollower
+
+
+class ControlEngagement:
+    """Puts a measured plant response in force at the oscillators (see the module)."""
+
+    def __init__(self, settings: Settings, canceller: AdaptiveNotchCanceller,
+                 clock: SampleClock, plant: PlantKnowledge, rates: RatePolicy,
+                 gate: ControlGate, safety: SafetyMonitor, follower: ToneFollower,
+                 events: EventLog) -> None:
+        """The supervisor's collaborators it acts through."""
+        self._settings, self._canceller, self._clock = settings, canceller, clock
+        self._plant, self._rates, self._gate = plant, rates, gate
+        self._safety, self._follower, self._events = safety, follower, events
+
+    def engage(self, measured_tones: list[float], response: np.ndarray, broadband: bool
+               ) -> Generator[None, None, None]:
+        """Coefficients and bound at the oscillators; control on, or refused with why.
+
+        ``response``: G (T, C, C) measured at ``measured_tones`` (Hz); the oscillators'
+        tones now may differ (then what is known at them is used).
+        """
+        canceller, rates = self._canceller, self._rates
+        tones = [float(f) for f in canceller.tone_frequencies_hz]
+        mode = self._settings.config.adaptation
+        current = response if tones == measured_tones else self._plant.known_response(tones)
+        try:
+            if current is None:
+                raise ValueError(f"no identified response at {tones} Hz")
+            if broadband:
+                coefficients = adaptation.normalized_coefficients(current, mode)
+            else:
+                coefficients, bound = rates.coefficients_for(tones, current, mode)
+        except ValueError as exc:
+            self._gate.refuse(f"identification unusable for {mode}: {exc}; not adapting")
+            return
+        if broadband:
+            bound = yield from rates.limit_steps(tones, coefficients)
+        self._plant.put_in_force(current, tones)
+        rates.bound = rates.mu_limit = bound
+        canceller.set_coefficients(coefficients)
+        gains = np.abs(np.diagonal(current, axis1=1, axis2=2)).mean(axis=1)
+        source = "Nyquist on G(f)" if broadband else "eq. 18"
+        self._events.add("info", f"identified: |G_ii| {np.round(gains, 4)} (m/s^2)/N, "
+                                 f"confidence {self._plant.confidence:.3f}, mu bound "
+                                 f"{bound:.4g} ({source})")
+        if bound <= 0.0:
+            rates.clamp(0.0)
+            self._gate.refuse(f"identified mu bound is 0 ({mode} adaptation at {tones} Hz): "
+                              "no stable rate, control stays off")
+            return
+        self._gate.release()
+        rates.clamp(bound)
+        if broadband:
+            yield
+            rates.choose(tones, coefficients)
+            yield from rates.check_type2(tones)
+        self._follower.limit_bandwidth()
+        self._safety.restart()
+        self._gate.resume()
+        self._gate.started(self._clock.last + 1)
