@@ -47,6 +47,7 @@ from hexapod_vibration.core.control.supervisor.events import EventLog, Superviso
 from hexapod_vibration.core.control.supervisor.fader import OutputFader
 from hexapod_vibration.core.control.supervisor.gate import ControlGate
 from hexapod_vibration.core.control.supervisor.identification import PlantIdentification
+from hexapod_vibration.core.control.supervisor.parts import SupervisorParts
 from hexapod_vibration.core.control.supervisor.planning import (
     bank_frequencies,
 )
@@ -115,13 +116,11 @@ class NotchSupervisor:
         self.follower = ToneFollower(settings, canceller, self.safety.guard, self._plant,
                                      self._rates, events)
         """The moving tones (reference, tracking, acquisition)."""
-        self.identification = PlantIdentification(
-            settings, canceller, self._clock, self._plant, self._rates, self._gate,
-            self.safety, self.follower, events)
+        parts = SupervisorParts(settings, canceller, self._clock, self._plant, self._rates,
+                                self._gate, self.safety, self.follower, events)
+        self.identification = PlantIdentification(parts)
         """The plant's identification (running, its span)."""
-        self._changes = SettingsChange(settings, canceller, self._clock, self._plant,
-                                       self._rates, self._gate, self.safety, self.follower,
-                                       self.identification)
+        self._changes = SettingsChange(parts, self.identification)
         first = {"mu": config.mu, "tone_frequencies_hz": list(config.tone_frequencies_hz),
                  "adaptation": config.adaptation, "harmonics": config.harmonics}
         self._rates.bound = self._changes.plan(first).bound

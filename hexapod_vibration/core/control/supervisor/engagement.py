@@ -16,28 +16,15 @@ from collections.abc import Generator
 import numpy as np
 
 from hexapod_vibration.core.control import adaptation
-from hexapod_vibration.core.control.notch import AdaptiveNotchCanceller
-from hexapod_vibration.core.control.supervisor.config import Settings
-from hexapod_vibration.core.control.supervisor.events import EventLog
-from hexapod_vibration.core.control.supervisor.gate import ControlGate
-from hexapod_vibration.core.control.supervisor.plant_knowledge import PlantKnowledge
-from hexapod_vibration.core.control.supervisor.rate_policy import RatePolicy
-from hexapod_vibration.core.control.supervisor.safety import SafetyMonitor
-from hexapod_vibration.core.control.supervisor.sample_clock import SampleClock
-from hexapod_vibration.core.control.supervisor.tone_follower import ToneFollower
+from hexapod_vibration.core.control.supervisor.parts import SupervisorParts
 
 
 class ControlEngagement:
     """Puts a measured plant response in force at the oscillators (see the module)."""
 
-    def __init__(self, settings: Settings, canceller: AdaptiveNotchCanceller,
-                 clock: SampleClock, plant: PlantKnowledge, rates: RatePolicy,
-                 gate: ControlGate, safety: SafetyMonitor, follower: ToneFollower,
-                 events: EventLog) -> None:
+    def __init__(self, parts: SupervisorParts) -> None:
         """The supervisor's collaborators it acts through."""
-        self._settings, self._canceller, self._clock = settings, canceller, clock
-        self._plant, self._rates, self._gate = plant, rates, gate
-        self._safety, self._follower, self._events = safety, follower, events
+        self._parts = parts
 
     def engage(self, measured_tones: list[float], response: np.ndarray, broadband: bool
                ) -> Generator[None, None, None]:
@@ -46,10 +33,11 @@ class ControlEngagement:
         ``response``: G (T, C, C) measured at ``measured_tones`` (Hz); the oscillators'
         tones now may differ (then what is known at them is used).
         """
-        canceller, rates = self._canceller, self._rates
+        parts = self._parts
+        canceller, rates, plant, gate = parts.canceller, parts.rates, parts.plant, parts.gate
         tones = [float(f) for f in canceller.tone_frequencies_hz]
-        mode = self._settings.config.adaptation
-        current = response if tones == measured_tones else self._plant.known_response(tones)
+        mode = parts.settings.config.adaptation
+        current = response if tones == measured_tones else plant.known_response(tones)
         try:
             if current is None:
                 raise ValueError(f"no identified response at {tones} Hz")
@@ -58,30 +46,30 @@ class ControlEngagement:
             else:
                 coefficients, bound = rates.coefficients_for(tones, current, mode)
         except ValueError as exc:
-            self._gate.refuse(f"identification unusable for {mode}: {exc}; not adapting")
+            gate.refuse(f"identification unusable for {mode}: {exc}; not adapting")
             return
         if broadband:
             bound = yield from rates.limit_steps(tones, coefficients)
-        self._plant.put_in_force(current, tones)
+        plant.put_in_force(current, tones)
         rates.bound = rates.mu_limit = bound
         canceller.set_coefficients(coefficients)
         gains = np.abs(np.diagonal(current, axis1=1, axis2=2)).mean(axis=1)
         source = "Nyquist on G(f)" if broadband else "eq. 18"
-        self._events.add("info", f"identified: |G_ii| {np.round(gains, 4)} (m/s^2)/N, "
-                                 f"confidence {self._plant.confidence:.3f}, mu bound "
+        parts.events.add("info", f"identified: |G_ii| {np.round(gains, 4)} (m/s^2)/N, "
+                                 f"confidence {plant.confidence:.3f}, mu bound "
                                  f"{bound:.4g} ({source})")
         if bound <= 0.0:
             rates.clamp(0.0)
-            self._gate.refuse(f"identified mu bound is 0 ({mode} adaptation at {tones} Hz): "
+            gate.refuse(f"identified mu bound is 0 ({mode} adaptation at {tones} Hz): "
                               "no stable rate, control stays off")
             return
-        self._gate.release()
+        gate.release()
         rates.clamp(bound)
         if broadband:
             yield
             rates.choose(tones, coefficients)
             yield from rates.check_type2(tones)
-        self._follower.limit_bandwidth()
-        self._safety.restart()
-        self._gate.resume()
-        self._gate.started(self._clock.last + 1)
+        parts.follower.limit_bandwidth()
+        parts.safety.restart()
+        gate.resume()
+        gate.started(parts.clock.last + 1)

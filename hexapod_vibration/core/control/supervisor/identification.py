@@ -34,18 +34,10 @@ from hexapod_vibration.core.control.held_inputs import (
     HeldCommands,
     input_difference,
 )
-from hexapod_vibration.core.control.notch import AdaptiveNotchCanceller
 from hexapod_vibration.core.control.plant_identification import BroadbandIdentifier
-from hexapod_vibration.core.control.supervisor.config import Settings
 from hexapod_vibration.core.control.supervisor.engagement import ControlEngagement
-from hexapod_vibration.core.control.supervisor.events import EventLog
-from hexapod_vibration.core.control.supervisor.gate import ControlGate
+from hexapod_vibration.core.control.supervisor.parts import SupervisorParts
 from hexapod_vibration.core.control.supervisor.planning import Plan
-from hexapod_vibration.core.control.supervisor.plant_knowledge import PlantKnowledge
-from hexapod_vibration.core.control.supervisor.rate_policy import RatePolicy
-from hexapod_vibration.core.control.supervisor.safety import SafetyMonitor
-from hexapod_vibration.core.control.supervisor.sample_clock import SampleClock
-from hexapod_vibration.core.control.supervisor.tone_follower import ToneFollower
 
 MAX_IDENTIFICATION_UNCERTAINTY = 0.1
 """An identification whose relative uncertainty at a tone exceeds this is refused (10 %:
@@ -70,27 +62,21 @@ class PlantIdentification:
     """Runs one identification at a time and puts its result in force.
 
     Args:
-        settings: the settings in force.
-        canceller: the canceller (frozen while identifying; its P set after).
-        clock: the samples taken (the span of the identification).
-        plant: where what was found goes.
-        rates: the bound, the clamp, the mu policy.
-        gate: refuses control, or lets it run again.
-        safety: its reference waits for the excitation's decay; restarts after.
-        follower: the tones acquired on the lines found.
-        events: where the identification is reported.
+        parts: the supervisor's collaborators: the canceller frozen while identifying (its P
+            set after), the clock (the identification's span), the plant's knowledge (what
+            was found), the rates, the gate (refuses control or lets it run again), the
+            safety monitor (its reference waits for the excitation's decay), the follower
+            (the tones acquired on the lines found), the event log.
     """
 
-    def __init__(self, settings: Settings, canceller: AdaptiveNotchCanceller,
-                 clock: SampleClock, plant: PlantKnowledge, rates: RatePolicy,
-                 gate: ControlGate, safety: SafetyMonitor, follower: ToneFollower,
-                 events: EventLog) -> None:
+    def __init__(self, parts: SupervisorParts) -> None:
         """None running."""
-        self._settings, self._canceller, self._clock = settings, canceller, clock
-        self._plant, self._rates, self._gate = plant, rates, gate
-        self._safety, self._follower, self._events = safety, follower, events
-        self._engagement = ControlEngagement(settings, canceller, clock, plant, rates, gate,
-                                             safety, follower, events)
+        self._settings, self._canceller, self._clock = (parts.settings, parts.canceller,
+            parts.clock)
+        self._plant, self._rates, self._gate = parts.plant, parts.rates, parts.gate
+        self._safety, self._follower, self._events = (parts.safety, parts.follower,
+            parts.events)
+        self._engagement = ControlEngagement(parts)
         self.identifier: adaptation.ToneResponseIdentifier | BroadbandIdentifier | None = None
         """The identification injecting its excitation, None: none."""
         self.tones: list[float] = []

@@ -12,32 +12,24 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
-from hexapod_vibration.core.control.notch import AdaptiveNotchCanceller
-from hexapod_vibration.core.control.supervisor.config import Settings
-from hexapod_vibration.core.control.supervisor.gate import ControlGate
 from hexapod_vibration.core.control.supervisor.identification import PlantIdentification
+from hexapod_vibration.core.control.supervisor.parts import SupervisorParts
 from hexapod_vibration.core.control.supervisor.planning import Plan, plan_changes
-from hexapod_vibration.core.control.supervisor.plant_knowledge import PlantKnowledge
-from hexapod_vibration.core.control.supervisor.rate_policy import RatePolicy
-from hexapod_vibration.core.control.supervisor.safety import SafetyMonitor
-from hexapod_vibration.core.control.supervisor.sample_clock import SampleClock
 from hexapod_vibration.core.control.supervisor.tone_follower import (
     FOLLOW_SETTINGS,
-    ToneFollower,
 )
 
 
 class SettingsChange:
     """Checks and applies sets of setting changes (see the module)."""
 
-    def __init__(self, settings: Settings, canceller: AdaptiveNotchCanceller,
-                 clock: SampleClock, plant: PlantKnowledge, rates: RatePolicy,
-                 gate: ControlGate, safety: SafetyMonitor, follower: ToneFollower,
-                 identification: PlantIdentification) -> None:
+    def __init__(self, parts: SupervisorParts, identification: PlantIdentification) -> None:
         """The supervisor's collaborators the changes act through."""
-        self._settings, self._canceller, self._clock = settings, canceller, clock
-        self._plant, self._rates, self._gate = plant, rates, gate
-        self._safety, self._follower, self._identification = safety, follower, identification
+        self._settings, self._canceller, self._clock = (parts.settings, parts.canceller,
+            parts.clock)
+        self._plant, self._rates, self._gate = parts.plant, parts.rates, parts.gate
+        self._safety, self._follower = parts.safety, parts.follower
+        self._identification = identification
 
     def plan(self, changes: Mapping[str, Any]) -> Plan:
         """What ``changes`` lead to, checked as a whole; nothing changed.
