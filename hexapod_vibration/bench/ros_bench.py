@@ -27,6 +27,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from hexapod_vibration.bench.message_floor import floor_markdown, measure_floor
 from hexapod_vibration.bench.node_budget import (
     BUDGET_SETUPS,
     budget_summary_markdown,
@@ -202,6 +203,7 @@ def ros_loop_benchmark(out_dir: Path, quick: bool) -> dict[str, Any]:
     return {"realtime": best["realtime"],
             "lockstep_speedup": best["lockstep"].get("speedup"),
             "loops": loops, "budget": measure_budget(out, quick),
+            "floor": measure_floor(out, quick),
             "ros_domain_id": int(os.environ["ROS_DOMAIN_ID"])}
 
 
@@ -251,6 +253,11 @@ def ros_summary_markdown(results: dict[str, Any]) -> str:
         for key in (BUDGET_SETUPS[0].key, BUDGET_SETUPS[1].key):
             rows += ["", f"Where the main threads' time goes, {key} (each node's meter, last "
                      "1000 samples):", "", stages_markdown(budget, key)]
+    floor = results.get("floor")
+    if floor:
+        rows += ["", "### The message path alone (bench/floor_nodes.py: the same four "
+                 "processes, topics, QoS, wait sets and codec, nothing computed; each "
+                 "process's CPU per sample after the warm-up)", "", floor_markdown(floor)]
     return "\n".join(rows)
 
 

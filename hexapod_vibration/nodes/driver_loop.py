@@ -169,20 +169,29 @@ def run_realtime(node: PPHDriver, spinner: LoopSpinner) -> None:
         node.apply_and_step()
 
 
-FLUSH_S = 2.0
-"""Longest wait (s, wall) at exit for the readers to acknowledge every sample published."""
+FLUSH_S = 5.0
+"""Longest wait (s, wall) at exit for the readers to acknowledge every sample published.
+
+Longer than Fast DDS's heartbeat period (3 s by default): a sample lost on its way to a
+starved reader (a recorder on a loaded machine) is only sent again after the writer's next
+heartbeat, so a shorter wait (it was 2 s) let a realtime run's bag lose its last 185 ms."""
 
 
 def run_driver(node: PPHDriver, spinner: LoopSpinner) -> None:
     """Run the loop of the driver's ``clock_mode`` until shutdown, then report once more.
 
     At exit every published sample is delivered first (at most ``FLUSH_S``): a recorder
-    behind a realtime loop had lost the last 0.6 s of a run when the driver exited.
+    behind a realtime loop had lost the last 0.6 s of a run when the driver exited. A topic
+    still unacknowledged then is logged (its readers may lack the run's last samples).
     """
     node.restart_stats()
     try:
         (run_lockstep if node.mode == "lockstep" else run_realtime)(node, spinner)
     finally:
         if rclpy.ok():
-            node.outputs.readers.wait_for_acks(FLUSH_S)
+            unacknowledged = node.outputs.readers.wait_for_acks(FLUSH_S)
+            if unacknowledged:
+                node.get_logger().warning(
+                    f"exit: {', '.join(unacknowledged)} not acknowledged by every reader "
+                    f"within {FLUSH_S:.0f} s: a reader may lack the last samples")
             node.publish_diagnostics()

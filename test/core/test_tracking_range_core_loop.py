@@ -16,7 +16,8 @@ rises by 1 dB.
   identification is refused (uncertainty at the tone 190 %: the line sweeps through it).
   (41.9 Hz, 0.1 Hz inside the range, is not here: +1.29 dB in the 100 Hz band over the
   window from 1 s after control-on, the pull-in of a tracker that steps its frequency
-  once per 16-sample block.)
+  once per 16-sample block.) 39.5 and 40.5 Hz, between the lines kept, were dropped for
+  the suite's time (each ~10 s with its twin).
 - The defaults alone: a scenario that sets only the notch's tones (the Table 1 shaker,
   and the 40.4 Hz one of ``mismatch``), and one that sets the tones and
   ``frequency_tracking``.
@@ -78,7 +79,7 @@ def _never_worse_or_refused(scenario: Scenario, line_hz: float,
     return status
 
 
-@pytest.mark.parametrize("line_hz", [39.0, 39.5, 40.4, 40.5, 41.0, 41.5])
+@pytest.mark.parametrize("line_hz", [39.0, 40.4, 41.0, 41.5])
 def test_a_steady_line_within_the_tracking_range_is_cancelled_and_nothing_rises(line_hz):
     status = _never_worse_or_refused(_moved(line_hz), line_hz)
     assert status["state"] == NotchState.ADAPTING                 # each is tracked

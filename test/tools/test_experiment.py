@@ -65,7 +65,8 @@ def test_lockstep_run_records_a_bag_and_reports_the_reduction(ros_env, scenario_
         assert series[topic].duplicate_samples == 0, topic
     # analyze BAG gives exactly the experiment's report (the run record is in the bag)
     analysed = subprocess.run([sys.executable, "-m", "hexapod_vibration.tools.analyze",
-                               str(out / "bag"), "--out", str(tmp_path / "analysed")],
+                               str(out / "bag"), "--out", str(tmp_path / "analysed"),
+                               "--no-plots"],
                               capture_output=True, text=True, timeout=300)
     assert analysed.returncode == 0, analysed.stderr
     assert json.loads((tmp_path / "analysed" / "report.json").read_text()) == report

@@ -1,0 +1,133 @@
+"""The floor of the loop's message path: what four processes cost with nothing computed.
+
+Runs :mod:`hexapod_vibration.bench.floor_nodes` (driver, notch, pointing, recorder, each
+its own process; the real nodes' topics, QoS, wait sets and codec, no computation) in
+lockstep and in realtime, and reports per process the CPU per sample (its own
+``time.process_time`` over the samples after the warm-up), the lockstep speed and the
+realtime late commands. Against the real graph's budget (``node_budget``) it separates what
+the message path costs on this machine from what the nodes compute: the part no change to
+the nodes' computation can remove.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+from typing import Any
+
+from hexapod_vibration.bench.floor_nodes import ROLES
+from hexapod_vibration.tools.processes import Child, spawn_module, stop_all
+
+FLOOR_RUNS = (("lockstep", True, 0, 20000), ("realtime", True, 0, 62000),
+              ("realtime", False, 0, 62000), ("realtime", True, 50, 62000))
+"""(mode, recorder, SCHED_FIFO priority, samples) of every floor run (lockstep about 10 s
+here; realtime 62 s: 60 s after the warm-up)."""
+FLOOR_WARMUP = 2000
+QUICK_SAMPLES = 4000
+
+
+def run_floor(out: Path, mode: str, samples: int, warmup: int = FLOOR_WARMUP,
+              command_delay: int = 2, timeout_s: float = 600.0,
+              env: dict[str, str] | None = None, recorder: bool = True,
+              priority: int = 0) -> dict[str, Any]:
+    """One floor run (``mode``: lockstep or realtime; ``recorder``: with one); its measurements.
+
+    ``priority``: SCHED_FIFO priority of the driver and controllers (0: none), as the nodes'
+    ``realtime_priority`` (the recorder keeps normal scheduling).
+
+    The processes' logs and result files go to ``out``; ``env``: their environment (None:
+    this process's, whose ``ROS_DOMAIN_ID`` they share).
+
+    Returns:
+        ``{"cpu_us_per_sample": {role: us}, "total_us", "samples", "x_real_time",
+        "late_fraction"}`` (the last in realtime only).
+
+    Raises:
+        RuntimeError: a process died or the driver did not finish in ``timeout_s``.
+    """
+    out.mkdir(parents=True, exist_ok=True)
+    roles = [role for role in ROLES if recorder or role != "recorder"]
+    results = {role: out / f"floor_{mode}_{role}.json" for role in roles}
+    for path in results.values():
+        path.unlink(missing_ok=True)
+    common = ["--mode", mode, "--samples", str(samples), "--warmup", str(warmup),
+              "--command-delay", str(command_delay), "--priority", str(priority)]
+    children = {role: spawn_module(f"floor_{mode}_{role}", "hexapod_vibration.bench.floor_nodes",
+                                   [role, *common, "--result", str(results[role])], out,
+                                   env=env)
+                for role in reversed(roles)}
+    try:
+        _wait_for_driver(children, timeout_s)
+    finally:
+        stop_all([child for role, child in children.items() if role != "driver"])
+        stop_all([children["driver"]])
+    measured = {role: _read(path, children[role]) for role, path in results.items()}
+    return floor_summary(measured, mode)
+
+
+def floor_summary(measured: dict[str, dict[str, float]], mode: str) -> dict[str, Any]:
+    """CPU (us) per sample per role, their sum, lockstep speed, realtime late fraction."""
+    per = {role: 1e6 * m["cpu_s"] / m["samples"] for role, m in measured.items()
+           if m["samples"] > 0}
+    driver = measured["driver"]
+    result = {"cpu_us_per_sample": per, "total_us": sum(per.values()),
+              "samples": driver["samples"],
+              "x_real_time": driver["samples"] / driver["wall_s"] / 1000.0
+              if driver["wall_s"] > 0 else None}
+    if mode == "realtime":
+        result["late_fraction"] = driver["late"] / max(driver["samples"], 1)
+    return result
+
+
+def measure_floor(out: Path, quick: bool) -> dict[str, Any]:
+    """Every run of :data:`FLOOR_RUNS`, for results.json (``--quick``: short ones)."""
+    floor = {}
+    for mode, recorder, priority, samples in FLOOR_RUNS:
+        samples = QUICK_SAMPLES if quick else samples
+        key = f"{mode}/{'recorder' if recorder else 'no recorder'}" + (
+            f"/fifo{priority}" if priority else "")
+        print(f"message-path floor: {key}, {samples} samples ...", flush=True)
+        try:
+            floor[key] = run_floor(out, mode, samples, min(FLOOR_WARMUP, samples // 4),
+                                   recorder=recorder, priority=priority)
+        except RuntimeError as exc:
+            floor[key] = {"failed": str(exc)}
+    return floor
+
+
+def floor_markdown(floor: dict[str, Any]) -> str:
+    """The floor table: us of CPU per sample per process, speed, late commands."""
+    rows = ["| message path alone | driver | notch | pointing | recorder | total | "
+            "x real time | late % |", "|---|---:|---:|---:|---:|---:|---:|---:|"]
+    for mode, result in floor.items():
+        if "failed" in result:
+            rows.append(f"| {mode} | failed: {result['failed']} | | | | | | |")
+            continue
+        cpu = result["cpu_us_per_sample"]
+        cells = " | ".join(f"{cpu[role]:.0f}" if role in cpu else "-" for role in ROLES)
+        late = result.get("late_fraction")
+        rows.append(f"| {mode} | {cells} | {result['total_us']:.0f} | "
+                    f"{result['x_real_time']:.2f} | "
+                    f"{'-' if late is None else f'{100 * late:.3f}'} |")
+    return "\n".join(rows)
+
+
+def _wait_for_driver(children: dict[str, Child], timeout_s: float) -> None:
+    """Until the driver process exits (its samples done); any other exit is an error."""
+    end = time.monotonic() + timeout_s
+    while children["driver"].alive():
+        for role, child in children.items():
+            if role != "driver" and not child.alive():
+                raise RuntimeError(f"floor {role} exited: {child.tail()}")
+        if time.monotonic() > end:
+            raise RuntimeError(f"the floor driver did not finish in {timeout_s:.0f} s")
+        time.sleep(0.1)
+
+
+def _read(path: Path, child: Child) -> dict[str, float]:
+    """A floor process's result file."""
+    try:
+        return json.loads(path.read_text())
+    except (OSError, ValueError) as exc:
+        raise RuntimeError(f"{child.name} wrote no result ({exc}): {child.tail()}") from exc
