@@ -19,7 +19,9 @@ floor, :mod:`hexapod_vibration.bench.message_floor`):
 
 Each process measures its own CPU (user + system, all threads: ``time.process_time``)
 from sample ``W`` to the last sample it saw and writes ``{"samples", "cpu_s", "wall_s"}``
-(and the driver ``"late"``) to FILE at SIGINT/SIGTERM or, for the driver, after N samples.
+(and the driver ``"late"`` and the latency percentiles ``"latency_ms_p50"``, ``"_p99"``:
+a sample's first publication to the arrival of its second command) to FILE at SIGINT or
+SIGTERM or, for the driver, after N samples.
 Not computed anywhere: the plant, the control laws, the supervisor, diagnostics, forecasts,
 the held-command reports, the bag (the every-10th-sample weights and forecasts of the real
 controllers are not published either).
@@ -46,6 +48,8 @@ SAMPLE_TOPICS = ("/pph/accel", "/pph/eddy", "/pph/actuator_force")
 COMMAND_TOPICS = {"notch": "/pph/notch_command", "pointing": "/pph/pointing_command"}
 OBSERVED = {"notch": "/pph/accel", "pointing": "/pph/eddy"}
 RUN = 1
+LATENCY_HORIZON = 1000
+"""Samples after which a sample not answered by both controllers leaves the latency table."""
 """The run id of every floor message (one run)."""
 OFFER_AGAIN_S = 0.05
 """Lockstep: wall time (s) after which a sample not answered by both is published again."""
@@ -102,11 +106,17 @@ class FloorDriver:
             for name, topic in COMMAND_TOPICS.items()]
         self.sample = 0
         self.late = 0
+        self.published_s: dict[int, float] = {}
+        """Wall time (s) of each sample's first publication, until both commands came."""
+        self._arrived: dict[int, set[str]] = {}
+        self.latencies_s: list[float] = []
+        """Per sample: first publication to the second of its two commands (s, wall)."""
         self._values = np.zeros(STRUT_COUNT)
 
     def publish(self) -> None:
         """This sample's /clock, sensors, force and tone frequencies (fixed values)."""
         n = self.sample
+        self.published_s.setdefault(n, time.perf_counter())
         self._clock(clock_cdr(n))
         for array in self._arrays:
             array.publish(self._values, n, RUN)
@@ -114,8 +124,14 @@ class FloorDriver:
 
     def _on_command(self, name: str, raw: bytes) -> None:
         index = decode_strut_cdr(raw).index
-        if index is not None and index >= self.sample - self.delay:
+        if index is None:
+            return
+        if index >= self.sample - self.delay:
             self.answered[name].add(index)
+        arrived = self._arrived.setdefault(index, set())
+        arrived.add(name)
+        if len(arrived) == len(COMMAND_TOPICS) and index in self.published_s:
+            self.latencies_s.append(time.perf_counter() - self.published_s.pop(index))
 
     def both_answered(self, sample: int) -> bool:
         """Whether both commands of ``sample`` are in."""
@@ -128,6 +144,11 @@ class FloorDriver:
             self.late += 1
         for seen in self.answered.values():
             seen.discard(due)
+        if self.sample % LATENCY_HORIZON == 0:          # never answered by both: forget
+            old = self.sample - LATENCY_HORIZON
+            for table in (self.published_s, self._arrived):
+                for index in [i for i in table if i < old]:
+                    del table[index]
         self.sample += 1
 
 
@@ -212,8 +233,12 @@ def _run_driver(node, spinner, driver: FloorDriver, args: argparse.Namespace,
         window.saw(driver.sample)
         if driver.sample == args.warmup:
             driver.late = 0
+            driver.latencies_s.clear()
         driver.step()
-    return {**window.result(), "late": driver.late}
+    latency_ms = 1e3 * np.asarray(driver.latencies_s or [np.nan])
+    return {**window.result(), "late": driver.late,
+            "latency_ms_p50": float(np.percentile(latency_ms, 50)),
+            "latency_ms_p99": float(np.percentile(latency_ms, 99))}
 
 
 def run(args: argparse.Namespace) -> int:

@@ -41,7 +41,7 @@ def run_floor(out: Path, mode: str, samples: int, warmup: int = FLOOR_WARMUP,
 
     Returns:
         ``{"cpu_us_per_sample": {role: us}, "total_us", "samples", "x_real_time",
-        "late_fraction"}`` (the last in realtime only).
+        "latency_ms_p50", "latency_ms_p99", "late_fraction"}`` (the last in realtime only).
 
     Raises:
         RuntimeError: a process died or the driver did not finish in ``timeout_s``.
@@ -75,6 +75,8 @@ def floor_summary(measured: dict[str, dict[str, float]], mode: str) -> dict[str,
               "samples": driver["samples"],
               "x_real_time": driver["samples"] / driver["wall_s"] / 1000.0
               if driver["wall_s"] > 0 else None}
+    result["latency_ms_p50"] = driver.get("latency_ms_p50")
+    result["latency_ms_p99"] = driver.get("latency_ms_p99")
     if mode == "realtime":
         result["late_fraction"] = driver["late"] / max(driver["samples"], 1)
     return result
@@ -99,18 +101,24 @@ def measure_floor(out: Path, quick: bool) -> dict[str, Any]:
 def floor_markdown(floor: dict[str, Any]) -> str:
     """The floor table: us of CPU per sample per process, speed, late commands."""
     rows = ["| message path alone | driver | notch | pointing | recorder | total | "
-            "x real time | late % |", "|---|---:|---:|---:|---:|---:|---:|---:|"]
+            "x real time | late % | latency p50 / p99 ms |",
+            "|---|---:|---:|---:|---:|---:|---:|---:|---:|"]
     for mode, result in floor.items():
         if "failed" in result:
-            rows.append(f"| {mode} | failed: {result['failed']} | | | | | | |")
+            rows.append(f"| {mode} | failed: {result['failed']} | | | | | | | |")
             continue
         cpu = result["cpu_us_per_sample"]
         cells = " | ".join(f"{cpu[role]:.0f}" if role in cpu else "-" for role in ROLES)
         late = result.get("late_fraction")
+        latency = " / ".join(_ms(result.get(k)) for k in ("latency_ms_p50", "latency_ms_p99"))
         rows.append(f"| {mode} | {cells} | {result['total_us']:.0f} | "
                     f"{result['x_real_time']:.2f} | "
-                    f"{'-' if late is None else f'{100 * late:.3f}'} |")
+                    f"{'-' if late is None else f'{100 * late:.3f}'} | {latency} |")
     return "\n".join(rows)
+
+
+def _ms(value: float | None) -> str:
+    return "-" if value is None or value != value else f"{value:.2f}"
 
 
 def _wait_for_driver(children: dict[str, Child], timeout_s: float) -> None:

@@ -45,6 +45,11 @@ CONTROLLERS = {
 }
 
 
+CASES = [("lockstep", "pointing"), ("lockstep", "notch"), ("realtime", "notch")]
+"""(clock mode, restarted stream): both controllers share the loop port that adopts a new
+run (``ros/messages.ControllerLoopPort``); realtime with the pointing controller too was
+dropped for the suite's time (10-19 s a case)."""
+
 SETTLE_SAMPLES = 100
 MIN_CHECKED_FORCES = 100
 
@@ -142,8 +147,7 @@ def _check_resumed(mode: str, stream: str, commands: dict[int, np.ndarray],
                                    rtol=0, atol=1e-12, err_msg=str(n))
 
 
-@pytest.mark.parametrize("stream", ["pointing", "notch"])
-@pytest.mark.parametrize("mode", ["lockstep", "realtime"])
+@pytest.mark.parametrize("mode, stream", CASES)
 def test_restarted_driver_is_answered_within_a_second(ros_context, node_processes, mode,
                                                       stream):
     driver = node_processes.start("pph_driver", *_driver_args(mode, stream))
@@ -200,8 +204,7 @@ def test_restarted_driver_is_answered_within_a_second(ros_context, node_processe
         assert process.stop() == 130, process.output()     # SIGINT: 128 + 2
 
 
-@pytest.mark.parametrize("stream", ["pointing", "notch"])
-@pytest.mark.parametrize("mode", ["lockstep", "realtime"])
+@pytest.mark.parametrize("mode, stream", CASES)
 def test_restarted_controller_is_waited_for_again(ros_context, node_processes, mode, stream):
     driver = node_processes.start("pph_driver", *_driver_args(mode, stream))
     pointing = _controller(node_processes, stream)
