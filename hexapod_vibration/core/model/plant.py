@@ -72,9 +72,17 @@ def rigid_body_mass_matrix(body: RigidBodyConfig) -> np.ndarray:
 
 def saturate_commands(notch_n: np.ndarray, pointing_n: np.ndarray,
                       strut: StrutConfig) -> np.ndarray:
-    """Actuator limits: vibration command within the dynamic rating, sum within the static."""
-    dynamic = np.clip(notch_n, -strut.force_limit_dynamic_n, strut.force_limit_dynamic_n)
-    return np.clip(dynamic + pointing_n, -strut.force_limit_static_n, strut.force_limit_static_n)
+    """Actuator limits: vibration command within the dynamic rating, sum within the static.
+
+    ``np.minimum(np.maximum(...))`` is ``np.clip`` value for value (NaN included) at a third
+    of its per-call cost (``np.clip`` goes through two Python wrappers): this runs every
+    sample in the driver and the core loop.
+    """
+    dynamic = np.maximum(notch_n, -strut.force_limit_dynamic_n)
+    np.minimum(dynamic, strut.force_limit_dynamic_n, out=dynamic)
+    total = np.add(dynamic, pointing_n, out=dynamic)
+    np.maximum(total, -strut.force_limit_static_n, out=total)
+    return np.minimum(total, strut.force_limit_static_n, out=total)
 
 
 class LinearHexapodModel:
