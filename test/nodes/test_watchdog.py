@@ -37,10 +37,9 @@ def test_killed_notch_controller_is_dropped_within_the_timeout(ros_context, node
     # long enough (20 offers) that the live pointing controller is never timed out on a
     # loaded machine, which would hold its previous command and look like the notch's here.
     driver = node_processes.start("pph_driver", "--ros-args", "-p", "lockstep_timeout_s:=1.0")
-    notch = node_processes.start(       # the 3.2 s tone identification (not the 10 s one)
+    notch = node_processes.start(
         "notch_controller", "--ros-args", "-p", "tone_frequencies_hz:=[40.0]",
-        "-p", "mu:=0.01", "-p", "identify_delay_s:=0.2", "-p", "identification:=tones",
-        "-p", "mu_policy:=manual")
+        "-p", "mu:=0.01", "-p", "identify_delay_s:=0.2")
     pointing = node_processes.start("pointing_controller")
     processes = (driver, notch, pointing)
 
