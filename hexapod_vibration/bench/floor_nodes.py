@@ -204,7 +204,7 @@ class FloorRecorder:
                                                            RECORDER_CLOCK_QOS, raw=True))
 
 
-def _run_driver(node, spinner, driver: FloorDriver, args: argparse.Namespace,
+def _run_driver(spinner, driver: FloorDriver, args: argparse.Namespace,
                 stop) -> dict[str, float]:
     """Handshake on sample 0, then ``args.samples`` samples; the window's result."""
     window = CpuWindow(args.warmup)
@@ -269,7 +269,7 @@ def run(args: argparse.Namespace) -> int:
                           latest_only=getattr(role, "latest_only", ()),
                           answered=args.command_delay + 1)
     if args.role == "driver":
-        result = _run_driver(node, spinner, role, args, stop)
+        result = _run_driver(spinner, role, args, stop)
     else:
         while not stop.is_set():
             woke = time.monotonic()
