@@ -19,9 +19,10 @@ floor, :mod:`hexapod_vibration.bench.message_floor`):
 
 Each process measures its own CPU (user + system, all threads: ``time.process_time``)
 from sample ``W`` to the last sample it saw and writes ``{"samples", "cpu_s", "wall_s"}``
-(and the driver ``"late"`` and the latency percentiles ``"latency_ms_p50"``, ``"_p99"``:
-a sample's first publication to the arrival of its second command) to FILE at SIGINT or
-SIGTERM or, for the driver, after N samples.
+(and the driver ``"late"`` and the latency percentiles ``"latency_ms_p50"``, ``"_p99"``,
+counted and timed by the real driver's ``CommandArbiter``: a sample's publication to the
+arrival of its notch command) to FILE at SIGINT or SIGTERM or, for the driver, after N
+samples.
 Not computed anywhere: the plant, the control laws, the supervisor, diagnostics, forecasts,
 the held-command reports, the bag (the every-10th-sample weights and forecasts of the real
 controllers are not published either).
@@ -40,6 +41,7 @@ import numpy as np
 from hexapod_vibration import cli
 from hexapod_vibration.cdr import clock_cdr, decode_strut_cdr, encode_vector_cdr
 from hexapod_vibration.contract import DISTURBANCE_FREQUENCIES_TOPIC, STRUT_COUNT
+from hexapod_vibration.core.loop.command_arbiter import CommandArbiter
 from hexapod_vibration.ros.messages import StrutArrayPublisher, create_loop_subscription
 from hexapod_vibration.ros.recording_loop import BATCH_PERIOD_S, install_stop_flag
 
@@ -48,8 +50,8 @@ SAMPLE_TOPICS = ("/pph/accel", "/pph/eddy", "/pph/actuator_force")
 COMMAND_TOPICS = {"notch": "/pph/notch_command", "pointing": "/pph/pointing_command"}
 OBSERVED = {"notch": "/pph/accel", "pointing": "/pph/eddy"}
 RUN = 1
-LATENCY_HORIZON = 1000
-"""Samples after which a sample not answered by both controllers leaves the latency table."""
+TIMEOUT_SAMPLES = 5
+"""The driver's ``command_timeout_samples`` default: how long a silent stream is waited for."""
 """The run id of every floor message (one run)."""
 OFFER_AGAIN_S = 0.05
 """Lockstep: wall time (s) after which a sample not answered by both is published again."""
@@ -84,7 +86,11 @@ class CpuWindow:
 
 
 class FloorDriver:
-    """Publishes the sample's five messages; pairs the two command streams with samples."""
+    """Publishes the sample's five messages; pairs the command streams with samples.
+
+    The pairing, the late commands and the latency are the real driver's
+    :class:`~hexapod_vibration.core.loop.command_arbiter.CommandArbiter`'s.
+    """
 
     def __init__(self, node, mode: str, delay: int) -> None:
         """Publishers and command subscriptions on ``node``."""
@@ -94,62 +100,56 @@ class FloorDriver:
         from hexapod_vibration.ros.qos import CLOCK_QOS, COMMAND_QOS, LOOP_PUBLISHER_QOS
         from hexapod_vibration.ros.rclpy_internals import serialized_publish
 
-        self.mode, self.delay = mode, delay
+        self.lockstep = mode == "lockstep"
+        self.arbiter = CommandArbiter(tuple(COMMAND_TOPICS), tuple(COMMAND_TOPICS), RUN,
+                                      limit_n=np.inf, latency_stream="notch",
+                                      delay_samples=delay)
         self._arrays = [StrutArrayPublisher(node.create_publisher(
             Float64MultiArray, topic, LOOP_PUBLISHER_QOS)) for topic in SAMPLE_TOPICS]
         self._frequencies = serialized_publish(node.create_publisher(
             Float64MultiArray, DISTURBANCE_FREQUENCIES_TOPIC, LOOP_PUBLISHER_QOS))
         self._clock = serialized_publish(node.create_publisher(Clock, "/clock", CLOCK_QOS))
-        self.answered = {name: set() for name in COMMAND_TOPICS}
         self.subscriptions = [create_loop_subscription(
             node, topic, lambda raw, n=name: self._on_command(n, raw), COMMAND_QOS)
             for name, topic in COMMAND_TOPICS.items()]
-        self.sample = 0
-        self.late = 0
-        self.published_s: dict[int, float] = {}
-        """Wall time (s) of each sample's first publication, until both commands came."""
-        self._arrived: dict[int, set[str]] = {}
-        self.latencies_s: list[float] = []
-        """Per sample: first publication to the second of its two commands (s, wall)."""
         self._values = np.zeros(STRUT_COUNT)
+        self._published = -1
+
+    @property
+    def sample(self) -> int:
+        """The current sample."""
+        return self.arbiter.sample
 
     def publish(self) -> None:
         """This sample's /clock, sensors, force and tone frequencies (fixed values)."""
-        n = self.sample
-        self.published_s.setdefault(n, time.perf_counter())
+        n = self.arbiter.sample
+        if n != self._published:
+            self.arbiter.published(time.perf_counter())
+            self._published = n
         self._clock(clock_cdr(n))
         for array in self._arrays:
             array.publish(self._values, n, RUN)
         self._frequencies(encode_vector_cdr([40.0, 80.0, 120.0], n, RUN))
 
     def _on_command(self, name: str, raw: bytes) -> None:
-        index = decode_strut_cdr(raw).index
-        if index is None:
-            return
-        if index >= self.sample - self.delay:
-            self.answered[name].add(index)
-        arrived = self._arrived.setdefault(index, set())
-        arrived.add(name)
-        if len(arrived) == len(COMMAND_TOPICS) and index in self.published_s:
-            self.latencies_s.append(time.perf_counter() - self.published_s.pop(index))
+        command = decode_strut_cdr(raw)
+        self.arbiter.offer(name, command.values, command.index, command.run,
+                           time.perf_counter())
 
-    def both_answered(self, sample: int) -> bool:
-        """Whether both commands of ``sample`` are in."""
-        return all(sample in seen for seen in self.answered.values())
+    def ready(self) -> bool:
+        """Lockstep: both streams answered the sample due (the handshake: sample 0)."""
+        return self.arbiter.ready(TIMEOUT_SAMPLES)
 
     def step(self) -> None:
-        """Apply the due commands (realtime: count a missing one late) and advance."""
-        due = self.sample - self.delay
-        if self.mode == "realtime" and due >= 0 and not self.both_answered(due):
-            self.late += 1
-        for seen in self.answered.values():
-            seen.discard(due)
-        if self.sample % LATENCY_HORIZON == 0:          # never answered by both: forget
-            old = self.sample - LATENCY_HORIZON
-            for table in (self.published_s, self._arrived):
-                for index in [i for i in table if i < old]:
-                    del table[index]
-        self.sample += 1
+        """Apply the due commands (realtime: a missing one counted late) and advance."""
+        self.arbiter.close_sample(self.lockstep, TIMEOUT_SAMPLES)
+        self.arbiter.advance()
+
+    def result(self) -> dict[str, float]:
+        """Late commands and the latency percentiles (ms) since ``restart_stats``."""
+        stats = self.arbiter.stats
+        p50, p99 = stats.latencies_ms.percentiles((50, 99))
+        return {"late": stats.late_commands, "latency_ms_p50": p50, "latency_ms_p99": p99}
 
 
 class FloorController:
@@ -209,10 +209,11 @@ def _run_driver(spinner, driver: FloorDriver, args: argparse.Namespace,
     """Handshake on sample 0, then ``args.samples`` samples; the window's result."""
     window = CpuWindow(args.warmup)
     period = 1e-3
-    while not stop.is_set() and not driver.both_answered(0):      # the handshake
+    driver.arbiter.refresh_connections(dict.fromkeys(COMMAND_TOPICS, 1), TIMEOUT_SAMPLES)
+    while not stop.is_set() and driver.arbiter.unanswered():      # the handshake
         driver.publish()
         deadline = time.perf_counter() + OFFER_AGAIN_S
-        while not driver.both_answered(0) and time.perf_counter() < deadline:
+        while driver.arbiter.unanswered() and time.perf_counter() < deadline:
             spinner.spin_once(0.005)
     start = time.perf_counter()
     while not stop.is_set() and driver.sample < args.samples:
@@ -220,7 +221,7 @@ def _run_driver(spinner, driver: FloorDriver, args: argparse.Namespace,
             driver.publish()
         if args.mode == "lockstep":
             offer_at = time.perf_counter() + OFFER_AGAIN_S
-            while not driver.both_answered(driver.sample) and not stop.is_set():
+            while not driver.ready() and not stop.is_set():
                 spinner.spin_once(max(offer_at - time.perf_counter(), 0.0))
                 if time.perf_counter() >= offer_at:
                     driver.publish()
@@ -232,13 +233,9 @@ def _run_driver(spinner, driver: FloorDriver, args: argparse.Namespace,
                 spinner.spin_once(remaining)
         window.saw(driver.sample)
         if driver.sample == args.warmup:
-            driver.late = 0
-            driver.latencies_s.clear()
+            driver.arbiter.restart_stats(time.perf_counter())
         driver.step()
-    latency_ms = 1e3 * np.asarray(driver.latencies_s or [np.nan])
-    return {**window.result(), "late": driver.late,
-            "latency_ms_p50": float(np.percentile(latency_ms, 50)),
-            "latency_ms_p99": float(np.percentile(latency_ms, 99))}
+    return {**window.result(), **driver.result()}
 
 
 def run(args: argparse.Namespace) -> int:

@@ -28,13 +28,15 @@ QUICK_SAMPLES = 4000
 
 
 def run_floor(out: Path, mode: str, samples: int, warmup: int = FLOOR_WARMUP,
-              command_delay: int = 2, timeout_s: float = 600.0,
+              command_delay: int | None = None, timeout_s: float = 600.0,
               env: dict[str, str] | None = None, recorder: bool = True,
               priority: int = 0) -> dict[str, Any]:
     """One floor run (``mode``: lockstep or realtime; ``recorder``: with one); its measurements.
 
-    ``priority``: SCHED_FIFO priority of the driver and controllers (0: none), as the nodes'
-    ``realtime_priority`` (the recorder keeps normal scheduling).
+    ``command_delay``: the loop's ``command_delay_samples`` (None: the experiment's, 2 in
+    realtime and 0 in lockstep). ``priority``: SCHED_FIFO priority of the driver and
+    controllers (0: none), as the nodes' ``realtime_priority`` (the recorder keeps normal
+    scheduling).
 
     The processes' logs and result files go to ``out``; ``env``: their environment (None:
     this process's, whose ``ROS_DOMAIN_ID`` they share).
@@ -52,7 +54,8 @@ def run_floor(out: Path, mode: str, samples: int, warmup: int = FLOOR_WARMUP,
     for path in results.values():
         path.unlink(missing_ok=True)
     common = ["--mode", mode, "--samples", str(samples), "--warmup", str(warmup),
-              "--command-delay", str(command_delay), "--priority", str(priority)]
+              "--command-delay", str(_delay(mode) if command_delay is None else command_delay),
+              "--priority", str(priority)]
     children = {role: spawn_module(f"floor_{mode}_{role}", "hexapod_vibration.bench.floor_nodes",
                                    [role, *common, "--result", str(results[role])], out,
                                    env=env)
@@ -115,6 +118,13 @@ def floor_markdown(floor: dict[str, Any]) -> str:
                     f"{result['x_real_time']:.2f} | "
                     f"{'-' if late is None else f'{100 * late:.3f}'} | {latency} |")
     return "\n".join(rows)
+
+
+def _delay(mode: str) -> int:
+    """The experiment's command delay in ``mode`` (samples)."""
+    from hexapod_vibration.tools.experiment_setup import REALTIME_COMMAND_DELAY_SAMPLES
+
+    return REALTIME_COMMAND_DELAY_SAMPLES if mode == "realtime" else 0
 
 
 def _ms(value: float | None) -> str:

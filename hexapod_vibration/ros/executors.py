@@ -27,6 +27,7 @@ falls back to the executor's own ``spin_once``.
 from __future__ import annotations
 
 import time
+from collections import deque
 from collections.abc import Callable, Mapping, Sequence
 
 import rclpy
@@ -122,6 +123,7 @@ class LoopSpinner:
         self._latest_only = frozenset(latest_only)
         self._skipped = dict(skipped or {})
         self._answered = max(int(answered), 1)
+        self._newest: deque[bytes] = deque()
         self.fast = fast and bool(self.subscriptions) and fast_path()
         self.service_period_s = service_period_s
         self.meter = loop_meter()
@@ -164,16 +166,17 @@ class LoopSpinner:
     def _take_all_of(self, sub: Subscription) -> None:
         """Take every queued message of ``sub``; call its callback with each (or the newest)."""
         if sub in self._latest_only:
-            newest: list[bytes] = []
+            newest = self._newest          # one buffer for every wake-up, empty between
+            newest.clear()
             on_skipped = self._skipped.get(sub)
             while (raw := self._take(sub)) is not None:
                 if len(newest) == self._answered:
-                    oldest = newest.pop(0)
+                    oldest = newest.popleft()
                     if on_skipped is not None:
                         on_skipped(oldest)
                 newest.append(raw)
-            for raw in newest:
-                sub.callback(raw)
+            while newest:
+                sub.callback(newest.popleft())
             return
         while (raw := self._take(sub)) is not None:
             sub.callback(raw)
