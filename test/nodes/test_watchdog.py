@@ -25,6 +25,8 @@ DRIVER = "pph_driver: loop"
 LOST_TAIL_SAMPLES = 20
 """Most commands a SIGKILLed controller had in flight that this listener may never get."""
 STRUT = load_model_config(config_path("pph_model.yaml")).strut
+POINTING_HOLD_SAMPLES = 20
+"""Most samples back a pointing command the driver held (timed out on) is looked for."""
 
 
 def _notch_part(force: StrutTopic, pointing: StrutTopic, n: int) -> np.ndarray:
@@ -32,10 +34,31 @@ def _notch_part(force: StrutTopic, pointing: StrutTopic, n: int) -> np.ndarray:
     return force.by_index[n] - saturate_commands(np.zeros(6), pointing.by_index[n], STRUT)
 
 
+def _applied_commands(force: StrutTopic, notch: dict[int | None, np.ndarray],
+                      pointing: StrutTopic, n: int) -> tuple[int | None, int] | None:
+    """The notch command (a ``notch`` key; None: no force) and pointing command applied at n.
+
+    The one pair whose saturated sum is the force the driver published. The pointing
+    command is the one of sample n or, where the driver timed out on it, one it held, of
+    an earlier sample: seen in two fresh-clone CI runs, within the hold (the driver waits
+    ``lockstep_timeout_s`` for the dead notch controller at each held sample, so a pointing
+    command late by as much, from a starved process or a lost RELIABLE sample repaired at
+    the writer's next heartbeat, is held too, and adds no timeout). None: no pair explains it.
+    """
+    for k in range(n, n - POINTING_HOLD_SAMPLES - 1, -1):
+        if k not in pointing.by_index:
+            continue
+        for key, command in notch.items():
+            if np.allclose(force.by_index[n], saturate_commands(command, pointing.by_index[k],
+                                                                STRUT), rtol=0.0, atol=1e-9):
+                return key, k
+    return None
+
+
 def test_killed_notch_controller_is_dropped_within_the_timeout(ros_context, node_processes):
-    # Each of the last TIMEOUT_SAMPLES samples waits lockstep_timeout_s for the dead one;
-    # long enough (20 offers) that the live pointing controller is never timed out on a
-    # loaded machine, which would hold its previous command and look like the notch's here.
+    # Each of the last TIMEOUT_SAMPLES samples waits lockstep_timeout_s for the dead one
+    # (20 offers); a pointing command later than that is held by the driver, which the
+    # judgement below tells from the notch's hold (_applied_commands).
     driver = node_processes.start("pph_driver", "--ros-args", "-p", "lockstep_timeout_s:=1.0")
     notch = node_processes.start(
         "notch_controller", "--ros-args", "-p", "tone_frequencies_hz:=[40.0]",
@@ -100,22 +123,35 @@ def test_killed_notch_controller_is_dropped_within_the_timeout(ros_context, node
         np.testing.assert_allclose(force.by_index[n], expected, atol=1e-9, err_msg=str(n))
     after = range(last + 1, last + 300)
     assert all(n in force.by_index and n in pointing_cmd.by_index for n in after)
-    held = [n for n in after if np.any(_notch_part(force, pointing_cmd, n) != 0.0)]
-    assert held == list(range(last + 1, last + 1 + len(held))), held
-    print(f"last notch command: sample {last}; held for {len(held)} samples; driver: "
-          f"{diagnostics.values(DRIVER)}")
     # The driver may have got command(s) after the status that named ``last`` (the
     # controller was killed mid-send; a command whose sample the driver had already passed
     # after a timeout is still applied as the latest): each one the driver got for sample
-    # last + k ends the hold k samples later and adds at most one distinct value.
-    # Without any, the hold is exactly TIMEOUT_SAMPLES samples of the last command.
+    # last + k ends the hold k samples later. Without any, the hold is exactly
+    # TIMEOUT_SAMPLES samples of the last command.
+    # The notch commands the driver can have applied: none (stale), the last one (as
+    # applied at its sample) and any later one this listener got.
+    notch = {None: np.zeros(6), last: _notch_part(force, pointing_cmd, last),
+             **{j: notch_cmd.by_index[j] for j in (last + 1, last + 2)
+                if j in notch_cmd.by_index}}
+    applied = {n: _applied_commands(force, notch, pointing_cmd, n) for n in after}
+
+    def notch_applied(n: int) -> object:
+        """The notch command applied at n (a later one this listener missed: its value)."""
+        if applied[n] is None:
+            return tuple(np.round(_notch_part(force, pointing_cmd, n), 9))
+        return applied[n][0]
+
+    held = [n for n in after if notch_applied(n) is not None]
+    assert held == list(range(last + 1, last + 1 + len(held))), held
+    pointing_held = [n for n in after if applied[n] is not None and applied[n][1] != n]
+    print(f"last notch command: sample {last}; held for {len(held)} samples; pointing "
+          f"command held at {pointing_held}; driver: {diagnostics.values(DRIVER)}")
     extra = len(held) - TIMEOUT_SAMPLES
     assert 0 <= extra <= 2, held
-    values = [tuple(np.round(_notch_part(force, pointing_cmd, n), 9)) for n in held]
-    assert len(set(values)) <= 1 + extra, values
+    commands = [notch_applied(n) for n in held]
+    assert len(set(commands)) <= 1 + extra, commands
     if extra == 0:          # the held command is the last one (as applied at its sample)
-        np.testing.assert_allclose(_notch_part(force, pointing_cmd, held[0]),
-                                   _notch_part(force, pointing_cmd, last), atol=1e-9)
+        assert set(commands) == {last}, commands
     for process in (driver, pointing):
         assert process.stop() == 130, process.output()   # SIGINT: 128 + 2
 
