@@ -82,35 +82,46 @@ class Rotor:
         self._revolutions_at_knot = np.concatenate([[0.0], np.cumsum(revolutions)])
 
     def _segment(self, time_s: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Segment index, time into it (s) and its slope (Hz/s; 0 before the first knot)."""
-        index = np.clip(np.searchsorted(self.profile_time_s, time_s, side="right") - 1,
-                        0, self.profile_time_s.size - 1)
+        """Segment index, time into it (s) and its slope (Hz/s; 0 before the first knot).
+
+        ``searchsorted(..., side="right") - 1`` lies in [-1, knots - 1]: only the lower
+        bound needs clamping (``np.maximum``, a third of ``np.clip``'s cost per call).
+        """
+        index = np.maximum(np.searchsorted(self.profile_time_s, time_s, side="right") - 1, 0)
         into_s = time_s - self.profile_time_s[index]
         slope = np.where(into_s < 0.0, 0.0, self._slope[index])
         return index, into_s, slope
 
+    def _speed(self, index: np.ndarray, into_s: np.ndarray, slope: np.ndarray) -> np.ndarray:
+        """Speed (Hz) ``into_s`` seconds into segment ``index`` of slope ``slope``."""
+        return self.profile_speed_hz[index] + slope * into_s
+
+    def _revolutions(self, index: np.ndarray, into_s: np.ndarray,
+                     slope: np.ndarray) -> np.ndarray:
+        """Revolutions from t = 0 to ``into_s`` seconds into segment ``index``."""
+        return (self._revolutions_at_knot[index] + self.profile_speed_hz[index] * into_s
+                + 0.5 * slope * into_s**2)
+
     def speed_hz(self, time_s: np.ndarray | float) -> np.ndarray:
         """Rotor speed (Hz, revolutions per second) at the given times (s)."""
-        time_s = np.asarray(time_s, float)
-        index, into_s, slope = self._segment(time_s)
-        return self.profile_speed_hz[index] + slope * into_s
+        return self._speed(*self._segment(np.asarray(time_s, float)))
 
     def revolutions(self, time_s: np.ndarray | float) -> np.ndarray:
         """Integral of the speed from t = 0 to ``time_s`` (revolutions), exact."""
-        time_s = np.asarray(time_s, float)
-        index, into_s, slope = self._segment(time_s)
-        return (self._revolutions_at_knot[index] + self.profile_speed_hz[index] * into_s
-                + 0.5 * slope * into_s**2)
+        return self._revolutions(*self._segment(np.asarray(time_s, float)))
 
     def frequencies_hz(self, time_s: np.ndarray | float) -> np.ndarray:
         """Frequency (Hz) of every order at the given times: shape ``time_s.shape + (orders,)``."""
         return self.speed_hz(time_s)[..., None] * self.orders
 
     def force_n(self, time_s: np.ndarray | float) -> np.ndarray:
-        """Rotor force (N) at the given times (s), same shape as ``time_s``."""
-        time_s = np.asarray(time_s, float)
-        scale = (self.speed_hz(time_s) / self.reference_speed_hz) ** 2
-        phase = (2.0 * np.pi) * self.revolutions(time_s)[..., None] * self.orders
+        """Rotor force (N) at the given times (s), same shape as ``time_s``.
+
+        One segment lookup for the speed and the phase (the plant calls this every sample).
+        """
+        segment = self._segment(np.asarray(time_s, float))
+        scale = (self._speed(*segment) / self.reference_speed_hz) ** 2
+        phase = (2.0 * np.pi) * self._revolutions(*segment)[..., None] * self.orders
         return scale * (np.sin(phase + self.phases_rad) @ self.amplitudes_n)
 
 
