@@ -34,6 +34,7 @@ from hexapod_vibration.bench.node_budget import (
     measure,
     stages_markdown,
 )
+from hexapod_vibration.bench.wakeup_lateness import measure_all_wakeups, wakeup_markdown
 from hexapod_vibration.contract import SAMPLE_RATE_HZ
 from hexapod_vibration.core.sim.scenario import load_scenario
 from hexapod_vibration.paths import scenario_path
@@ -203,7 +204,7 @@ def ros_loop_benchmark(out_dir: Path, quick: bool) -> dict[str, Any]:
     return {"realtime": best["realtime"],
             "lockstep_speedup": best["lockstep"].get("speedup"),
             "loops": loops, "budget": measure_budget(out, quick),
-            "floor": measure_floor(out, quick),
+            "floor": measure_floor(out, quick), "wakeups": measure_all_wakeups(quick),
             "ros_domain_id": int(os.environ["ROS_DOMAIN_ID"])}
 
 
@@ -258,6 +259,11 @@ def ros_summary_markdown(results: dict[str, Any]) -> str:
         rows += ["", "### The message path alone (bench/floor_nodes.py: the same four "
                  "processes, topics, QoS, wait sets and codec, nothing computed; each "
                  "process's CPU per sample after the warm-up)", "", floor_markdown(floor)]
+    wakeups = results.get("wakeups")
+    if wakeups:
+        rows += ["", "### The machine's 1 kHz wake-ups (bench/wakeup_lateness.py: processes "
+                 "that only sleep to deadlines 1 ms apart, no ROS; % of wake-ups later than "
+                 "each threshold)", "", wakeup_markdown(wakeups)]
     return "\n".join(rows)
 
 

@@ -255,6 +255,8 @@ def test_restarted_controller_is_waited_for_again(ros_context, node_processes, m
             commands.by_run[run], force.by_run.get(run, {}), first)) >= MIN_CHECKED_FORCES
 
     resumed = wait_until(ros_context, lambda: not driver.running() or checked())
+    if not (resumed and driver.running() and again.running()):
+        print(logs())       # whole, in the report's captured output (the message is cut)
     assert resumed and driver.running() and again.running(), (
         first_new(), commands.last_index, force.last_index,
         sorted(_driver_reports(diagnostics, run).items())[-12:],
