@@ -10,9 +10,10 @@ import pytest
 from scipy import signal
 
 from hexapod_vibration.core.control.pointing import PointingGains
+from hexapod_vibration.core.loop.signal_ranges import out_of_range
 from hexapod_vibration.core.model.config import load_model_config
-from hexapod_vibration.core.model.plant import rigid_body_mass_matrix
-from hexapod_vibration.core.model.sensors import EddySensorArray
+from hexapod_vibration.core.model.plant import PPHPlant, rigid_body_mass_matrix, saturate_commands
+from hexapod_vibration.core.model.sensors import EddySensorArray, pose_from_gaps
 from hexapod_vibration.core.sim.closed_loop import make_pointing_controller, strut_stiffness_n_per_m
 from hexapod_vibration.paths import config_path
 
@@ -110,7 +111,10 @@ def _reference(gaps: np.ndarray) -> tuple[np.ndarray, int]:
 
 
 def _lowpass_segments(raw: np.ndarray, restarts: dict) -> np.ndarray:
-    """2nd-order Butterworth per segment: from the last output after a gain change, else 0."""
+    """2nd-order Butterworth per segment, its output saturated at the segment's limit.
+
+    Each segment starts from the last output after a gain change, else from 0.
+    """
     out = np.empty_like(raw)
     starts = sorted(restarts) + [len(raw)]
     for start, stop in zip(starts[:-1], starts[1:], strict=True):
@@ -118,7 +122,8 @@ def _lowpass_segments(raw: np.ndarray, restarts: dict) -> np.ndarray:
         sos = signal.butter(2, gains.output_lowpass_hz, fs=FS, output="sos")
         level = out[start - 1] if keep else np.zeros(6)
         zi = signal.sosfilt_zi(sos)[:, :, None] * level
-        out[start:stop] = signal.sosfilt(sos, raw[start:stop], axis=0, zi=zi)[0]
+        filtered = signal.sosfilt(sos, raw[start:stop], axis=0, zi=zi)[0]
+        out[start:stop] = np.clip(filtered, -gains.force_limit_n, gains.force_limit_n)
     return out
 
 
@@ -159,3 +164,30 @@ def test_linear_state_space_is_the_step_law_without_windup():
         expected = law.step(g)
         np.testing.assert_allclose(c @ x + d @ g, expected, rtol=1e-9, atol=1e-12)
         x = a @ x + b @ g
+
+
+def test_after_its_force_was_zeroed_the_pointing_loop_recovers_within_the_actuator_range():
+    """The law's output stays within ``force_limit_n``, so a sag cannot lock the loop up.
+
+    Regression: a restarted driver under load zeroed the pointing stream (late for the
+    watchdog's 5 samples), the platform sagged, the law then asked for more than the
+    actuator's range, the driver refused every such command (out of range: zero force) and
+    the platform never came back.
+    """
+    limit = MODEL.strut.force_limit_static_n            # the driver's command range (N)
+    plant = PPHPlant(MODEL, seed=4)
+    law = make_pointing_controller(MODEL, SENSING, FS)
+    zeroed = range(3000, 3400)                          # the watchdog's zero force
+    sample, forces, tilts = plant.step(np.zeros(6)), [], []
+    for n in range(9000):
+        command = law.step(sample.eddy_m)
+        forces.append(command.copy())
+        refused = n in zeroed or out_of_range(command, limit)   # the driver's rules
+        applied = np.zeros(6) if refused else command
+        sample = plant.step(saturate_commands(np.zeros(6), applied, MODEL.strut))
+        tilts.append(np.abs(pose_from_gaps(SENSING, sample.eddy_m)).max())
+    forces = np.array(forces)
+    assert np.abs(forces).max() <= limit
+    assert np.abs(forces[zeroed.stop:]).max() == limit          # it did saturate
+    settled = np.array(tilts[:zeroed.start]).max()
+    assert max(tilts[-1000:]) <= 2.0 * settled + 1e-6, (settled, max(tilts[-1000:]))

@@ -1,9 +1,15 @@
 """Low-pass pointing law: hold the top plate's pose from the eddy-current sensors.
 
 Per sample (1 kHz): pose = S^-1 gaps (relative to the bottom plate); error = target - pose;
-a Cartesian PID law per axis, then the Stewart statics and a Butterworth low-pass:
+a Cartesian PID law per axis, then the Stewart statics, a Butterworth low-pass and the
+actuator's range:
 
-    wrench = Kp e + Ki integral(e) - D pose_rate,   strut forces = J^-T wrench.
+    wrench = Kp e + Ki integral(e) - D pose_rate,   strut forces = J^-T wrench,
+
+each strut force saturated at +-``force_limit_n`` after the low-pass (the driver refuses a
+command beyond the actuator's range: after a sag, say while the driver had zeroed this
+stream, an unsaturated law asked for more, every command was refused and the platform never
+came back), the integral held while its own strut forces would exceed it (anti-windup).
 
 The cubic configuration decouples the six axes (J^T J and the payload's mass matrix are
 diagonal), so each axis is a mass m on the suspension stiffness k = k_strut (J^T J)_ii.
@@ -45,7 +51,8 @@ class PointingGains:
     bandwidth_hz: the integral pole (Hz), a few Hz, well below the vibration tones.
     damping_ratio: damping ratio given to each axis' suspension mode (-).
     output_lowpass_hz: corner of the 2nd-order Butterworth on the strut forces (Hz).
-    force_limit_n: the integral is clamped so its strut forces stay within this (N).
+    force_limit_n: the output strut forces are saturated at this, and the integral held
+        while its own strut forces would exceed it (N).
     """
 
     bandwidth_hz: float = 1.5
@@ -212,7 +219,10 @@ class PointingController:
         else:
             self._integral[...] = self._candidate
             force = self._force
-        self._last_force = self._lowpass.step(force)
+        force = self._lowpass.step(force)                 # a new array
+        limit = self.gains.force_limit_n
+        np.minimum(force, limit, out=force)
+        self._last_force = np.maximum(force, -limit, out=force)
         return self._last_force
 
 
