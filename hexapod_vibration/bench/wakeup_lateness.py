@@ -93,6 +93,9 @@ def wakeup_summary(lateness_s: list[np.ndarray]) -> dict[str, Any]:
 
     ``late_fraction[t]``: of all wake-ups; ``any_late_fraction[t]``: of the deadlines, those
     at which at least one process was later than t (a loop of these processes needs all).
+    Each process counts its deadlines from its own start, so the k-th deadlines of two
+    processes lie apart by their start-up skew (tens of ms), as a graph's nodes do not share
+    deadlines either.
     """
     late_ms = [1e3 * np.asarray(x) for x in lateness_s]
     pooled = np.concatenate(late_ms)
