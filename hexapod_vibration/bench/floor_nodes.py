@@ -40,8 +40,13 @@ import numpy as np
 
 from hexapod_vibration import cli
 from hexapod_vibration.cdr import clock_cdr, decode_strut_cdr, encode_vector_cdr
-from hexapod_vibration.contract import DISTURBANCE_FREQUENCIES_TOPIC, STRUT_COUNT
+from hexapod_vibration.contract import (
+    DISTURBANCE_FREQUENCIES_TOPIC,
+    SAMPLE_RATE_HZ,
+    STRUT_COUNT,
+)
 from hexapod_vibration.core.loop.command_arbiter import CommandArbiter
+from hexapod_vibration.parameter_specs import PPH_DRIVER
 from hexapod_vibration.ros.messages import StrutArrayPublisher, create_loop_subscription
 from hexapod_vibration.ros.recording_loop import BATCH_PERIOD_S, install_stop_flag
 
@@ -50,9 +55,9 @@ SAMPLE_TOPICS = ("/pph/accel", "/pph/eddy", "/pph/actuator_force")
 COMMAND_TOPICS = {"notch": "/pph/notch_command", "pointing": "/pph/pointing_command"}
 OBSERVED = {"notch": "/pph/accel", "pointing": "/pph/eddy"}
 RUN = 1
-TIMEOUT_SAMPLES = 5
-"""The driver's ``command_timeout_samples`` default: how long a silent stream is waited for."""
 """The run id of every floor message (one run)."""
+TIMEOUT_SAMPLES = PPH_DRIVER["command_timeout_samples"].default
+"""The driver's ``command_timeout_samples`` default: how long a silent stream is waited for."""
 OFFER_AGAIN_S = 0.05
 """Lockstep: wall time (s) after which a sample not answered by both is published again."""
 
@@ -113,19 +118,24 @@ class FloorDriver:
             node, topic, lambda raw, n=name: self._on_command(n, raw), COMMAND_QOS)
             for name, topic in COMMAND_TOPICS.items()]
         self._values = np.zeros(STRUT_COUNT)
-        self._published = -1
 
     @property
     def sample(self) -> int:
         """The current sample."""
         return self.arbiter.sample
 
-    def publish(self) -> None:
-        """This sample's /clock, sensors, force and tone frequencies (fixed values)."""
+    def publish(self, again: bool = False) -> None:
+        """This sample's /clock, sensors, force and tone frequencies (fixed values).
+
+        ``again``: a lockstep re-offer of the current sample (the arbiter times the latency
+        from the first publication, and counts the re-offers), as the real driver's
+        ``publish_sample`` / ``offer_again``.
+        """
         n = self.arbiter.sample
-        if n != self._published:
+        if again:
+            self.arbiter.offered_again()
+        else:
             self.arbiter.published(time.perf_counter())
-            self._published = n
         self._clock(clock_cdr(n))
         for array in self._arrays:
             array.publish(self._values, n, RUN)
@@ -208,10 +218,12 @@ def _run_driver(spinner, driver: FloorDriver, args: argparse.Namespace,
                 stop) -> dict[str, float]:
     """Handshake on sample 0, then ``args.samples`` samples; the window's result."""
     window = CpuWindow(args.warmup)
-    period = 1e-3
+    period = 1.0 / SAMPLE_RATE_HZ
     driver.arbiter.refresh_connections(dict.fromkeys(COMMAND_TOPICS, 1), TIMEOUT_SAMPLES)
+    again = False
     while not stop.is_set() and driver.arbiter.unanswered():      # the handshake
-        driver.publish()
+        driver.publish(again)
+        again = True
         deadline = time.perf_counter() + OFFER_AGAIN_S
         while driver.arbiter.unanswered() and time.perf_counter() < deadline:
             spinner.spin_once(0.005)
@@ -224,7 +236,7 @@ def _run_driver(spinner, driver: FloorDriver, args: argparse.Namespace,
             while not driver.ready() and not stop.is_set():
                 spinner.spin_once(max(offer_at - time.perf_counter(), 0.0))
                 if time.perf_counter() >= offer_at:
-                    driver.publish()
+                    driver.publish(again=True)
                     offer_at = time.perf_counter() + OFFER_AGAIN_S
         else:
             deadline = start + (driver.sample + 1) * period

@@ -19,11 +19,15 @@ from typing import Any
 
 import numpy as np
 
-PERIOD_S = 1e-3
-"""The loop period (s): the 1 kHz sample rate."""
-LATE_MS = (1.0, 2.0, 3.0)
-"""Lateness thresholds reported (ms); 3 ms is the realtime experiment's budget (command
-delay 2: three periods)."""
+from hexapod_vibration.contract import SAMPLE_RATE_HZ
+from hexapod_vibration.tools.experiment_setup import REALTIME_COMMAND_DELAY_SAMPLES
+
+PERIOD_S = 1.0 / SAMPLE_RATE_HZ
+"""The loop period (s)."""
+BUDGET_MS = 1e3 * (REALTIME_COMMAND_DELAY_SAMPLES + 1) * PERIOD_S
+"""The realtime experiment's budget (ms): a controller has d + 1 periods (command delay d)."""
+LATE_MS = (1.0, 2.0, BUDGET_MS)
+"""Lateness thresholds reported (ms); the last is the budget."""
 WAKEUP_RUNS = (("1 process", 1, 0), ("4 processes", 4, 0),
                ("1 process, SCHED_FIFO 50", 1, 50), ("4 processes, SCHED_FIFO 50", 4, 50))
 """(label, processes, SCHED_FIFO priority (0: normal scheduling)) of every run: one
