@@ -6,7 +6,11 @@ Hz and publishes ``/pph/pointing_command`` (N, same sample index and run); its s
 the counts of refused ``/pph/eddy`` messages (malformed, beyond the gaps' physical range,
 out of sequence) go to ``/diagnostics`` once per simulated second. The loop port
 (:class:`~hexapod_vibration.ros.messages.ControllerLoopPort`) decides which samples to act
-on; a new run of the driver (a restart) resets the law's integral and filters.
+on; a new run of the driver (a restart) resets the law's integral and filters. Behind (a
+realtime stall), the node answers only the newest samples, but the law steps through every
+sample since its last one: those skipped as they were received, those lost as the
+continuation of the eddy signal (:mod:`~hexapod_vibration.core.control.gap_bridge`, counted
+as ``lost_samples_stood_in``), so its rate and low-pass cross the gap without a kick.
 The set-point (tilt, twist, translation) and the loop's bandwidth are parameters, validated
 against the platform's range (tilt within 2.5 deg, twist within 10 deg, stroke within 95 %).
 """
@@ -27,6 +31,7 @@ from hexapod_vibration.contract import (
     POINTING_STATUS,
     STRUT_COUNT,
 )
+from hexapod_vibration.core.control.gap_bridge import GapBridge
 from hexapod_vibration.core.control.pointing import PointingGains, validate_target_pose
 from hexapod_vibration.core.control.tone_continuation import ToneContinuation
 from hexapod_vibration.core.loop.signal_ranges import SignalRanges
@@ -54,6 +59,11 @@ GAIN_PARAMS = ("bandwidth_hz", "damping_ratio", "output_lowpass_hz")
 DIAGNOSTICS_PHASE = DIAGNOSTICS_PHASE_SAMPLES["pointing_controller"]
 
 
+NO_FORCE_N = np.zeros(STRUT_COUNT)
+"""Read-only: the command while the law is disabled (N)."""
+NO_FORCE_N.flags.writeable = False
+
+
 class PointingControllerNode(Node):
     """Pointing law node: eddy gaps in, strut forces out."""
 
@@ -79,10 +89,13 @@ class PointingControllerNode(Node):
             self.get_logger())
         self._forecasts = ForecastPublisher(self, POINTING_FORECAST_TOPIC)  # for late samples
         self._continuation = ToneContinuation(STRUT_COUNT)
+        self._bridge = GapBridge(STRUT_COUNT)         # the law's input across skipped samples
         self._pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", DIAGNOSTICS_QOS)
         publish_status_periodically(self, self.publish_diagnostics)
         self.loop_subscriptions = [create_loop_subscription(self, "/pph/eddy", self._on_eddy)]
-        self.latest_only_subscriptions = self.loop_subscriptions   # stale samples: skipped
+        # Stale samples are skipped (not answered) but the law steps through them.
+        self.latest_only_subscriptions = self.loop_subscriptions
+        self.skipped_message_callbacks = {self.loop_subscriptions[0]: self.port.hold_skipped}
         self.meter = loop_meter()
         self._count = self.meter.counter("pointing_controller")
         self._stage = {name: self.meter.stage(f"pointing {name}")
@@ -130,10 +143,14 @@ class PointingControllerNode(Node):
             return
         if sample.new_run:
             self.law.reset()
-        force = self.law.step(sample.values) if self.enabled else np.zeros(STRUT_COUNT)
+            self._bridge.reset()
+        force = NO_FORCE_N
+        for gaps in self._bridge.inputs(sample.index, sample.values, sample.skipped):
+            if self.enabled:             # every sample since the last: the law's state
+                force = self.law.step(gaps)
+            self._continuation.add(force)
         meter.lap(stage["law"])
         self.port.answer(force, sample)
-        self._continuation.add(force)
         self._forecasts.after(sample.index, sample.run, self._continuation.forecast)
         meter.lap(stage["publish"])
         self._count()
@@ -147,6 +164,7 @@ class PointingControllerNode(Node):
         values = {"enabled": str(self.enabled).lower(), "last_sample": self.port.last_sample,
                   "run": self.port.sequence.run, **counters, **self.readers.values(),
                   "target_pose_m_rad": np.round(self.law.target, 9).tolist(),
+                  "lost_samples_stood_in": self._bridge.stood_in,
                   **self.meter.report()}
         message = "enabled" if self.enabled else "disabled"
         self._pub_diag.publish(diagnostic_array(POINTING_STATUS, bool(counters["invalid"]),

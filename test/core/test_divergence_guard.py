@@ -142,6 +142,34 @@ def test_no_reference_no_verdict_and_a_mixed_block_counts_for_nothing():
         DivergenceGuard(6, FS, [TONE], margin_db=0.0)
 
 
+def _spliced(rng, blocks: int, start: int, missing_at: int) -> tuple[np.ndarray, np.ndarray]:
+    """The same statistics with 2 samples of every block missing at ``missing_at`` in it."""
+    x = _signal(rng, blocks * (BLOCK + 2), start)
+    index = start + np.arange(len(x))
+    keep = ~np.isin(np.arange(len(x)) % (BLOCK + 2), (missing_at, missing_at + 1))
+    return x[keep], index[keep]
+
+
+def test_a_block_with_samples_missing_is_dropped_not_judged(referenced):
+    guard, rng = referenced
+    x, index = _spliced(rng, 40, 4000, missing_at=120)
+    blind = DivergenceGuard(6, FS, [TONE], margin_db=1.0)
+    _feed(blind, _signal(np.random.default_rng(5), 4000, 0), recording=True, judging=False)
+    spliced_verdicts = _feed(blind, x, recording=False, judging=True)
+    assert any(v.action is not None for _, v in spliced_verdicts)     # the splice is a rise
+    verdicts = [guard.step(e, False, True, index=int(n)) for e, n in zip(x, index, strict=True)]
+    assert not any(verdicts) and guard.blocks_with_gaps == 40
+
+
+def test_samples_missing_between_blocks_cost_no_block(referenced):
+    guard, rng = referenced
+    x, index = _spliced(rng, 40, 4000, missing_at=BLOCK)
+    verdicts = [guard.step(e, False, True, index=int(n)) for e, n in zip(x, index, strict=True)]
+    judged = [v for v in verdicts if v is not None]
+    assert len(judged) == 40 and all(v.action is None for v in judged)
+    assert guard.blocks_with_gaps == 0
+
+
 def test_limit_weights_keeps_each_strut_within_the_rating():
     canceller = AdaptiveNotchCanceller(6, [40.0, 80.0], FS, 0.01)
     w = np.zeros((2, 6), complex)
@@ -162,8 +190,12 @@ def _paper(**changes) -> NotchConfig:
     return NotchConfig().replaced({**notch_preset("paper"), **changes})
 
 
-def _run(sup, k_of_n, samples, start=0, amplitude=0.05):
-    """The static plant a = g + d + K u_{n-1}; K may change with the sample (k_of_n)."""
+def _run(sup, k_of_n, samples, start=0, amplitude=0.05, observed=(), lost=()):
+    """The static plant a = g + d + K u_{n-1}; K may change with the sample (k_of_n).
+
+    Samples in ``observed`` are skipped by the loop but received (``observe``), those in
+    ``lost`` never reach the supervisor; the command before them is held.
+    """
     u = np.zeros(6)
     mix = np.linspace(0.5, 1.5, 6)
     rng = np.random.default_rng(start)
@@ -171,8 +203,10 @@ def _run(sup, k_of_n, samples, start=0, amplitude=0.05):
     for n in range(start, start + samples):
         d = amplitude * mix * np.cos(2 * np.pi * TONE * n / FS + 0.3)
         accel = 9.80665 + d + k_of_n(n) @ u + 1e-4 * rng.standard_normal(6)
-        command = sup.step(n, accel)
-        u = command.copy()
+        if n in observed:
+            sup.observe(n, accel)
+        elif n not in lost:
+            u = sup.step(n, accel).copy()
         peak = max(peak, float(np.abs(sup.canceller.weights).sum(axis=0).max()))
     return peak
 
@@ -208,6 +242,23 @@ def test_supervisor_does_not_act_while_control_works():
     _run(sup, lambda n: good, 5000, sup.last_sample + 1)
     assert sup.guard_state == "watching" and sup.safety.action == ""
     assert sup.state == NotchState.ADAPTING
+
+
+def test_skipped_samples_count_in_the_guards_blocks_and_lost_ones_drop_theirs():
+    sup = NotchSupervisor(_paper(tone_frequencies_hz=(TONE,), enabled=False,
+                                      identify_delay_s=0.5))
+    good = 0.1 * np.eye(6)
+    _run(sup, lambda n: good, 500 + 3200 + 1500)
+    sup.apply({"enabled": True})
+    start = sup.last_sample + 1
+    gaps = {start + 300 * k + 77 + m for k in range(1, 11) for m in (0, 1)}   # 10 gaps
+    _run(sup, lambda n: good, 3500, start, observed=gaps)
+    assert sup.safety.guard.blocks_with_gaps == 0
+    start = sup.last_sample + 1
+    gaps = {start + 300 * k + 77 + m for k in range(1, 11) for m in (0, 1)}
+    _run(sup, lambda n: good, 3500, start, lost=gaps)
+    assert 9 <= sup.status()["guard_blocks_with_gaps"] <= 10      # one at a block's start
+    assert sup.guard_state == "watching" and sup.state == NotchState.ADAPTING
 
 
 def test_a_faded_out_canceller_stays_off_until_a_new_mu_and_the_mirror_changes_nothing():

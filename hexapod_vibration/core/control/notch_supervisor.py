@@ -220,9 +220,19 @@ class NotchSupervisor:
         return command
 
     def observe(self, index: int, accel_m_s2: np.ndarray) -> None:
-        """A sample received but skipped for a newer one: to the identification's record."""
-        if self._clock.observe(index):
-            self.identification.observe(int(index), self.dc_blocker.step(accel_m_s2))
+        """A sample received but skipped for a newer one: to the identification and guard.
+
+        The guard measures what the platform did, so a sample the loop skipped still counts
+        in its block (a block with samples missing is dropped, see ``DivergenceGuard.step``).
+        """
+        clock = self._clock
+        if not clock.observe(index):
+            return
+        error = self.dc_blocker.step(accel_m_s2)
+        self.identification.observe(int(index), error)
+        if self._settings.config.divergence_guard and clock.first >= 0:
+            self.safety.step(int(index), clock.first, error,
+                             self.identification.identifier is not None, self.follower.active)
 
     def note_held(self, rows: Sequence[tuple[int, int, int]], covered: int) -> None:
         """The driver's held commands (``/pph/notch_held``; ``core/control/held_inputs``)."""

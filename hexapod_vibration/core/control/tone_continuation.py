@@ -7,8 +7,9 @@ realtime identification, rms 1.1 N per strut). Held, a late command of such a si
 by about its rms after a few samples: an input error at the tone, which spoiled realtime
 identifications (22 % uncertainty in a run with 102 held samples).
 
-:class:`ToneContinuation` keeps the last ``HISTORY_SAMPLES`` commands (the samples the
-controller skipped, about 1 %, are left out), fits per strut a second-order autoregression
+:class:`ToneContinuation` keeps the last ``HISTORY_SAMPLES`` commands (of every sample: the
+controller steps its law through those it skipped, :mod:`~hexapod_vibration.core.control.
+gap_bridge`), fits per strut a second-order autoregression
 of the commands less their mean (the normal equations, every strut at once: one damped
 sinusoid) and continues it from the last two commands, around the mean. A strut whose fit is
 not an oscillation, or before the history is full, holds its last command; the pole radius

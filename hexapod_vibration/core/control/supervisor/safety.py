@@ -127,7 +127,8 @@ class SafetyMonitor:
                        and not canceller.frozen and not identifying
                        and self._plant.response is not None
                        and self.level is not SafetyLevel.OFF)
-        verdict = self.guard.step(error, recording=quiet and off, judging=controlling)
+        verdict = self.guard.step(error, recording=quiet and off, judging=controlling,
+                                  index=n)
         if verdict is not None and verdict.action is not None:
             self._act(verdict, n)
         self._check_lines(controlling and not following, n)
@@ -254,6 +255,7 @@ class SafetyMonitor:
         """The guard's ``state``, its last action, reference, clamps and the lines located."""
         values = {"guard": state, "guard_action": self.action,
                   "guard_reference_blocks": self.guard.reference_blocks,
+                  "guard_blocks_with_gaps": self.guard.blocks_with_gaps,
                   "weight_clamps": self.weight_clamps}
         monitor = self.line_monitor
         if monitor.ready:
