@@ -26,10 +26,11 @@ from hexapod_vibration.contract import (
     FORECAST_EVERY_SAMPLES,
     FORECAST_ROWS_LABEL,
     FORECAST_SAMPLES,
+    SHORT_FORECAST_SAMPLES,
     STRUT_COUNT,
     InvalidStrutMessage,
 )
-from hexapod_vibration.core.control.command_forecast import notch_forecast
+from hexapod_vibration.core.control.command_forecast import WeightTrend, notch_forecast
 from hexapod_vibration.core.control.notch_supervisor import NotchSupervisor
 from hexapod_vibration.ros.messages import (
     create_parsed_subscription,
@@ -40,18 +41,29 @@ from hexapod_vibration.ros.rclpy_internals import serialized_publish
 
 
 class ForecastPublisher:
-    """A controller's forecasts on ``topic``, published while someone listens."""
+    """A controller's forecasts on ``topic``, published while someone listens.
 
-    def __init__(self, node: Node, topic: str) -> None:
+    ``every_sample``: between the full forecasts, a short one (``SHORT_FORECAST_SAMPLES``
+    rows) after every sample, so the row a driver applies for a late command is recent.
+    """
+
+    def __init__(self, node: Node, topic: str, every_sample: bool = False) -> None:
         """Create the publisher (:data:`~hexapod_vibration.ros.qos.LOOP_QOS`)."""
         self._publisher = node.create_publisher(Float64MultiArray, topic, LOOP_QOS)
         self._publish = serialized_publish(self._publisher)       # CDR bytes
+        self.every_sample = bool(every_sample)
 
     def after(self, index: int, run: int | None, rows: Callable[[int], np.ndarray]) -> None:
-        """Sample ``index`` was answered: every 10th, ``rows(FORECAST_SAMPLES)`` (N) after it."""
-        if index % FORECAST_EVERY_SAMPLES or not self._publisher.get_subscription_count():
+        """Sample ``index`` was answered: the commands ``rows(K)`` (N) after it, if due.
+
+        Every ``FORECAST_EVERY_SAMPLES``-th sample ``K = FORECAST_SAMPLES``; at the others
+        ``SHORT_FORECAST_SAMPLES`` if ``every_sample``, else none.
+        """
+        full = index % FORECAST_EVERY_SAMPLES == 0
+        if not (full or self.every_sample) or not self._publisher.get_subscription_count():
             return
-        self._publish(encode_vector_cdr(rows(FORECAST_SAMPLES).reshape(-1), index + 1, run,
+        samples = FORECAST_SAMPLES if full else SHORT_FORECAST_SAMPLES
+        self._publish(encode_vector_cdr(rows(samples).reshape(-1), index + 1, run,
                                         label=FORECAST_ROWS_LABEL))
 
 
@@ -59,10 +71,15 @@ def notch_rows(supervisor: NotchSupervisor) -> Callable[[int], np.ndarray]:
     """The notch controller's forecast, as :meth:`ForecastPublisher.after` asks for it.
 
     :func:`~hexapod_vibration.core.control.command_forecast.notch_forecast` of the
-    supervisor's canceller and running identification.
+    supervisor's canceller (its weights moving at their trend) and running identification.
     """
-    return lambda samples: notch_forecast(supervisor.canceller,
-                                          supervisor.identification.identifier, samples)
+    trend = WeightTrend()
+
+    def rows(samples: int) -> np.ndarray:
+        canceller = supervisor.canceller
+        rate = trend.rate(canceller.weights, supervisor.last_sample)
+        return notch_forecast(canceller, supervisor.identification.identifier, samples, rate)
+    return rows
 
 
 def parse_forecast(msg: Float64MultiArray) -> tuple[np.ndarray, int, int | None]:

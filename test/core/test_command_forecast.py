@@ -12,7 +12,13 @@ import numpy as np
 import pytest
 
 from hexapod_vibration.core.control.adaptation import ToneResponseIdentifier
-from hexapod_vibration.core.control.command_forecast import canceller_ahead, notch_forecast
+from hexapod_vibration.core.control.command_forecast import (
+    MAX_TREND_SPAN_SAMPLES,
+    TREND_BASELINE_SAMPLES,
+    WeightTrend,
+    canceller_ahead,
+    notch_forecast,
+)
 from hexapod_vibration.core.control.notch import AdaptiveNotchCanceller
 from hexapod_vibration.core.control.plant_identification import BroadbandIdentifier
 from hexapod_vibration.core.loop.command_arbiter import CommandArbiter, Refusal
@@ -37,6 +43,33 @@ def test_canceller_forecast_is_its_next_outputs_with_weights_still():
     np.testing.assert_allclose(forecast, _next_commands(canceller.step, AHEAD), atol=1e-12)
 
 
+@pytest.mark.parametrize(("flag", "smooth"), [(True, False), (True, True), (False, True)])
+def test_canceller_forecast_follows_the_output_ramp(flag, smooth):
+    rng = np.random.default_rng(2)
+    canceller = AdaptiveNotchCanceller(6, [40.0, 80.0], FS, mu=0.0)
+    canceller.set_weights(rng.normal(size=(2, 6)) + 1j * rng.normal(size=(2, 6)))
+    if not flag:
+        _next_commands(canceller.step, 300)          # fully on, then faded out
+    canceller.set_enabled(flag, ramp_samples=120, smooth=smooth)
+    for done in (0, 7, 40, 100):                     # across the ramp and its end
+        _next_commands(canceller.step, done)
+        forecast = canceller_ahead(canceller, AHEAD, WeightTrend().rate(canceller.weights, 0))
+        np.testing.assert_allclose(forecast, _next_commands(canceller.step, AHEAD), atol=1e-12)
+
+
+def test_weight_trend_is_the_change_per_sample_over_its_baseline():
+    trend, weights = WeightTrend(), np.ones((2, 6), complex)
+    span = TREND_BASELINE_SAMPLES
+    assert trend.rate(weights, 10) is None                           # nothing before
+    assert trend.rate(weights * 2.0, 10 + span - 1) is None          # too short a span
+    np.testing.assert_allclose(trend.rate(weights * 3.0, 10 + span), np.full((2, 6), 2 / span))
+    np.testing.assert_allclose(trend.rate(weights * 3.5, 10 + 2 * span - 1),
+                               np.full((2, 6), 1.5 / span))   # from 10 + span - 1
+    assert trend.rate(weights, 10 + 2 * span - 1) is None            # not after the last
+    assert trend.rate(np.ones((3, 6), complex), 500) is None         # a new tone set
+    assert trend.rate(np.ones((3, 6), complex), 500 + MAX_TREND_SPAN_SAMPLES + 1) is None
+
+
 @pytest.mark.parametrize("make", [
     lambda: BroadbandIdentifier(6, FS, period_s=0.5, settle_s=0.1, periods=2),
     lambda: ToneResponseIdentifier(6, [40.0, 80.0], FS, settle_s=0.01, measure_s=0.03),
@@ -55,7 +88,7 @@ def test_identification_forecast_is_its_excitation_across_segments_and_the_end(m
     assert identifier.done
 
 
-def _stalled_loop(forecasts: bool, samples: int = 16_000):
+def _stalled_loop(forecasts: bool, samples: int = 16_000, trend: bool = True):
     """A notch supervisor on a 6-channel plant whose driver gets 2 % of its commands late.
 
     Returns the supervisor, the commands it computed and the notch forces applied (N, by
@@ -66,14 +99,16 @@ def _stalled_loop(forecasts: bool, samples: int = 16_000):
     shaker = (0.02 * np.sin(2 * np.pi * 40.0 * np.arange(samples) / FS)[:, None]
               + 1e-4 * rng.normal(size=(samples, 6)))
     computed, applied = np.zeros((samples, 6)), np.zeros((samples, 6))
+    weights = WeightTrend()
     for n in range(samples):
         computed[n] = supervisor.step(n, c @ x + shaker[n])
         if not late[n]:
             arbiter.offer("notch", computed[n].copy(), n, 1, 0.0)
             if forecasts and n % 10 == 0:
                 identifier = supervisor.identification.identifier
-                arbiter.forecast("notch", n + 1, notch_forecast(supervisor.canceller,
-                                                                identifier, AHEAD), 1)
+                rate = (weights.rate(supervisor.canceller.weights, n) if trend else None)
+                arbiter.forecast("notch", n + 1, notch_forecast(
+                    supervisor.canceller, identifier, AHEAD, rate), 1)
         forces, _ = arbiter.close_sample(False, 5)
         applied[n] = forces["notch"]
         x = a @ x + b @ forces["notch"]
@@ -104,6 +139,24 @@ def test_forecasts_stand_in_for_late_commands_in_identification_and_control():
           f"{peak:.3g} N; {arbiter.streams['notch'].forecast.applied} rows applied")
     assert stand_in.size > 50
     assert forecast_error < 0.01 * peak < hold_error
+
+
+def test_the_weights_trend_makes_the_stand_ins_closer_while_the_canceller_converges():
+    """The same stalled run with the forecast's weights held and moving at their trend.
+
+    The stand-ins of the first two seconds of control (the weights converging) against the
+    commands computed for them: the trend's error is the smaller (rms and worst).
+    """
+    errors = {}
+    for trend in (False, True):
+        supervisor, computed, applied, late, _ = _stalled_loop(True, 13_000, trend)
+        on = 11_000                        # the 10 s identification and its analysis done
+        samples = np.arange(on, computed.shape[0] - 1)
+        stand_in = samples[late[samples]]
+        error = applied[stand_in + 1] - computed[stand_in]
+        errors[trend] = (np.sqrt(np.mean(error**2)), np.abs(error).max())
+    print(f"stand-in error rms / worst (N): held weights {errors[False]}, trend {errors[True]}")
+    assert errors[True][0] < 0.5 * errors[False][0] and errors[True][1] < errors[False][1]
 
 
 def test_arbiter_applies_forecast_rows_only_for_late_realtime_samples():

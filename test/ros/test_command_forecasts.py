@@ -1,18 +1,33 @@
-"""``/pph/notch_forecast`` messages: what the notch writes reads back, a bad one is refused."""
+"""``/pph/*_forecast`` messages: what a controller writes reads back, a bad one is refused.
+
+The publisher sends a full forecast every ``FORECAST_EVERY_SAMPLES`` and, for the pointing
+controller, a short one after every other sample (in-process nodes on the test's domain).
+"""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from hexapod_vibration.contract import FORECAST_ROWS_LABEL, InvalidStrutMessage
-from hexapod_vibration.ros.command_forecasts import parse_forecast
+from hexapod_vibration.contract import (
+    FORECAST_EVERY_SAMPLES,
+    FORECAST_ROWS_LABEL,
+    FORECAST_SAMPLES,
+    SHORT_FORECAST_SAMPLES,
+    InvalidStrutMessage,
+)
+from hexapod_vibration.ros.command_forecasts import (
+    ForecastPublisher,
+    parse_forecast,
+    subscribe_forecasts,
+)
 from hexapod_vibration.ros.messages import make_vector_array
 
-pytestmark = pytest.mark.unit
 RUN = 77
+HANG_GUARD_S = 30.0
 
 
+@pytest.mark.unit
 def test_a_forecast_reads_back_as_it_was_written():
     rows = np.arange(60.0).reshape(10, 6) / 7.0
     parsed, first, run = parse_forecast(make_vector_array(rows.reshape(-1), 1234, RUN,
@@ -28,6 +43,27 @@ def test_a_forecast_reads_back_as_it_was_written():
     make_vector_array(np.zeros(12), None, label=FORECAST_ROWS_LABEL),       # no first sample
     make_vector_array([np.nan] + [0.0] * 5, 9, RUN, label=FORECAST_ROWS_LABEL),
 ])
+@pytest.mark.unit
 def test_a_bad_forecast_is_refused(message):
     with pytest.raises(InvalidStrutMessage):
         parse_forecast(message)
+
+
+@pytest.mark.parametrize("every_sample", [False, True])
+def test_the_publisher_sends_full_forecasts_and_short_ones_between(ros_context, every_sample):
+    controller = ros_context.create_node("forecaster")
+    driver = ros_context.create_node("forecast_reader")
+    got: list[tuple[int, int]] = []
+    subscribe_forecasts(driver, "/pph/test_forecast",
+                        lambda rows, first, _run: got.append((first, rows.shape[0])))
+    publisher = ForecastPublisher(controller, "/pph/test_forecast", every_sample)
+    assert ros_context.wait_for(lambda: publisher._publisher.get_subscription_count() > 0,
+                                HANG_GUARD_S)
+    expected = [(n + 1, FORECAST_SAMPLES if n % FORECAST_EVERY_SAMPLES == 0
+                 else SHORT_FORECAST_SAMPLES) for n in range(5, 26)
+                if every_sample or n % FORECAST_EVERY_SAMPLES == 0]
+    for index in range(5, 26):                 # one at a time: the queue is 10 deep
+        publisher.after(index, RUN, lambda k: np.full((k, 6), float(k)))
+        sent = sum(first <= index + 1 for first, _ in expected)
+        assert ros_context.wait_for(lambda n=sent: len(got) >= n, HANG_GUARD_S)
+    assert got == expected

@@ -267,6 +267,26 @@ class AdaptiveNotchCanceller(NotchWeights):
         self._fading.advance(samples)
         self._osc.advance(samples)
 
+    def gains_ahead(self, samples: int) -> np.ndarray:
+        """The output gain of each of the next ``samples`` :meth:`step` calls (the ramp ahead).
+
+        Entry k is the gain after k + 1 moves of the ramp, as :meth:`step` applies it.
+        """
+        moves = np.arange(1, int(samples) + 1)
+        target, gain = self._target, self._gain
+        if gain == target:
+            return np.full(moves.size, gain)
+        step = moves * self._gain_step
+        if self._smooth:
+            progress = self._progress
+            ahead = (np.minimum(target, progress + step) if progress < target
+                     else np.maximum(target, progress - step))
+            return np.array([target if p == target else smooth_fade_gain(p) for p in ahead])
+        if self._gain_step <= 0.0:
+            return np.full(moves.size, target)
+        return (np.minimum(target, gain + step) if gain < target
+                else np.maximum(target, gain - step))
+
     def _move_gain(self, samples: int) -> None:
         """``samples`` samples of the ramp: linear in the gain, or along the smooth curve."""
         target = self._target
