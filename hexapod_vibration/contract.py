@@ -83,8 +83,7 @@ POINTING_FORECAST_TOPIC = "/pph/pointing_forecast"
 row when the command of its sample is late): ``layout.dim[0] = (FORECAST_ROWS_LABEL, 6 K,
 6 K)``, rows of six struts, then the sample label (the first row's sample) and the run.
 The notch controller forecasts its sinusoids, the pointing controller continues the
-oscillation of its last commands (and publishes ``SHORT_FORECAST_SAMPLES`` rows at the other
-samples)."""
+oscillation of its last commands."""
 
 FORECAST_TOPICS = {"notch": NOTCH_FORECAST_TOPIC, "pointing": POINTING_FORECAST_TOPIC}
 """The forecast topic of each command stream."""
@@ -100,15 +99,6 @@ is 9.6 kB, 1 MB/s at 100 Hz."""
 
 FORECAST_EVERY_SAMPLES = 10
 """Samples between two forecasts (100 Hz; each covers the next ``FORECAST_SAMPLES``)."""
-
-SHORT_FORECAST_SAMPLES = 20
-"""Rows of the forecast the pointing controller publishes at the other samples.
-
-Its forecast continues the oscillation of its last commands, and its error grows with the
-age of the row applied (0.002 / 0.024 / 0.036 N rms 1 / 5 / 10 samples ahead on a realtime
-run's commands): a row up to ten samples old stood in for a late command with a one-sample
-step of 0.05-0.12 N, the kick the divergence guard saw. Anchored at the sample before the
-late one, the same stand-ins were within 0.01 N. 20 rows are 960 bytes."""
 
 FREQUENCY_LABEL = "frequency_hz"
 """``layout.dim[0]`` label of the frequency topics (values in Hz)."""

@@ -87,8 +87,7 @@ class PointingControllerNode(Node):
             StrutArrayPublisher(self.readers.publisher(
                 self, Float64MultiArray, "/pph/pointing_command", LOOP_PUBLISHER_QOS)),
             self.get_logger())
-        self._forecasts = ForecastPublisher(self, POINTING_FORECAST_TOPIC,   # for late samples
-                                            every_sample=True)
+        self._forecasts = ForecastPublisher(self, POINTING_FORECAST_TOPIC)  # for late samples
         self._continuation = ToneContinuation(STRUT_COUNT)
         self._bridge = GapBridge(STRUT_COUNT)         # the law's input across skipped samples
         self._pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", DIAGNOSTICS_QOS)

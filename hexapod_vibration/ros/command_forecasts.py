@@ -26,7 +26,6 @@ from hexapod_vibration.contract import (
     FORECAST_EVERY_SAMPLES,
     FORECAST_ROWS_LABEL,
     FORECAST_SAMPLES,
-    SHORT_FORECAST_SAMPLES,
     STRUT_COUNT,
     InvalidStrutMessage,
 )
@@ -41,29 +40,18 @@ from hexapod_vibration.ros.rclpy_internals import serialized_publish
 
 
 class ForecastPublisher:
-    """A controller's forecasts on ``topic``, published while someone listens.
+    """A controller's forecasts on ``topic``, published while someone listens."""
 
-    ``every_sample``: between the full forecasts, a short one (``SHORT_FORECAST_SAMPLES``
-    rows) after every sample, so the row a driver applies for a late command is recent.
-    """
-
-    def __init__(self, node: Node, topic: str, every_sample: bool = False) -> None:
+    def __init__(self, node: Node, topic: str) -> None:
         """Create the publisher (:data:`~hexapod_vibration.ros.qos.LOOP_QOS`)."""
         self._publisher = node.create_publisher(Float64MultiArray, topic, LOOP_QOS)
         self._publish = serialized_publish(self._publisher)       # CDR bytes
-        self.every_sample = bool(every_sample)
 
     def after(self, index: int, run: int | None, rows: Callable[[int], np.ndarray]) -> None:
-        """Sample ``index`` was answered: the commands ``rows(K)`` (N) after it, if due.
-
-        Every ``FORECAST_EVERY_SAMPLES``-th sample ``K = FORECAST_SAMPLES``; at the others
-        ``SHORT_FORECAST_SAMPLES`` if ``every_sample``, else none.
-        """
-        full = index % FORECAST_EVERY_SAMPLES == 0
-        if not (full or self.every_sample) or not self._publisher.get_subscription_count():
+        """Sample ``index`` was answered: every 10th, ``rows(FORECAST_SAMPLES)`` (N) after it."""
+        if index % FORECAST_EVERY_SAMPLES or not self._publisher.get_subscription_count():
             return
-        samples = FORECAST_SAMPLES if full else SHORT_FORECAST_SAMPLES
-        self._publish(encode_vector_cdr(rows(samples).reshape(-1), index + 1, run,
+        self._publish(encode_vector_cdr(rows(FORECAST_SAMPLES).reshape(-1), index + 1, run,
                                         label=FORECAST_ROWS_LABEL))
 
 

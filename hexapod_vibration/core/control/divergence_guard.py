@@ -24,9 +24,10 @@ scatter (dB). While control is on each block is judged against it:
   the tones, two judged blocks in a row (<= 0.5 s): what control does there (a harmonic,
   a resonance) lasts, while one block's rise is a transient. In realtime a command stood
   in for by a forecast is a one-sample step of 0.02-0.1 N, which lifted the 100-400 Hz
-  third octaves of one block by 11-20 dB: six of eleven realtime runs of
-  ``single_tone_harmonic`` faded control out on such a block, with or without control the
-  same kind of kick (the pointing controller's stand-ins);
+  third octaves of one block by 10-20 dB: of 13 realtime runs of ``single_tone_harmonic``
+  whose guard saw every sample, 9 faded control out on such kicks (7 on one block, 2 on
+  the slow mean), the same kind of kick as without control (the pointing controller's
+  stand-ins, reconstructed from the bags);
 - slow: the exponential mean over ``SLOW_BLOCKS`` blocks (2 s) above ``reference + margin
   + 3 sigma sqrt(v)`` (a steady excess of a few dB: a canceller that is stable but wrong,
   e.g. tuned 0.4 Hz off the line) is a divergence too; ``v`` is the variance of the mean

@@ -28,8 +28,6 @@ HISTORY_SAMPLES = 200
 """Commands the model is fitted to (0.2 s at 1 kHz: eight periods of 40 Hz)."""
 MAX_POLE_RADIUS = 0.999
 """Largest radius of the continued oscillation's pole (-18 % over 200 samples)."""
-REFIT_EVERY_SAMPLES = 10
-"""Commands between two fits of the model (a fit is 0.1 ms, the continuation a few us)."""
 
 
 class ToneContinuation:
@@ -44,42 +42,19 @@ class ToneContinuation:
         self._ring = np.zeros((HISTORY_SAMPLES, int(channels)))
         self._next = 0
         self._filled = 0
-        self._model: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
-        self._added_since_fit = 0
 
     def add(self, command: np.ndarray) -> None:
         """The controller's command (N, (C,)) of its latest sample."""
         self._ring[self._next] = command
         self._next = (self._next + 1) % HISTORY_SAMPLES
         self._filled = min(self._filled + 1, HISTORY_SAMPLES)
-        self._added_since_fit += 1
 
     def forecast(self, samples: int) -> np.ndarray:
-        """The next ``samples`` commands (N, (samples, C)) after the last one added.
-
-        The model is fitted again once ``REFIT_EVERY_SAMPLES`` commands came since the last
-        fit; between fits it continues from the last two commands (cheap: a forecast at
-        every sample costs a fit every tenth).
-        """
+        """The next ``samples`` commands (N, (samples, C)) after the last one added."""
         last = self._ring[self._next - 1]
         rows = np.tile(last, (int(samples), 1))
         if self._filled < HISTORY_SAMPLES:
             return rows
-        if self._model is None or self._added_since_fit >= REFIT_EVERY_SAMPLES:
-            self._model, self._added_since_fit = self._fit(), 0
-        mean, pole, oscillates = self._model
-        if not oscillates.any():
-            return rows
-        y0 = last[oscillates] - mean
-        y_1 = self._ring[self._next - 2][oscillates] - mean
-        # y[k] = Re(c p^k): Re(c) = y0, Re(c / p) = y_1
-        imag = (y_1 * np.abs(pole) ** 2 - y0 * pole.real) / pole.imag
-        powers = np.exp(np.outer(np.arange(1, int(samples) + 1), np.log(pole)))   # p^k
-        rows[:, oscillates] = mean + ((y0 + 1j * imag)[None, :] * powers).real
-        return rows
-
-    def _fit(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """``(mean, pole, oscillates)``: the oscillating struts' mean (N) and pole, and which."""
         history = np.roll(self._ring, -self._next, axis=0)
         mean = history.mean(axis=0)
         y = history - mean
@@ -92,7 +67,14 @@ class ToneContinuation:
             a2 = (g11 * b2 - g12 * b1) / det
         discriminant = a1 * a1 + 4.0 * a2             # z^2 - a1 z - a2: complex poles if < 0
         oscillates = np.isfinite(discriminant) & (discriminant < 0.0) & (det > 0.0)
+        if not oscillates.any():
+            return rows
         radius = np.minimum(np.sqrt(np.abs(a2[oscillates])), MAX_POLE_RADIUS)
         pole = radius * np.exp(1j * np.arccos(np.clip(
             a1[oscillates] / (2.0 * np.sqrt(np.abs(a2[oscillates]))), -1.0, 1.0)))
-        return mean[oscillates], pole, oscillates
+        y0, y_1 = y[-1, oscillates], y[-2, oscillates]
+        # y[k] = Re(c p^k): Re(c) = y0, Re(c / p) = y_1
+        imag = (y_1 * radius**2 - y0 * pole.real) / pole.imag
+        powers = np.exp(np.outer(np.arange(1, int(samples) + 1), np.log(pole)))   # p^k
+        rows[:, oscillates] = mean[oscillates] + ((y0 + 1j * imag)[None, :] * powers).real
+        return rows
