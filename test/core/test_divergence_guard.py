@@ -248,23 +248,26 @@ def test_supervisor_backs_off_a_diverging_canceller_and_clamps_the_weights():
     assert sup.canceller.output_gain == 0.0
 
 
-def test_supervisor_does_not_act_while_control_works():
+def _controlling(good: np.ndarray) -> NotchSupervisor:
+    """A supervisor on the plant ``good``: identified, 1.5 s of reference, control on."""
     sup = NotchSupervisor(_paper(tone_frequencies_hz=(TONE,), enabled=False,
                                       identify_delay_s=0.5))
-    good = 0.1 * np.eye(6)
     _run(sup, lambda n: good, 500 + 3200 + 1500)
     sup.apply({"enabled": True})
+    return sup
+
+
+def test_supervisor_does_not_act_while_control_works():
+    good = 0.1 * np.eye(6)
+    sup = _controlling(good)
     _run(sup, lambda n: good, 5000, sup.last_sample + 1)
     assert sup.guard_state == "watching" and sup.safety.action == ""
     assert sup.state == NotchState.ADAPTING
 
 
 def test_skipped_samples_count_in_the_guards_blocks_and_lost_ones_drop_theirs():
-    sup = NotchSupervisor(_paper(tone_frequencies_hz=(TONE,), enabled=False,
-                                      identify_delay_s=0.5))
     good = 0.1 * np.eye(6)
-    _run(sup, lambda n: good, 500 + 3200 + 1500)
-    sup.apply({"enabled": True})
+    sup = _controlling(good)
     start = sup.last_sample + 1
     gaps = {start + 300 * k + 77 + m for k in range(1, 11) for m in (0, 1)}   # 10 gaps
     _run(sup, lambda n: good, 3500, start, observed=gaps)
