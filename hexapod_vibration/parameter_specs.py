@@ -269,8 +269,8 @@ COMMAND_DELAY = ParameterSpec(
     "command_delay_samples", "int", 0, "the driver applies the command answering sample n "
     "over [n+d, n+d+1): a controller has d+1 periods to answer (a realtime pipeline), and "
     "one behind its loop answers the newest d+1 samples queued (the older ones are past "
-    "their deadline); the same d on the driver and the controllers; the notch's "
-    "loop_delay_samples must grow by d", unit="samples", low=0, high=10, read_only=True)
+    "their deadline); the same d on the driver and the controllers; the notch adds d "
+    "to its loop_delay_samples", unit="samples", low=0, high=10, read_only=True)
 LOOP_SCHEDULING = (EXECUTOR, REALTIME_PRIORITY, CPU_AFFINITY, COMMAND_DELAY)
 """The parameters of every 1 kHz node on how its loop is served and scheduled."""
 MODEL_FILE = ParameterSpec(
@@ -533,7 +533,8 @@ NOTCH_CONTROLLER = NodeSpec("notch_controller", summary="six decentralized Adapt
     ParameterSpec("dc_cutoff_hz", "double", 0.5, "DC-blocker corner", unit="Hz", low=0.01,
                   high=10.0, read_only=True),
     ParameterSpec("loop_delay_samples", "double", 2.0, "loop delay used in the stability "
-                  "bound: 1 for the ZOH + anti-aliasing group delay", unit="samples",
+                  "bound: 1 for the ZOH + anti-aliasing group delay; the node adds its "
+                  "command_delay_samples", unit="samples",
                   low=0.0, high=20.0, read_only=True),
     ParameterSpec("ramp_s", "double", 0.05, "enable/disable and removed-tone fade time",
                   unit="s", low=0.0, high=5.0),

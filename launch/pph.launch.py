@@ -6,6 +6,7 @@
     ros2 launch hexapod_vibration pph.launch.py record:=true bag_path:=/tmp/pph_bag
     ros2 launch hexapod_vibration pph.launch.py composed:=true
     ros2 launch hexapod_vibration pph.launch.py clock_mode:=realtime realtime_priority:=50
+    ros2 launch hexapod_vibration pph.launch.py clock_mode:=realtime command_delay_samples:=1
 
 Starts ``pph_driver``, ``notch_controller`` and ``pointing_controller`` (node names = the
 executable names) with the parameters of ``config/pph.yaml`` from the package's share
@@ -16,7 +17,9 @@ With ``composed:=true`` the three nodes run in one process (``pph_graph``: same 
 parameters and topics, intra-process delivery; see docs/performance.md).
 ``realtime_priority`` (1-98; 0 = off) runs the loop processes under SCHED_FIFO, refused at
 start-up where the OS does not permit it; per-node CPUs (``cpu_affinity``) go in the params
-file.
+file. ``command_delay_samples`` (default 2 in realtime, as ``experiment --realtime``, 0 in
+lockstep) gives the controllers that many more periods to answer; the notch controller adds
+it to its loop delay.
 """
 
 import os
@@ -25,12 +28,14 @@ from ament_index_python.packages import get_package_share_directory
 from launch import LaunchDescription
 from launch.actions import DeclareLaunchArgument
 from launch.conditions import IfCondition, UnlessCondition
-from launch.substitutions import LaunchConfiguration
+from launch.substitutions import LaunchConfiguration, PythonExpression
 from launch_ros.actions import Node
 from launch_ros.parameter_descriptions import ParameterValue
 
 PACKAGE = "hexapod_vibration"
 PARAMS_FILE = "pph.yaml"
+REALTIME_COMMAND_DELAY_SAMPLES = 2
+"""The default ``command_delay_samples`` in realtime (``experiment_setup``'s, measured)."""
 
 
 def generate_launch_description() -> LaunchDescription:
@@ -42,6 +47,7 @@ def generate_launch_description() -> LaunchDescription:
     bag_path = LaunchConfiguration("bag_path")
     composed = LaunchConfiguration("composed")
     priority = LaunchConfiguration("realtime_priority")
+    command_delay = LaunchConfiguration("command_delay_samples")
     arguments = [
         DeclareLaunchArgument(
             "params_file", default_value=default_params,
@@ -61,11 +67,19 @@ def generate_launch_description() -> LaunchDescription:
             description="SCHED_FIFO priority (1-98) of the driver and controllers; 0: the "
                         "normal scheduler (overrides the params file)"),
         DeclareLaunchArgument(
+            "command_delay_samples",
+            default_value=PythonExpression([
+                f"{REALTIME_COMMAND_DELAY_SAMPLES} if '", clock_mode, "' == 'realtime' else 0"]),
+            description="samples between a sample and the command answering it, on the "
+                        "driver and both controllers (0-10; default: 2 in realtime, 0 in "
+                        "lockstep; overrides the params file)"),
+        DeclareLaunchArgument(
             "bag_path", default_value="",
             description="bag directory of the recorder (must not exist); empty: "
                         "rosbag2_<date>-<time> in the current directory"),
     ]
-    scheduling = {"realtime_priority": ParameterValue(priority, value_type=int)}
+    scheduling = {"realtime_priority": ParameterValue(priority, value_type=int),
+                  "command_delay_samples": ParameterValue(command_delay, value_type=int)}
     controller_parameters = [params_file, scheduling]
     driver_parameters = [*controller_parameters,
                          {"clock_mode": ParameterValue(clock_mode, value_type=str)}]

@@ -81,7 +81,7 @@ class NotchControllerNode(Node):
         self.fs = SAMPLE_RATE_HZ
         values = self.params.values()
         model = load_model_config(config_path("pph_model.yaml"))
-        config = NotchConfig().replaced({k: v for k, v in values.items() if k in SETTINGS})
+        config = NotchConfig().replaced(self._settings_with_pipeline(values))
         z_row = np.linalg.inv(model.geometry.top_jacobian)[2]       # the z axis, as CoreLoop
         self.supervisor = NotchSupervisor(config, self.fs, output_weights=z_row)
         accel_range = SignalRanges.from_model(model).accel_m_s2      # the accelerometers' +-2 g
@@ -120,6 +120,22 @@ class NotchControllerNode(Node):
                                f" Hz, mu {config.mu:g}, {config.adaptation}")
 
     # ------------------------------------------------------------------ parameters
+    @staticmethod
+    def _settings_with_pipeline(values: dict) -> dict:
+        """The notch settings among ``values``, the loop delay grown by the command delay.
+
+        The driver applies this node's answers ``command_delay_samples`` later, so the loop's
+        delay in the stability bound grows by as much. ValueError beyond the bound's range.
+        """
+        settings = {k: v for k, v in values.items() if k in SETTINGS}
+        base, delay = settings["loop_delay_samples"], values["command_delay_samples"]
+        highest = NOTCH_CONTROLLER["loop_delay_samples"].high
+        if base + delay > highest:
+            raise ValueError(f"loop_delay_samples {base:g} + command_delay_samples {delay} = "
+                             f"{base + delay:g} samples of loop delay, more than {highest:g}")
+        settings["loop_delay_samples"] = base + delay
+        return settings
+
     def _check_parameters(self, values: dict, changed: frozenset) -> str:
         """Validate only: the supervisor checks the changed settings as a whole."""
         try:

@@ -33,8 +33,8 @@ samples queued. Through separate processes on the project machine (docs/performa
 one period missed a few % of the notch's answers, each held answer corrupting the
 identification's input; against two periods (delay 1), interleaved, three runs each, the
 late commands fell from 3 141-3 961 to 1 636-1 806 of 41 100 and the identification's
-confidence rose from 0.943-0.967 to 0.976-0.984. The notch's ``loop_delay_samples`` grows
-by as much."""
+confidence rose from 0.943-0.967 to 0.976-0.984. The notch controller adds it to its
+``loop_delay_samples`` (the stability bound's delay)."""
 
 
 def node_parameters(scenario: Scenario, mode: str, model_file: str = "",
@@ -92,16 +92,10 @@ def node_parameters(scenario: Scenario, mode: str, model_file: str = "",
 
 
 def _pipeline(params: dict[str, dict[str, Any]], delay_samples: int) -> None:
-    """Set every loop node's command delay and add it to the notch's loop delay (samples)."""
-    from hexapod_vibration.parameter_specs import NOTCH_CONTROLLER
-
+    """Set every loop node's command delay (samples; the notch adds it to its loop delay)."""
     for node in ("pph_driver", "notch_controller", "pointing_controller"):
         if node in params:
             params[node]["command_delay_samples"] = delay_samples
-    notch = params.get("notch_controller")
-    if notch is not None:
-        base = notch.get("loop_delay_samples", NOTCH_CONTROLLER["loop_delay_samples"].default)
-        notch["loop_delay_samples"] = float(base) + delay_samples
 
 
 def rotor_parameters(scenario: Scenario) -> dict[str, Any]:

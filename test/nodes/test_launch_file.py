@@ -64,7 +64,10 @@ def test_launch_file_compiles_and_starts_the_three_nodes(tmp_path):
     arguments = {_keywords(c, constants).get("name") or c.args[0].value
                  for c in _calls(tree, "DeclareLaunchArgument")}
     assert arguments == {"params_file", "clock_mode", "record", "bag_path", "composed",
-                         "realtime_priority"}
+                         "realtime_priority", "command_delay_samples"}
+    # The realtime default is the experiment's (one definition, checked here).
+    from hexapod_vibration.tools.experiment_setup import REALTIME_COMMAND_DELAY_SAMPLES
+    assert constants["REALTIME_COMMAND_DELAY_SAMPLES"] == REALTIME_COMMAND_DELAY_SAMPLES
     assert 'choices=["lockstep", "realtime"]' in source
     # The params file comes from the package's share directory.
     assert "get_package_share_directory" in source

@@ -100,6 +100,16 @@ def test_start_up_refuses_what_run_time_refuses(ros_context, node_processes):
     assert all(p.running() for p in running.values())
 
 
+def test_a_command_delay_the_loop_delay_cannot_take_is_refused(node_processes):
+    process = node_processes.start("notch_controller", "--ros-args", "-p",
+                                   "loop_delay_samples:=19.0", "-p", "command_delay_samples:=2")
+    assert process.wait(HANG_GUARD_S) == 2, process.output()
+    errors = [line for line in process.stderr_path.read_text().splitlines()
+              if line.startswith("notch_controller: error: ")]
+    assert errors == ["notch_controller: error: loop_delay_samples 19 + command_delay_samples "
+                      "2 = 21 samples of loop delay, more than 20"], process.output()
+
+
 def test_unknown_parameters_are_reported(node_processes, tmp_path):
     params = tmp_path / "params.yaml"
     params.write_text(yaml.safe_dump({"pph_driver": {"ros__parameters": {
