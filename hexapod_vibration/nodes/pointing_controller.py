@@ -34,6 +34,7 @@ from hexapod_vibration.contract import (
 from hexapod_vibration.core.control.gap_bridge import GapBridge
 from hexapod_vibration.core.control.pointing import PointingGains, validate_target_pose
 from hexapod_vibration.core.control.tone_continuation import ToneContinuation
+from hexapod_vibration.core.loop.command_arbiter import NO_FORCE_N  # zero force, read-only
 from hexapod_vibration.core.loop.signal_ranges import SignalRanges
 from hexapod_vibration.core.model.config import load_model_config
 from hexapod_vibration.core.model.sensors import EddySensorArray
@@ -57,11 +58,6 @@ TARGET_PARAMS = ("target_tilt_x_deg", "target_tilt_y_deg", "target_twist_deg",
                  "target_translation_m")
 GAIN_PARAMS = ("bandwidth_hz", "damping_ratio", "output_lowpass_hz")
 DIAGNOSTICS_PHASE = DIAGNOSTICS_PHASE_SAMPLES["pointing_controller"]
-
-
-NO_FORCE_N = np.zeros(STRUT_COUNT)
-"""Read-only: the command while the law is disabled (N)."""
-NO_FORCE_N.flags.writeable = False
 
 
 class PointingControllerNode(Node):

@@ -66,6 +66,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from hexapod_vibration.core.control.guard_blocks import ErrorBlocks
 from hexapod_vibration.core.spectrum import third_octave_bands_hz
 
 DEFAULT_BLOCK_S = 0.25
@@ -122,6 +123,23 @@ class SlowMean:
     def variance(self) -> float:
         """Variance of the mean in one block's units (:func:`slow_mean_variance`)."""
         return slow_mean_variance(self.blocks)
+
+
+class ConsecutiveRises:
+    """Bands over their threshold in two judged blocks in a row (the off-tone octaves')."""
+
+    def __init__(self) -> None:
+        """No judged block before."""
+        self._before: np.ndarray | None = None
+
+    def confirmed(self, over: np.ndarray) -> np.ndarray:
+        """The bands ``over`` (bool) now that were over in the block judged before too."""
+        before, self._before = self._before, over.copy()
+        return over & before if before is not None else np.zeros_like(over)
+
+    def reset(self) -> None:
+        """The last block was not judged (or an action was taken): start again."""
+        self._before = None
 
 
 GUARD_DISABLED = "disabled"
@@ -183,13 +201,8 @@ class DivergenceGuard:
         self.margin_db = float(margin_db)
         self.block = int(round(block_s * self.fs))
         self.half_width_hz = float(band_half_width_hz)
-        self._buffer = np.zeros((self.block, self.channels))
-        self._window = np.hanning(self.block)[:, None]
+        self._blocks = ErrorBlocks(self.channels, self.block)
         self._freqs = np.fft.rfftfreq(self.block, 1.0 / self.fs)
-        self._n = 0
-        self._last_index = -1
-        self.blocks_with_gaps = 0
-        """Blocks dropped (neither reference nor judged) for missing samples."""
         self._lobe_hz = self.half_width_hz + 2.0 * self.fs / self.block
         self.set_tones(tone_frequencies_hz)
         self.action_count = 0
@@ -279,7 +292,7 @@ class DivergenceGuard:
         """
         a = np.asarray(amplitude)
         self._cancelled = (np.sum(np.abs(a) ** 2, axis=1)
-                           * (self.block * np.sum(self._window ** 2) / 4.0))
+                           * (self.block * np.sum(self._blocks.window ** 2) / 4.0))
 
     @property
     def following(self) -> bool:
@@ -303,15 +316,18 @@ class DivergenceGuard:
         self._ref_tones: list[np.ndarray] = []        # and where the tones were
         self._ref_tone_power: list[np.ndarray] = []   # their bands' power there (T,)
         self._slow = SlowMean()
-        self._octaves_over: np.ndarray | None = None
-        """Off-tone bands over the fast threshold in the last block judged (None: the last
-        block was not judged)."""
+        self._octave_rises = ConsecutiveRises()
         self.last_levels_db = np.full(nb, np.nan)
 
     @property
     def reference_blocks(self) -> int:
         """Number of blocks in the reference."""
         return len(self._ref_db)
+
+    @property
+    def blocks_with_gaps(self) -> int:
+        """Blocks dropped (neither reference nor judged) for missing samples."""
+        return self._blocks.with_gaps
 
     @property
     def has_reference(self) -> bool:
@@ -361,47 +377,25 @@ class DivergenceGuard:
             index: the sample's index (None: the one after the last).
 
         A block counts for the reference (or is judged) only if every one of its samples
-        was recording (judging); a block that mixes the two is dropped. So is a block with
-        samples missing (an ``index`` not after the last one's): spliced, a residual
-        sinusoid's jump is broadband power (2 samples missing from a 250-sample block of a
-        realtime run, 1.9 s after control-on: +23 dB in the 100 Hz third octave, the guard
-        faded control out of a platform that was quieter than without it).
+        was recording (judging); a block that mixes the two, or with samples missing, is
+        dropped (:class:`~hexapod_vibration.core.control.guard_blocks.ErrorBlocks`).
         """
-        if self._n == 0:
-            self._all_recording, self._all_judging = True, True
-        elif index is not None and index != self._last_index + 1:
-            if self._all_recording or self._all_judging:
-                self.blocks_with_gaps += 1
-            self._all_recording, self._all_judging = False, False
-        if index is not None:
-            self._last_index = index
-        self._buffer[self._n] = error
-        self._all_recording &= bool(recording)
-        self._all_judging &= bool(judging)
-        self._n += 1
-        if self._n < self.block:
+        if (block := self._blocks.add(error, recording, judging, index)) is None:
             return None
-        self._n = 0
-        bins = self._bin_power()
-        power = self._masks @ bins
-        if self._all_recording:
+        bins, power = block.bins, self._masks @ block.bins
+        if block.recording:
             self._ref_sum += power
             self._ref_db.append(10.0 * np.log10(np.maximum(power, 1e-300)))
             self._ref_bins.append(bins)
             self._ref_tones.append(self._following.copy())
             self._ref_tone_power.append(self._tone_masks(self._following) @ bins)
             return None
-        if self._all_judging and self.has_reference:
+        if block.judging and self.has_reference:
             if self._moved:
                 return self._judge(*self._following_levels(bins))
             return self._judge(power)
-        self._octaves_over = None
+        self._octave_rises.reset()
         return None
-
-    def _bin_power(self) -> np.ndarray:
-        """(F,) power of each bin of the buffered block ((m/s^2)^2, channels summed)."""
-        spectrum = np.fft.rfft(self._buffer * self._window, axis=0)
-        return np.sum(np.abs(spectrum) ** 2, axis=1)
 
     def _following_levels(self, bins: np.ndarray
                           ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -443,9 +437,7 @@ class DivergenceGuard:
         mean = self._slow.add(np.minimum(power, cap))
         slow = 10.0 * np.log10(np.maximum(mean, 1e-300) / np.maximum(ref, 1e-300))
         fast_over = level > fast_th
-        octaves = slice(self._n_main, None)        # off the tones: confirmed by the next block
-        before, self._octaves_over = self._octaves_over, fast_over[octaves].copy()
-        fast_over[octaves] &= before if before is not None else False
+        fast_over[self._n_main:] = self._octave_rises.confirmed(fast_over[self._n_main:])
         detectors = [("fast", level, fast_th, fast_over), ("slow", slow, slow_th, slow > slow_th)]
         if self._grace > 0:
             self._grace -= 1
@@ -459,7 +451,7 @@ class DivergenceGuard:
                     action = ACTIONS[-1]
                 self.action_count += 1
                 self._slow = SlowMean()                # judge the next state afresh
-                self._octaves_over = None
+                self._octave_rises.reset()
                 self._grace = GRACE_BLOCKS
                 return GuardVerdict(action, self._band_name(b), float(rise[b]),
                                     float(th[b]), detector)
@@ -482,5 +474,5 @@ class DivergenceGuard:
         """Control starts again from scratch (new settings): the action sequence restarts."""
         self.action_count = 0
         self._slow = SlowMean()
-        self._octaves_over = None
+        self._octave_rises.reset()
         self._grace = 0

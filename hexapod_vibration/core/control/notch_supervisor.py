@@ -231,8 +231,8 @@ class NotchSupervisor:
         error = self.dc_blocker.step(accel_m_s2)
         self.identification.observe(int(index), error)
         if self._settings.config.divergence_guard and clock.first >= 0:
-            self.safety.step(int(index), clock.first, error,
-                             self.identification.identifier is not None, self.follower.active)
+            self.safety.step(int(index), clock.first, error, self.identification.running,
+                             self.follower.active)
 
     def note_held(self, rows: Sequence[tuple[int, int, int]], covered: int) -> None:
         """The driver's held commands (``/pph/notch_held``; ``core/control/held_inputs``)."""
