@@ -54,6 +54,7 @@ class ControlOutcome:
             "faded": f"CONTROL FADED OUT{at}: {self.reason}",
             "backed_off": f"CONTROL BACKED OFF{at}: {self.reason}",
             "interrupted": f"CONTROL INTERRUPTED{at}: {self.reason}",
+            "unknown": f"CONTROL UNKNOWN: {self.reason}",
             "never_engaged": "CONTROL NEVER ENGAGED: the notch did not adapt after control-on"
                              + (f" ({self.reason})" if self.reason else ""),
         }
@@ -103,6 +104,10 @@ def control_outcome(statuses: Sequence[dict[str, str]], control_on_sample: int |
                               backed.get("guard_action", ""), _sample(backed))
     if adapting_throughout:
         return ControlOutcome(True, True, engaged_at, True, "controlled")
+    if not after:
+        return ControlOutcome(True, True, engaged_at, False, "unknown",
+                              f"no notch status in the controlled window (its last at "
+                              f"sample {_sample(statuses[-1])})")
     stopped = _first_status(after, lambda s: s.get("state") != NotchState.ADAPTING)
     return ControlOutcome(True, True, engaged_at, False, "interrupted",
                           f"state {stopped.get('state', '?')} in the controlled window",

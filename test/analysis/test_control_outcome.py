@@ -60,3 +60,15 @@ def test_never_engaged_interrupted_and_not_asked():
     twin = [status(1000, "disabled", enabled="false"), status(9000, "disabled",
                                                                 enabled="false")]
     assert control_outcome(twin, None, 14000, True).outcome == "not_asked"
+
+
+def test_no_status_in_the_controlled_window_is_unknown_not_a_crash():
+    """The notch's last status came before the window (seen in a realtime run's bag)."""
+    statuses = [*IDENTIFYING, status(12000, "adapting")]
+    outcome = control_outcome(statuses, 12000, 14000, True)
+    assert (outcome.outcome, outcome.engaged, outcome.in_force) == ("unknown", True, False)
+    assert outcome.headline() == ("CONTROL UNKNOWN: no notch status in the controlled window "
+                                  "(its last at sample 12000); the reductions below are not "
+                                  "those of control")
+    empty = control_outcome([], 12000, 14000, True)
+    assert empty.outcome == "unknown" and "CONTROL UNKNOWN" in empty.headline()
