@@ -74,7 +74,17 @@ the report is complete up to) and the run label."""
 HELD_ROWS_LABEL = "held:first_due,last_due,applied"
 
 HELD_REPORT_EVERY_SAMPLES = 100
-"""Samples between two reports on ``NOTCH_HELD_TOPIC`` (10 Hz, empty ones included)."""
+"""Samples between two reports on ``NOTCH_HELD_TOPIC`` and ``STAND_INS_TOPIC`` (10 Hz, empty
+ones included)."""
+
+STAND_INS_TOPIC = "/pph/stand_ins"
+"""The due samples at which a realtime driver applied, for some controller's late command, a
+stand-in that controller did not compute (:mod:`hexapod_vibration.core.loop.stand_in_log`),
+every ``HELD_REPORT_EVERY_SAMPLES``, reliable: rows ``(first due sample, last due sample)``
+flattened, ``layout.dim[0] = (STAND_IN_ROWS_LABEL, 2 R, 2 R)``, then the sample label (the
+last due sample the report is complete up to) and the run label."""
+
+STAND_IN_ROWS_LABEL = "stand_ins:first_due,last_due"
 
 NOTCH_FORECAST_TOPIC = "/pph/notch_forecast"
 POINTING_FORECAST_TOPIC = "/pph/pointing_forecast"

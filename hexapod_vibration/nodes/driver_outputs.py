@@ -1,6 +1,7 @@
-"""What the driver publishes: /clock, the tachometer, the sensors, the force, held commands.
+"""What the driver publishes every sample: /clock, the tachometer, the sensors, the force.
 
-Every sample the first four; in realtime, every 100 samples, the notch commands it held.
+(In realtime its reports on the commands it applied are
+:mod:`~hexapod_vibration.nodes.driver_reports`'.)
 
 :class:`DriverOutputs` owns the driver's loop publishers (watched for their matched
 readers, :mod:`hexapod_vibration.ros.matching`). The sample's /clock and sensor messages are
@@ -18,17 +19,12 @@ from std_msgs.msg import Float64MultiArray
 from hexapod_vibration.cdr import clock_cdr, encode_vector_cdr
 from hexapod_vibration.contract import (
     DISTURBANCE_FREQUENCIES_TOPIC,
-    HELD_REPORT_EVERY_SAMPLES,
-    HELD_ROWS_LABEL,
-    NOTCH_HELD_TOPIC,
     REFERENCE_FREQUENCY_TOPIC,
 )
-from hexapod_vibration.core.loop.command_arbiter import CommandArbiter
-from hexapod_vibration.core.loop.held_log import HeldLog
 from hexapod_vibration.core.model.plant import PlantSample
 from hexapod_vibration.ros.matching import MatchedReaders
 from hexapod_vibration.ros.messages import StrutArrayPublisher
-from hexapod_vibration.ros.qos import CLOCK_QOS, HELD_QOS, LOOP_PUBLISHER_QOS
+from hexapod_vibration.ros.qos import CLOCK_QOS, LOOP_PUBLISHER_QOS
 from hexapod_vibration.ros.rclpy_internals import serialized_publish
 
 LOOP_TOPICS = ("/pph/accel", "/pph/eddy", "/pph/actuator_force", REFERENCE_FREQUENCY_TOPIC,
@@ -58,9 +54,6 @@ class DriverOutputs:
         self._frequencies = serialized_publish(arrays[DISTURBANCE_FREQUENCIES_TOPIC])
         self._clock = serialized_publish(self.readers.publisher(node, Clock, "/clock",
                                                                 CLOCK_QOS))
-        self._held = serialized_publish(node.create_publisher(Float64MultiArray,
-                                                              NOTCH_HELD_TOPIC, HELD_QOS))
-        self._held_log = HeldLog()
         self._offer: tuple[bytes, bytes, bytes] | None = None
         self._reference_msg: bytes | None = None
 
@@ -89,15 +82,3 @@ class DriverOutputs:
     def frequencies(self, frequencies_hz, n: int, run: int) -> None:
         """Publish the true frequency (Hz) of every sounding tone at sample ``n``."""
         self._frequencies(encode_vector_cdr(frequencies_hz, n, run))
-
-    def note_held(self, arbiter: CommandArbiter, run: int) -> None:
-        """Log the notch command applied now; report the held ones every 100 samples.
-
-        Called once per sample, after ``arbiter.close_sample`` (realtime only: lockstep
-        holds no command but after a timeout).
-        """
-        notch, log = arbiter.streams["notch"], self._held_log
-        log.note(arbiter.due, notch.applied, notch.stale)
-        if arbiter.sample % HELD_REPORT_EVERY_SAMPLES == 0 and log.covered >= 0:
-            flat = [float(v) for row in log.drain() for v in row]
-            self._held(encode_vector_cdr(flat, log.covered, run, label=HELD_ROWS_LABEL))

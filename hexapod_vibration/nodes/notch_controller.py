@@ -7,7 +7,8 @@ newer one is only observed); parameters are checked in the on-set callback and a
 the post-set one. Out: the weights (100 Hz), each tone's frequency now, the predicted
 sensitivity after each identification (transient local), ``/diagnostics``. In, besides:
 the tachometer (``/pph/reference_frequency``, served before ``/pph/accel``) and the driver's
-held commands (``/pph/notch_held``); out to it, every 10 samples while it listens, the next
+held commands (``/pph/notch_held``, for the identification) and stand-ins (``/pph/stand_ins``,
+for the divergence guard); out to it, every 10 samples while it listens, the next
 200 samples' commands (``/pph/notch_forecast``).
 """
 
@@ -46,7 +47,10 @@ from hexapod_vibration.paths import config_path
 from hexapod_vibration.ros.command_forecasts import ForecastPublisher, notch_rows
 from hexapod_vibration.ros.diagnostics import diagnostic_array, publish_status_periodically
 from hexapod_vibration.ros.executors import loop_meter
-from hexapod_vibration.ros.held_reports import subscribe_held_reports
+from hexapod_vibration.ros.held_reports import (
+    subscribe_held_reports,
+    subscribe_stand_in_reports,
+)
 from hexapod_vibration.ros.matching import MatchedReaders
 from hexapod_vibration.ros.messages import (
     ControllerLoopPort,
@@ -107,8 +111,11 @@ class NotchControllerNode(Node):
         self.loop_subscriptions = [reference, accel]
         self.latest_only_subscriptions = list(self.loop_subscriptions)  # stale samples: skipped
         self.skipped_message_callbacks = {accel: self.port.hold_skipped}
-        self.loop_subscriptions.append(subscribe_held_reports(
-            self, lambda: self.port.sequence.run, self.supervisor.note_held))
+        run, delay = (lambda: self.port.sequence.run), values["command_delay_samples"]
+        self.loop_subscriptions += [
+            subscribe_held_reports(self, run, self.supervisor.note_held),
+            subscribe_stand_in_reports(self, run, lambda rows, covered: (
+                self.supervisor.note_stand_ins(rows, covered, delay)))]
         self.meter = loop_meter()
         self._count = self.meter.counter("notch_controller")
         self._stage = {name: self.meter.stage(f"notch {name}")

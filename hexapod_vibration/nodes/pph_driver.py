@@ -16,7 +16,8 @@ With ``rotor_tachometer`` on, the rotor's speed for sample n (Hz) goes out on
 tone goes out on ``/pph/disturbance_frequencies`` every ``FREQUENCIES_EVERY_SAMPLES`` samples.
 A realtime driver applies a controller's forecast (``/pph/notch_forecast``,
 ``/pph/pointing_forecast``) for a sample whose command is late, and reports the notch
-commands it held on ``/pph/notch_held``.
+commands it held (``/pph/notch_held``) and the samples where a stand-in no controller
+computed went in (``/pph/stand_ins``): :mod:`~hexapod_vibration.nodes.driver_reports`.
 """
 
 from __future__ import annotations
@@ -42,6 +43,7 @@ from hexapod_vibration.core.model.config import load_model_config
 from hexapod_vibration.core.model.plant import PPHPlant
 from hexapod_vibration.nodes.driver_loop import run_driver
 from hexapod_vibration.nodes.driver_outputs import DriverOutputs
+from hexapod_vibration.nodes.driver_reports import DriverReports
 from hexapod_vibration.nodes.driver_settings import DriverSettings
 from hexapod_vibration.parameter_specs import LOCKSTEP_STREAMS, PPH_DRIVER
 from hexapod_vibration.paths import config_path
@@ -79,6 +81,7 @@ class PPHDriver(Node):
         self.topics = {name: f"/pph/{name}_command" for name in LOCKSTEP_STREAMS}
         self.outputs = DriverOutputs(self, self.fs,
                                      lambda: self.publish_diagnostics(held=self.held()))
+        self.reports = DriverReports(self) if self.mode == "realtime" else None
         self._pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", DIAGNOSTICS_QOS)
         self.loop_subscriptions = [
             create_loop_subscription(self, topic, lambda msg, n=name: self._on_command(n, msg),
@@ -141,7 +144,9 @@ class PPHDriver(Node):
         else:
             refusal = self.arbiter.offer(name, sample.values, sample.index, sample.run,
                                          time.perf_counter())
-            if refusal is not None and refusal.invalid:
+            if refusal is None and self.reports is not None and sample.index is not None:
+                self.reports.answered(name, sample.index, sample.values)
+            elif refusal is not None and refusal.invalid:
                 self.get_logger().warn(f"{topic}: refused command for sample {sample.index} "
                                        f"({refusal}) at sample {self.sample}",
                                        throttle_duration_sec=1.0)
@@ -184,8 +189,8 @@ class PPHDriver(Node):
         """Apply the current sample's commands, publish the applied force, advance one sample."""
         timeout = self.settings.timeout_samples
         forces, newly_stale = self.arbiter.close_sample(self.mode == "lockstep", timeout)
-        if self.mode == "realtime":
-            self.outputs.note_held(self.arbiter, self.run_id)
+        if self.reports is not None:
+            self.reports.note(self.arbiter, forces, self.run_id)
         for name in newly_stale:
             self.get_logger().warn(f"{self.topics[name]}: no command for {timeout} samples "
                                    "(nor a forecast), force set to zero")
@@ -208,6 +213,8 @@ class PPHDriver(Node):
                        "fallback_samples": plant.fallback_samples,
                        "accel_clipped_samples": plant.accelerometers.clipped_samples,
                        **self.meter.report()})
+        if self.reports is not None:
+            values["stand_in_samples"] = self.reports.stand_in_log.stood_in
         if plant.shaker.rotor is not None:
             values["rotor_speed_hz"] = float(plant.shaker.rotor.speed_hz(self.sensor_time_s()))
         self._pub_diag.publish(diagnostic_array(DRIVER_STATUS, warn, message, values,

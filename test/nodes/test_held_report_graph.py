@@ -1,4 +1,6 @@
-"""A realtime driver reports every notch command it held, on ``/pph/notch_held``.
+"""A realtime driver reports the notch commands it held and the samples a controller skipped.
+
+``/pph/notch_held`` and ``/pph/stand_ins``.
 
 With no notch controller on the graph every due sample gets zero force, so, whatever the
 machine's timing, the reports' rows must tile every due sample from 0 to the last one
@@ -8,12 +10,14 @@ samples).
 
 from __future__ import annotations
 
+import numpy as np
 from node_graph import wait_until
 from std_msgs.msg import Float64MultiArray
 
-from hexapod_vibration.contract import HELD_REPORT_EVERY_SAMPLES, NOTCH_HELD_TOPIC
-from hexapod_vibration.ros.held_reports import parse_held_report
-from hexapod_vibration.ros.qos import HELD_QOS
+from hexapod_vibration.contract import HELD_REPORT_EVERY_SAMPLES, NOTCH_HELD_TOPIC, STAND_INS_TOPIC
+from hexapod_vibration.ros.held_reports import parse_held_report, parse_stand_in_report
+from hexapod_vibration.ros.messages import make_strut_array, parse_strut_sample
+from hexapod_vibration.ros.qos import COMMAND_QOS, HELD_QOS, LOOP_QOS
 
 REPORTS = 5
 
@@ -39,3 +43,42 @@ def test_a_realtime_driver_without_a_notch_reports_every_sample_at_zero_force(
     # One run of zero force per report: the due samples since the report before.
     assert [rows for rows, _, _ in reports] == [
         [(c - HELD_REPORT_EVERY_SAMPLES + 1, c, -1)] for c in covered]
+
+
+SKIP_EVERY = 50
+"""The test's pointing 'controller' never answers samples n with n % SKIP_EVERY == 7."""
+
+
+def test_a_realtime_driver_reports_every_sample_a_controller_skipped_as_a_stand_in(
+        ros_context, node_processes):
+    """``/pph/stand_ins``: every sample a controller skipped is reported.
+
+    A pointing stream answered with one constant command except at skipped samples: a late
+    answer equals the held command (cleared: the stand-in was right); a skipped sample never
+    gets one, so whatever the timing it must be reported (the watchdog's timeout is long
+    enough that the stream never goes stale).
+    """
+    node = ros_context.create_node("stand_in_controller")
+    reports: list = []
+    node.create_subscription(Float64MultiArray, STAND_INS_TOPIC,
+                             lambda msg: reports.append(parse_stand_in_report(msg)), HELD_QOS)
+    commands = node.create_publisher(Float64MultiArray, "/pph/pointing_command", COMMAND_QOS)
+    answered: list[int] = []
+
+    def answer(msg: Float64MultiArray) -> None:
+        sample = parse_strut_sample(msg)
+        if sample.index % SKIP_EVERY != 7:
+            commands.publish(make_strut_array(np.full(6, 0.5), sample.index, sample.run))
+            answered.append(sample.index)
+
+    node.create_subscription(Float64MultiArray, "/pph/accel", answer, LOOP_QOS)
+    node_processes.start("pph_driver", "--ros-args", "-p", "clock_mode:=realtime",
+                         "-p", "lockstep_controllers:=[]", "-p", "command_timeout_samples:=1000")
+    assert wait_until(ros_context, lambda: len(reports) >= REPORTS and answered
+                      and reports[-1][1] > answered[0] + 3 * SKIP_EVERY)
+    rows = [row for rows, _, _ in reports for row in rows]
+    reported = {n for first, last in rows for n in range(first, last + 1)}
+    covered = reports[-1][1]
+    skipped = [n for n in range(answered[0] + 1, covered + 1) if n % SKIP_EVERY == 7]
+    assert skipped and set(skipped) <= reported, (skipped, rows)
+    assert all(a[1] < b[0] for a, b in zip(rows, rows[1:], strict=False)), rows   # in order

@@ -1,6 +1,6 @@
-"""``/pph/notch_held``: what the driver's reports carry and what the notch takes from them.
+"""The driver's reports (held commands, stand-ins): what they carry, what the notch takes.
 
-In-process nodes on the test's domain: a publisher of reports as ``DriverOutputs`` makes
+In-process nodes on the test's domain: a publisher of reports as ``DriverReports`` makes
 them (``make_vector_array`` with the rows label) and a node subscribed with
 ``subscribe_held_reports``. A bad report is refused and changes nothing; a report of
 another run is dropped.
@@ -11,8 +11,17 @@ from __future__ import annotations
 import pytest
 from std_msgs.msg import Float64MultiArray
 
-from hexapod_vibration.contract import HELD_ROWS_LABEL, NOTCH_HELD_TOPIC, InvalidStrutMessage
-from hexapod_vibration.ros.held_reports import parse_held_report, subscribe_held_reports
+from hexapod_vibration.contract import (
+    HELD_ROWS_LABEL,
+    NOTCH_HELD_TOPIC,
+    STAND_IN_ROWS_LABEL,
+    InvalidStrutMessage,
+)
+from hexapod_vibration.ros.held_reports import (
+    parse_held_report,
+    parse_stand_in_report,
+    subscribe_held_reports,
+)
 from hexapod_vibration.ros.messages import make_vector_array
 from hexapod_vibration.ros.qos import HELD_QOS
 
@@ -55,3 +64,14 @@ def test_the_subscriber_takes_good_reports_of_its_run_only(ros_context):
     publisher.publish(_report([(5, 6, -1)], 199))
     assert ros_context.wait_for(lambda: got, HANG_GUARD_S)
     assert got == [([(5, 6, -1)], 199)]
+
+
+def test_a_stand_in_report_reads_back_and_a_bad_one_is_refused():
+    rows = [(3, 4), (11, 11)]
+    assert parse_stand_in_report(_report(rows, 99, label=STAND_IN_ROWS_LABEL)) == (
+        rows, 99, RUN)
+    for bad in (_report([(3, 4, 2)], 99),                                  # a held report
+                make_vector_array([4.0, 3.0], 99, RUN, label=STAND_IN_ROWS_LABEL),
+                make_vector_array([-1.0, 3.0], 99, RUN, label=STAND_IN_ROWS_LABEL)):
+        with pytest.raises(InvalidStrutMessage):
+            parse_stand_in_report(bad)

@@ -330,6 +330,11 @@ class DivergenceGuard:
         return self._blocks.with_gaps
 
     @property
+    def blocks_with_stand_ins(self) -> int:
+        """Blocks dropped (neither reference nor judged) for a stand-in disturbed sample."""
+        return self._blocks.with_stand_ins
+
+    @property
     def has_reference(self) -> bool:
         """True once at least one reference block was taken."""
         return self.reference_blocks > 0
@@ -366,7 +371,7 @@ class DivergenceGuard:
 
     # ------------------------------------------------------------------ per sample
     def step(self, error: np.ndarray, recording: bool, judging: bool,
-             index: int | None = None) -> GuardVerdict | None:
+             index: int | None = None, stood_in: bool = False) -> GuardVerdict | None:
         """Take one sample of the error (C,) (m/s^2); a verdict at the end of a judged block.
 
         Args:
@@ -375,12 +380,14 @@ class DivergenceGuard:
                 reference.
             judging: control is on: the block is judged.
             index: the sample's index (None: the one after the last).
+            stood_in: a stand-in the driver reported disturbed the sample.
 
         A block counts for the reference (or is judged) only if every one of its samples
-        was recording (judging); a block that mixes the two, or with samples missing, is
-        dropped (:class:`~hexapod_vibration.core.control.guard_blocks.ErrorBlocks`).
+        was recording (judging); a block that mixes the two, with samples missing or a
+        stand-in disturbed one, is dropped
+        (:class:`~hexapod_vibration.core.control.guard_blocks.ErrorBlocks`).
         """
-        if (block := self._blocks.add(error, recording, judging, index)) is None:
+        if (block := self._blocks.add(error, recording, judging, index, stood_in)) is None:
             return None
         bins, power = block.bins, self._masks @ block.bins
         if block.recording:

@@ -6,7 +6,9 @@ with whether every sample of it was recording (control off, nothing injected) or
 (control on). A block with samples missing (an index not after the last one's) is neither:
 spliced, a residual sinusoid's jump is broadband power (2 samples missing from a 250-sample
 block of a realtime run, 1.9 s after control-on: +23 dB in the 100 Hz third octave, and the
-guard faded control out of a platform that was quieter than without it).
+guard faded control out of a platform that was quieter than without it). A block with a
+sample disturbed by a stand-in the driver reported (:mod:`~hexapod_vibration.core.control.
+guard_feed`) is dropped the same way.
 """
 
 from __future__ import annotations
@@ -47,18 +49,25 @@ class ErrorBlocks:
         self._recording = self._judging = True
         self.with_gaps = 0
         """Blocks dropped (neither reference nor judged) for missing samples."""
+        self.with_stand_ins = 0
+        """Blocks dropped (neither reference nor judged) for a stand-in disturbed sample."""
 
     def add(self, error: np.ndarray, recording: bool, judging: bool,
-            index: int | None = None) -> ErrorBlock | None:
+            index: int | None = None, stood_in: bool = False) -> ErrorBlock | None:
         """Take sample ``index``'s error (C,) (None: the one after the last); a whole block.
 
-        ``recording`` / ``judging``: what this sample is (see :class:`ErrorBlock`).
+        ``recording`` / ``judging``: what this sample is (see :class:`ErrorBlock`);
+        ``stood_in``: a stand-in disturbed it (the block is dropped).
         """
         if self._n == 0:
             self._recording, self._judging = True, True
         elif index is not None and index != self._last_index + 1:
             if self._recording or self._judging:
                 self.with_gaps += 1
+            self._recording, self._judging = False, False
+        if stood_in:
+            if self._recording or self._judging:
+                self.with_stand_ins += 1
             self._recording, self._judging = False, False
         if index is not None:
             self._last_index = index

@@ -174,6 +174,7 @@ class NotchSupervisor:
         self._clock.restart_at(first_index)
         self.dc_blocker.reset()
         self.identification.held.clear()
+        self.safety.feed.restart()
         self._gate.new_run(first_index)
         self._events.add("warn", f"new run of the loop from sample {first_index}: sequence "
                                  "restarted, identification and weights kept")
@@ -237,6 +238,14 @@ class NotchSupervisor:
     def note_held(self, rows: Sequence[tuple[int, int, int]], covered: int) -> None:
         """The driver's held commands (``/pph/notch_held``; ``core/control/held_inputs``)."""
         self.identification.held.add(rows, covered)
+
+    def note_stand_ins(self, rows: Sequence[tuple[int, int]], covered: int,
+                       delay_samples: int) -> None:
+        """The driver's stand-ins (``/pph/stand_ins``; ``core/control/guard_feed``).
+
+        ``delay_samples``: the driver's command delay (due sample j is applied at j + d).
+        """
+        self.safety.feed.note(rows, covered, delay_samples)
 
     def _missed(self, index: int, gap: int) -> None:
         """``gap`` samples before ``index`` never came: left out, the phases move on.

@@ -95,6 +95,9 @@ class CommandStream:
     stale: bool = True
     stale_events: int = 0
     connected: bool = False
+    stood_in: bool = False
+    """Realtime: at the sample closed last the stream was connected, its answer to the due
+    sample late and not stale, so a stand-in (forecast row or held command) went in."""
 
     @property
     def invalid(self) -> int:
@@ -306,6 +309,8 @@ class CommandArbiter:
                 stream.force_n, stream.applied = forecast, due
                 stream.forecast.applied += 1
             stale = forecast is None and not self.fresh(name, timeout_samples)
+            stream.stood_in = (not lockstep and stream.connected and not answered[name]
+                               and not stale)
             if stale and not stream.stale and stream.sample >= 0:
                 stream.stale_events += 1
                 newly_stale.append(name)

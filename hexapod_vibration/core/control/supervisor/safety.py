@@ -36,6 +36,7 @@ from hexapod_vibration.core.control.divergence_guard import (
     DivergenceGuard,
     GuardVerdict,
 )
+from hexapod_vibration.core.control.guard_feed import GuardFeed
 from hexapod_vibration.core.control.line_offset import MIN_COHERENCE, LineOffsetMonitor
 from hexapod_vibration.core.control.notch import FADE_S, AdaptiveNotchCanceller
 from hexapod_vibration.core.control.supervisor.config import Settings
@@ -99,6 +100,8 @@ class SafetyMonitor:
         self._fader, self._events = fader, events
         self.guard = DivergenceGuard(settings.channels, settings.fs, tones,
                                      settings.config.guard_margin_db)
+        self.feed = GuardFeed(self.guard)
+        """The guard's samples, held for a realtime driver's stand-in reports."""
         self.action = ""
         """The last action and why (``guard_action`` on /diagnostics)."""
         self.line_monitor = LineOffsetMonitor(len(tones), settings.fs)
@@ -127,10 +130,9 @@ class SafetyMonitor:
                        and not canceller.frozen and not identifying
                        and self._plant.response is not None
                        and self.level is not SafetyLevel.OFF)
-        verdict = self.guard.step(error, recording=quiet and off, judging=controlling,
-                                  index=n)
-        if verdict is not None and verdict.action is not None:
-            self._act(verdict, n)
+        for verdict, sample in self.feed.step(error, quiet and off, controlling, n):
+            if verdict.action is not None and self.level is not SafetyLevel.OFF:
+                self._act(verdict, sample)
         self._check_lines(controlling and not following, n)
 
     def _act(self, verdict: GuardVerdict, n: int) -> None:
@@ -211,6 +213,7 @@ class SafetyMonitor:
         if "guard_margin_db" in changes:
             self.guard.margin_db = float(changes["guard_margin_db"])
         if tones is not None:
+            self.feed.clear()
             self.guard.set_tones(tones)
 
     def retry(self, identifying: bool) -> None:
@@ -228,6 +231,7 @@ class SafetyMonitor:
     def restart(self) -> None:
         """New coefficients or settings: the actions start again from watching."""
         self._fader.end()
+        self.feed.clear()
         self.guard.restart()
         self.level = SafetyLevel.WATCHING
 
@@ -256,6 +260,7 @@ class SafetyMonitor:
         values = {"guard": state, "guard_action": self.action,
                   "guard_reference_blocks": self.guard.reference_blocks,
                   "guard_blocks_with_gaps": self.guard.blocks_with_gaps,
+                  "guard_blocks_with_stand_ins": self.guard.blocks_with_stand_ins,
                   "weight_clamps": self.weight_clamps}
         monitor = self.line_monitor
         if monitor.ready:
