@@ -206,7 +206,9 @@ def loop_statistics(signals: BagSignals) -> dict[str, Any]:
     ``/pph/accel`` in the bag to the driver's own count (in realtime: the samples whose
     commands came late); ``notch_missed_samples``: the samples the notch controller never
     received (its gaps); ``forecast_rows``: the late commands a controller's forecast stood
-    in for (a realtime driver's ``<stream>_forecast_applied``, summed over the streams).
+    in for (a realtime driver's ``<stream>_forecast_applied``, summed over the streams);
+    ``stand_in_samples``: the due samples where a force no controller computed went in (a
+    realtime driver's count, ``core/loop/stand_in_log``).
     """
     accel, st = signals.accel, signals.driver_status
     run = signals.run_samples()
@@ -217,6 +219,8 @@ def loop_statistics(signals: BagSignals) -> dict[str, Any]:
     forecasts = [int(v) for k, v in st.items() if k.endswith("_forecast_applied")]
     if any(forecasts):
         own["forecast_rows"] = sum(forecasts)
+    if "stand_in_samples" in st:
+        own["stand_in_samples"] = int(st["stand_in_samples"])
     if st:
         return {"mode": st.get("mode", "unknown"),
                 "samples": run,

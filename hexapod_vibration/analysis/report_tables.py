@@ -71,10 +71,12 @@ def control_headline(report: dict[str, Any]) -> str:
 
 
 def loop_missed_text(loop: dict[str, Any]) -> str:
-    """``N missed``, with how many the notch never received and forecasts stood in for."""
+    """``N missed``, with how many the notch never received, forecasts and stand-ins."""
     own, forecast = loop.get("notch_missed_samples"), loop.get("forecast_rows")
     notes = [f"{own} not received by the notch"] if own else []
     notes += [f"{forecast} late commands stood in for by forecasts"] if forecast else []
+    stood_in = loop.get("stand_in_samples")
+    notes += [f"{stood_in} samples with a force no controller computed"] if stood_in else []
     return f"{loop['missed_samples']} missed" + (f" ({'; '.join(notes)})" if notes else "")
 
 

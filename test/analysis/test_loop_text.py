@@ -16,3 +16,5 @@ def test_missed_alone_and_with_the_notchs_gaps_and_the_forecasts():
         "5 missed (3 not received by the notch; 4 late commands stood in for by forecasts)")
     assert loop_missed_text({"missed_samples": 5, "forecast_rows": 4}) == (
         "5 missed (4 late commands stood in for by forecasts)")
+    assert loop_missed_text({"missed_samples": 5, "stand_in_samples": 2}) == (
+        "5 missed (2 samples with a force no controller computed)")
