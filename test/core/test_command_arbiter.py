@@ -153,6 +153,24 @@ def test_realtime_counts_late_streams():
     assert values["missed_samples"] == 1
 
 
+def test_a_joining_stream_counts_from_its_first_command_not_the_next_graph_look():
+    """A stream is connected from its first accepted command.
+
+    Regression: a controller that joined between two looks at the graph (every 200
+    samples) had its late answers uncounted, and no stand-in marked, until the next look.
+    """
+    arbiter = CommandArbiter(("notch", "pointing"), (), RUN, LIMIT_N, "notch")
+    arbiter.refresh_connections({}, TIMEOUT)            # nobody on the graph yet
+    _step(arbiter, lockstep=False)
+    assert arbiter.stats.late_commands == 0             # not connected: not late
+    assert arbiter.offer("pointing", _force(1.0), 1, RUN, 0.0) is None
+    _step(arbiter, lockstep=False)                      # sample 1: answered
+    _step(arbiter, lockstep=False)                      # sample 2: late, held
+    pointing = arbiter.streams["pointing"]
+    assert pointing.connected and pointing.late == 1 and pointing.stood_in
+    assert arbiter.streams["notch"].late == 0
+
+
 def test_latency_and_period_from_the_given_times():
     arbiter = _arbiter()
     arbiter.published(10.000)

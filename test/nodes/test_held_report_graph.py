@@ -80,8 +80,10 @@ def test_a_realtime_driver_reports_every_sample_a_controller_skipped_as_a_stand_
     rows = [row for rows, _, _ in reports for row in rows]
     reported = {n for first, last in rows for n in range(first, last + 1)}
     covered = reports[-1][1]
-    # The driver sees a stream connected from its next look at the graph (every
-    # REFRESH_EVERY_SAMPLES samples); before it, a late command is not counted either.
+    # The driver counts a stream from its first accepted command, or its next look at the
+    # graph (every REFRESH_EVERY_SAMPLES samples) if that comes first; when the first
+    # command arrived depends on the machine, so only the bound the graph gives is checked
+    # (the first-command rule is exact in test/core/test_command_arbiter.py).
     seen = (answered[0] // REFRESH_EVERY_SAMPLES + 1) * REFRESH_EVERY_SAMPLES
     skipped = [n for n in range(seen + 1, covered + 1) if n % SKIP_EVERY == 7]
     assert skipped and set(skipped) <= reported, (skipped, rows)

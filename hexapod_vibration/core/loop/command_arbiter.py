@@ -95,6 +95,9 @@ class CommandStream:
     stale: bool = True
     stale_events: int = 0
     connected: bool = False
+    """A publisher on the graph (looked up every few hundred samples) or a command accepted
+    recently: from its first accepted command a joining controller is waited for
+    (lockstep) and its late answers counted (realtime)."""
     stood_in: bool = False
     """Realtime: at the sample closed last the stream was connected, its answer to the due
     sample late and not stale, so a stand-in (forecast row or held command) went in."""
@@ -179,6 +182,7 @@ class CommandArbiter:
             stream.refused[reason] += 1
             return reason
         stream.queued.append((index, np.array(values, dtype=float)))
+        stream.connected = True       # a command is proof enough: no wait for the graph
         stream.sample = index
         stream.accepted_at = self.sample
         stream.received_s = now_s
