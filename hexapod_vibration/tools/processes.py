@@ -36,8 +36,8 @@ except (OSError, AttributeError):   # not Linux
     _prctl = None
 
 
-def _die_with_parent(parent_pid: int) -> None:
-    """``preexec_fn``: the kernel sends SIGTERM when the parent dies (runs in the child)."""
+def die_with_parent(parent_pid: int) -> None:
+    """In a child (a ``preexec_fn``, or after a fork): SIGTERM when ``parent_pid`` dies."""
     if _prctl is not None:
         _prctl(PR_SET_PDEATHSIG, int(PARENT_DEATH_SIGNAL), 0, 0, 0)
     if os.getppid() != parent_pid:     # the parent died before the prctl: go now
@@ -127,7 +127,7 @@ def spawn(name: str, command: Sequence[str], log: Path | None = None,
     process = subprocess.Popen(
         list(command), stdin=subprocess.DEVNULL, stdout=stdout, stderr=stderr,
         env=env, cwd=cwd, start_new_session=True,
-        preexec_fn=lambda: _die_with_parent(parent))  # noqa: PLW1509 (only a prctl)
+        preexec_fn=lambda: die_with_parent(parent))  # noqa: PLW1509 (only a prctl)
     return Child(name, process, log, stderr_log, files)
 
 

@@ -86,6 +86,8 @@ class CoreLoop:
         self.tachometer = self.rotor is not None and scenario.rotor.tachometer
         """Whether the rotor's speed (the speed at the sample's time, Hz) is fed to the
         notch as its reference frequency each sample, as the driver publishes it."""
+        self.next_sample = 0
+        """The sample :meth:`advance` simulates next."""
 
     def _controller_step(self, n: int, accel_m_s2: np.ndarray,
                          record: LoopRecord) -> np.ndarray:
@@ -108,16 +110,23 @@ class CoreLoop:
         record.mu_bound = self.notch.bound
         record.notes.extend(event.message for event in self.notch.drain_events())
 
-    def run(self) -> LoopRecord:
-        """Simulate the whole scenario and return every sample."""
+    def new_record(self) -> LoopRecord:
+        """An empty record of the whole scenario, for :meth:`advance` to fill."""
         sc, n_samples = self.scenario, self.scenario.samples
         tones = len(sc.notch.tone_frequencies_hz)
         bank = 0 if self.notch is None else self.notch.canceller.tone_frequencies_hz.size
-        rec = LoopRecord(*(np.zeros((n_samples, STRUTS)) for _ in range(7)),
-                         weights=np.zeros((n_samples, bank, STRUTS), complex),
-                         control_on_sample=int(round(sc.control_on_s * self.fs)),
-                         tone_estimates_hz=np.zeros((n_samples, tones)))
-        for n in range(n_samples):
+        return LoopRecord(*(np.zeros((n_samples, STRUTS)) for _ in range(7)),
+                          weights=np.zeros((n_samples, bank, STRUTS), complex),
+                          control_on_sample=int(round(sc.control_on_s * self.fs)),
+                          tone_estimates_hz=np.zeros((n_samples, tones)))
+
+    def advance(self, rec: LoopRecord, stop: int) -> None:
+        """Simulate from the next sample up to sample ``stop`` (excluded) into ``rec``.
+
+        A run in pieces is the run in one piece, sample for sample; a piece may change
+        ``rec.control_on_sample`` before it (e.g. a twin that never turns control on).
+        """
+        for n in range(self.next_sample, stop):
             sample = self.actuated.pending
             notch = self._controller_step(n, sample.accel_m_s2, rec)
             pointing = self.pointing.step(sample.eddy_m)
@@ -129,5 +138,15 @@ class CoreLoop:
                 rec.weights[n] = self.notch.canceller.weights
                 rec.tone_estimates_hz[n] = self.notch.tone_estimates_hz
             rec.actuator_force_n[n] = self.actuated.apply(n, notch, pointing)
+        self.next_sample = max(self.next_sample, stop)
+
+    def finish(self, rec: LoopRecord) -> LoopRecord:
+        """Copy the notch's identification and what it reported into ``rec``; ``rec``."""
         self._finish(rec)
         return rec
+
+    def run(self) -> LoopRecord:
+        """Simulate the whole scenario and return every sample."""
+        rec = self.new_record()
+        self.advance(rec, self.scenario.samples)
+        return self.finish(rec)
