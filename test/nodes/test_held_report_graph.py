@@ -88,3 +88,42 @@ def test_a_realtime_driver_reports_every_sample_a_controller_skipped_as_a_stand_
     skipped = [n for n in range(seen + 1, covered + 1) if n % SKIP_EVERY == 7]
     assert skipped and set(skipped) <= reported, (skipped, rows)
     assert all(a[1] < b[0] for a, b in zip(rows, rows[1:], strict=False)), rows   # in order
+
+
+def _recorded(bag, topic: str, parse) -> list:
+    """The messages of ``topic`` in an MCAP bag, decoded by the independent mcap reader."""
+    from mcap.reader import make_reader
+    from mcap_ros2.decoder import DecoderFactory
+
+    with (bag / "bag_0.mcap").open("rb") as stream:
+        reader = make_reader(stream, decoder_factories=[DecoderFactory()])
+        return [parse(msg) for _, _, _, msg in reader.iter_decoded_messages(topics=[topic])]
+
+
+def test_the_recorder_records_the_reports_a_listener_gets(ros_context, node_processes,
+                                                           tmp_path):
+    """``pph_recorder`` records ``/pph/notch_held`` and ``/pph/stand_ins``.
+
+    Read back by the independent mcap reader (what rosbag2 reads), every held report in
+    the bag is the one a listener got for the same coverage, with none left out between
+    the first and the last recorded; the stand-in reports are there (empty: no controller).
+    """
+    reports = _listen(ros_context)
+    bag = tmp_path / "bag"
+    recorder = node_processes.start("pph_recorder", "--ros-args", "-p", f"bag_path:={bag}")
+    driver = node_processes.start("pph_driver", "--ros-args", "-p", "clock_mode:=realtime",
+                                  "-p", "lockstep_controllers:=[]",
+                                  "-p", "command_delay_samples:=1")
+    assert wait_until(ros_context, lambda: len(reports) >= 2 * REPORTS)
+    assert driver.stop() == 130, driver.output()
+    assert recorder.stop() == 130, recorder.output()
+    held = _recorded(bag, NOTCH_HELD_TOPIC, parse_held_report)
+    heard = {covered: rows for rows, covered, _ in reports}
+    assert held, recorder.output()
+    covered = [c for _, c, _ in held]
+    assert all(b - a == HELD_REPORT_EVERY_SAMPLES for a, b in zip(covered, covered[1:],
+                                                                  strict=False)), covered
+    assert all(rows == heard[c] for rows, c, _ in held if c in heard), (held, reports)
+    assert set(covered) & set(heard)
+    stand_ins = _recorded(bag, STAND_INS_TOPIC, parse_stand_in_report)
+    assert stand_ins and all(rows == [] for rows, _, _ in stand_ins), stand_ins
