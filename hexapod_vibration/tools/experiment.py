@@ -41,6 +41,7 @@ from typing import TYPE_CHECKING, Any
 from hexapod_vibration import cli
 from hexapod_vibration.parameter_specs import STORAGES
 from hexapod_vibration.paths import available_scenarios, scenario_path
+from hexapod_vibration.ros.realtime import DEFAULT_REALTIME_PRIORITY, fifo_refusal
 from hexapod_vibration.tools.experiment_run import (
     RunOptions,
     analyze_run,
@@ -75,10 +76,12 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--composed", action="store_true",
                         help="driver and controllers as one process (pph_graph): same nodes "
                              "and topics, intra-process delivery, faster loop")
-    parser.add_argument("--realtime-priority", type=cli.number(1, 98, integer=True), metavar="N",
-                        default=0, help="run the driver and controllers under SCHED_FIFO at "
+    parser.add_argument("--realtime-priority", type=cli.number(0, 98, integer=True), metavar="N",
+                        default=None, help="run the driver and controllers under SCHED_FIFO at "
                         "priority N (1-98; needs CAP_SYS_NICE or an rtprio limit: refused "
-                        "otherwise, with the reason)")
+                        "otherwise, with the reason); 0: the normal scheduler. Default: "
+                        f"--realtime runs at {DEFAULT_REALTIME_PRIORITY} where the OS "
+                        "permits it (said at start), else without; --lockstep at 0")
     parser.add_argument("--storage", choices=STORAGES, default="mcap",
                         help="rosbag2 storage of DIR/bag (default mcap, as Jazzy)")
     parser.add_argument("--demo", action="store_true",
@@ -155,9 +158,33 @@ def main(argv: list[str] | None = None) -> int:
     except (ValueError, FileNotFoundError) as exc:
         return cli.fail("experiment", exc)
     try:
+        args.realtime_priority = realtime_priority(args.realtime_priority, args.mode)
         return _run_all(args, scenarios)
     except KeyboardInterrupt as exc:        # between two runs, or while printing
         return cli.interrupted_exit_code(exc)
+
+
+def realtime_priority(asked: float | None, mode: str) -> int:
+    """The loop nodes' SCHED_FIFO priority: as asked, else by mode (said in one line).
+
+    Not asked: realtime runs at :data:`DEFAULT_REALTIME_PRIORITY` where the OS permits it
+    and without otherwise (the reason printed; asked for, a priority the OS refuses stops
+    the run instead); lockstep, whose pace no deadline sets, at 0.
+    """
+    if asked is not None:
+        return int(asked)
+    if mode != "realtime":
+        return 0
+    refusal = fifo_refusal(DEFAULT_REALTIME_PRIORITY)
+    if refusal is None:
+        print(f"experiment: realtime: the driver and controllers run under SCHED_FIFO "
+              f"priority {DEFAULT_REALTIME_PRIORITY} (--realtime-priority 0: without)",
+              flush=True)
+        return DEFAULT_REALTIME_PRIORITY
+    print(f"experiment: realtime without real-time priority: {refusal}; in separate "
+          "processes several times more samples may be late (docs/performance.md)",
+          flush=True)
+    return 0
 
 
 def _run_all(args: argparse.Namespace, scenarios: list[Scenario]) -> int:

@@ -4,12 +4,18 @@ from __future__ import annotations
 
 import os
 import shutil
+import subprocess
 import sys
 from pathlib import Path
 
 import pytest
 
-from hexapod_vibration.ros.realtime import apply_scheduling
+from hexapod_vibration.ros.realtime import (
+    DEFAULT_REALTIME_PRIORITY,
+    apply_scheduling,
+    fifo_refusal,
+)
+from hexapod_vibration.tools.experiment import realtime_priority
 
 HANG_GUARD_S = 60.0
 BIN_DIR = Path(sys.executable).parent
@@ -65,3 +71,37 @@ def test_a_priority_the_os_does_not_permit_is_refused_in_one_line(node_processes
                       "SCHED_FIFO (Operation not permitted); grant CAP_SYS_NICE or raise the "
                       "rtprio limit (ulimit -r, /etc/security/limits.conf), or set "
                       "realtime_priority 0"], node.output()
+
+
+def test_the_probe_says_why_the_os_refuses_a_priority():
+    # 100 is beyond SCHED_FIFO's range on Linux (1-99): refused for everyone.
+    assert fifo_refusal(100) == "the OS refused SCHED_FIFO 100 (Invalid argument)"
+    reason = fifo_refusal(DEFAULT_REALTIME_PRIORITY)
+    assert reason is None or reason.startswith("the OS refused SCHED_FIFO 50"), reason
+
+
+def test_experiment_priority_as_asked_else_by_mode(capsys):
+    assert realtime_priority(0, "realtime") == 0
+    assert realtime_priority(20, "lockstep") == 20
+    assert realtime_priority(None, "lockstep") == 0
+    assert capsys.readouterr().out == ""                  # nothing to say
+    permitted = fifo_refusal(DEFAULT_REALTIME_PRIORITY) is None
+    assert realtime_priority(None, "realtime") == (DEFAULT_REALTIME_PRIORITY if permitted
+                                                   else 0)
+    said = capsys.readouterr().out
+    assert said.count("\n") == 1 and ("SCHED_FIFO priority 50" in said) == permitted, said
+
+
+@pytest.mark.skipif(not (shutil.which("setpriv") and shutil.which("prlimit")),
+                    reason="needs util-linux setpriv and prlimit to withhold the permission")
+def test_experiment_without_the_permission_runs_without_priority_and_says_why():
+    code = ("from hexapod_vibration.tools.experiment import realtime_priority; "
+            "print(realtime_priority(None, 'realtime'))")
+    result = subprocess.run(["prlimit", "--rtprio=0", "setpriv", "--bounding-set", "-sys_nice",
+                             "--inh-caps", "-sys_nice", sys.executable, "-c", code],
+                            capture_output=True, text=True, timeout=HANG_GUARD_S, check=False)
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.splitlines() == [
+        "experiment: realtime without real-time priority: the OS refused SCHED_FIFO 50 "
+        "(Operation not permitted); in separate processes several times more samples may be "
+        "late (docs/performance.md)", "0"], result.stdout
