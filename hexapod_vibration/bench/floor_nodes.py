@@ -46,6 +46,7 @@ from hexapod_vibration.contract import (
     STRUT_COUNT,
 )
 from hexapod_vibration.core.loop.command_arbiter import CommandArbiter
+from hexapod_vibration.nodes.driver_loop import OFFER_AGAIN_S
 from hexapod_vibration.parameter_specs import PPH_DRIVER
 from hexapod_vibration.ros.messages import StrutArrayPublisher, create_loop_subscription
 from hexapod_vibration.ros.recording_loop import BATCH_PERIOD_S, install_stop_flag
@@ -58,8 +59,6 @@ RUN = 1
 """The run id of every floor message (one run)."""
 TIMEOUT_SAMPLES = PPH_DRIVER["command_timeout_samples"].default
 """The driver's ``command_timeout_samples`` default: how long a silent stream is waited for."""
-OFFER_AGAIN_S = 0.05
-"""Lockstep: wall time (s) after which a sample not answered by both is published again."""
 
 
 class CpuWindow:

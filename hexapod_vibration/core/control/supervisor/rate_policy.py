@@ -274,12 +274,27 @@ class RatePolicy:
         The policy's per-tone rates (folded into P) follow ``mu`` when it changes (the guard
         lowers it); without a policy's choice every oscillator adapts at ``mu``.
         """
-        canceller, choice = self._canceller, self.choice
-        mu = canceller.mu
-        if (choice is None or choice.tone_mu.shape != (canceller.n_tones,)
-                or not choice.mu > 0.0):
-            return np.full(canceller.n_tones, mu)
+        choice, mu = self._choice_in_force(), self._canceller.mu
+        if choice is None:
+            return np.full(self._canceller.n_tones, mu)
         return choice.tone_mu * (mu / choice.mu)
+
+    def tone_rate_scale(self) -> np.ndarray | float:
+        """Each oscillator's rate relative to ``mu`` (1.0: every oscillator at ``mu``).
+
+        The policy's per-tone rates folded into P, so that the sweep gate gives every
+        tone's type-2 loop the same damping (``kappa_t = R mu_t``).
+        """
+        choice = self._choice_in_force()
+        return 1.0 if choice is None else choice.tone_mu / choice.mu
+
+    def _choice_in_force(self) -> mu_policy.MuChoice | None:
+        """The policy's choice if it fits the oscillators now (a rate per tone, mu > 0)."""
+        choice = self.choice
+        if (choice is None or choice.tone_mu.shape != (self._canceller.n_tones,)
+                or not choice.mu > 0.0):
+            return None
+        return choice
 
     def clamp(self, bound: float) -> None:
         """Lower ``mu`` to half the bound (0 for a bound of 0) if it is not below it."""

@@ -100,23 +100,12 @@ class SweepGate:
         if not fast.any() and bool(np.all(np.isneginf(self._swept_at))):
             return                             # steady tones: the paper's update
         self._swept_at[fast] = index
-        scale = np.broadcast_to(self._tone_rate_scale(), (size,))
+        scale = np.broadcast_to(self._rates.tone_rate_scale(), (size,))  # kappa_t = R mu_t
         hold = SWEEP_HOLD_TIME_CONSTANTS / (canceller.mu * np.maximum(scale, 1e-6))
         sweeping = index - np.tile(self._swept_at, size // sweep.size) <= hold
         wanted = ratio * scale * sweeping
         if not np.array_equal(wanted, canceller.integral_ratio):
             canceller.set_integral_ratio(wanted)
-
-    def _tone_rate_scale(self) -> np.ndarray | float:
-        """Each oscillator's rate relative to mu (a mu policy's per-tone rates in P).
-
-        So that every tone's type-2 loop has the same damping: ``kappa_t = R mu_t``.
-        """
-        choice = self._rates.choice
-        size = self._canceller.tone_frequencies_hz.size
-        if choice is None or choice.tone_mu.shape != (size,) or not choice.mu > 0.0:
-            return 1.0
-        return choice.tone_mu / choice.mu
 
     def follow(self, sweep_hz_per_s: np.ndarray | None) -> None:
         """Scale the weights' rates of change (type-2 update) down with a falling sweep rate.
