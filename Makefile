@@ -8,7 +8,7 @@ PY := $(VENV)/bin/python
 STAMP := $(VENV)/.hexapod_vibration.installed
 BASE_PYTHON ?= $(shell command -v python3.11 || command -v python3)
 
-.PHONY: venv test check lint demo bench soak clean
+.PHONY: venv compiled test check lint demo bench soak clean
 
 venv: $(STAMP)
 
@@ -22,20 +22,21 @@ $(STAMP): requirements.txt setup.py setup.cfg package.xml | $(PY)
 	test -x $(VENV)/bin/pph_recorder
 	touch $@
 
+# The package's bytecode, compiled before the tests: where PYTHONDONTWRITEBYTECODE is set
+# (this machine, some CI images) every node process a test starts would compile it again.
+compiled: venv
+	$(PY) -m compileall -q hexapod_vibration > /dev/null
+
 # Each run picks its own base ROS_DOMAIN_ID (test/conftest.py adds a per-test offset), so
 # concurrent runs on one machine do not see each other's nodes; the two pytest-xdist
 # workers (-n 2, one per core) take disjoint domains.
-# The package's bytecode is compiled first: where PYTHONDONTWRITEBYTECODE is set (this
-# machine, some CI images) every node process the tests start would compile it again.
-test: venv
-	$(PY) -m compileall -q hexapod_vibration > /dev/null
+test: compiled
 	HEXAPOD_TEST_DOMAIN_BASE=$${HEXAPOD_TEST_DOMAIN_BASE:-$$((20 + RANDOM % 181))} \
 	  $(PY) -m pytest -q -n 2 --dist worksteal test
 
 # The fast tier (a developer's inner loop): the tests marked unit by test/conftest.py, no
 # ROS graph and no long scenario run. `make test` (and CI) runs every tier.
-check: venv
-	$(PY) -m compileall -q hexapod_vibration > /dev/null
+check: compiled
 	$(PY) -m pytest -q -n 2 --dist worksteal -m unit test
 
 lint: venv

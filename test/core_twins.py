@@ -51,14 +51,14 @@ def run_with_twin(scenario: Scenario) -> tuple[CoreLoop, np.ndarray, np.ndarray]
         if child == 0:                                  # the twin: control never on
             _run_twin_and_exit(loop, record, path, parent)
         loop.advance(record, scenario.samples)
-        z_on = _z(loop.finish(record))
+        z_on = z_axis(loop.finish(record))
         _, status = os.waitpid(child, 0)
         if os.waitstatus_to_exitcode(status) != 0 or not path.exists():
             raise RuntimeError(f"the twin's process failed (exit {status})")
         return loop, z_on, np.load(path)
 
 
-def _z(record: LoopRecord) -> np.ndarray:
+def z_axis(record: LoopRecord) -> np.ndarray:
     """The top plate's z acceleration (m/s^2) of a run."""
     return CFG.geometry.platform_from_struts(record.accel_m_s2)[:, 2]
 
@@ -70,7 +70,7 @@ def _run_twin_and_exit(loop: CoreLoop, record: LoopRecord, path: Path, parent: i
         die_with_parent(parent)
         record.control_on_sample = loop.scenario.samples        # never reached
         loop.advance(record, loop.scenario.samples)
-        np.save(path, _z(record))
+        np.save(path, z_axis(record))
         code = 0
     finally:
         os._exit(code)                 # never back into pytest: no teardown, no report

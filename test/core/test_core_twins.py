@@ -8,7 +8,7 @@ for sample, what two whole runs (``CoreLoop.run``) of the scenario and of its tw
 import dataclasses
 
 import numpy as np
-from core_twins import CFG, run_with_twin
+from core_twins import CFG, run_with_twin, z_axis
 
 from hexapod_vibration.core.sim.closed_loop import CoreLoop
 from hexapod_vibration.core.sim.scenario import scenario_from_dict
@@ -24,8 +24,7 @@ SHORT = {
 
 
 def _whole_run_z(scenario) -> np.ndarray:
-    record = CoreLoop(CFG, scenario).run()
-    return CFG.geometry.platform_from_struts(record.accel_m_s2)[:, 2]
+    return z_axis(CoreLoop(CFG, scenario).run())
 
 
 def test_the_forked_twin_is_the_twin_of_two_whole_runs():

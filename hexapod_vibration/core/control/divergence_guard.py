@@ -6,7 +6,7 @@ and, from a Hann-windowed FFT of each block, takes the power (summed over the ch
 
 - one band per controlled tone, ``f_t +- band_half_width_hz`` (4 Hz: the band a 1 %
   frequency error or a +-1 Hz drift stays in), and
-- the broadband error, ``BROADBAND_LOW_HZ`` .. fs/2, and
+- the broadband error, ``BROADBAND_LOW_HZ`` (8 Hz) .. fs/2, and
 - every one-third-octave band from ``THIRD_OCTAVE_LOW_HZ`` (50 Hz: narrower bands hold
   fewer than three of the block's 4 Hz bins) to fs/2, without the bins within the tones'
   bands and their window's main lobe (a converging tone is no rise): a harmonic the nonlinear plant
@@ -66,15 +66,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from hexapod_vibration.core.control.guard_bands import GuardBands
 from hexapod_vibration.core.control.guard_blocks import ErrorBlocks
-from hexapod_vibration.core.spectrum import third_octave_bands_hz
 
 DEFAULT_BLOCK_S = 0.25
 DEFAULT_BAND_HALF_WIDTH_HZ = 4.0
-BROADBAND_LOW_HZ = 8.0
-"""Below this (two 4 Hz bins) the DC blocker's settling leaks into the block's spectrum:
-left out of the broadband."""
-THIRD_OCTAVE_LOW_HZ = 50.0
 FAST_EXTRA_MIN_DB = 2.0
 SLOW_BLOCKS = 8
 MIN_REFERENCE_BLOCKS = 4
@@ -202,8 +198,6 @@ class DivergenceGuard:
         self.block = int(round(block_s * self.fs))
         self.half_width_hz = float(band_half_width_hz)
         self._blocks = ErrorBlocks(self.channels, self.block)
-        self._freqs = np.fft.rfftfreq(self.block, 1.0 / self.fs)
-        self._lobe_hz = self.half_width_hz + 2.0 * self.fs / self.block
         self.set_tones(tone_frequencies_hz)
         self.action_count = 0
         self._grace = 0
@@ -213,48 +207,13 @@ class DivergenceGuard:
         """Bands for a new tone set; the reference and the judging start again."""
         self.tones_hz = [float(f) for f in tone_frequencies_hz]
         tones = np.asarray(self.tones_hz, dtype=float)
-        near_tone = self._near(tones)
-        self._octaves = [(centre, lo, hi) for centre, lo, hi
-                         in third_octave_bands_hz(THIRD_OCTAVE_LOW_HZ, 0.5 * self.fs)
-                         if np.count_nonzero((self._freqs >= lo) & (self._freqs < hi)
-                                             & ~near_tone) >= 3]
-        self._masks, _ = self._band_masks(tones)
-        self.band_names = ([f"tone {f:g} Hz" for f in self.tones_hz] + ["broadband"]
-                           + [f"1/3 octave {c:.0f} Hz" for c, _, _ in self._octaves])
-        self._n_main = len(self.tones_hz) + 1            # the tones' bands and broadband
+        self._bands = GuardBands(self.block, self.fs, self.half_width_hz, tones)
+        self.band_names = self._bands.names
+        self._masks, self._n_main = self._bands.masks, self._bands.main
         self._following = tones.copy()
         self._cancelled = np.zeros(tones.size)
         self._moved = False
         self.reset_reference()
-
-    def _band_masks(self, tones: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(B, F) bin masks of the tones' bands, broadband and the third octaves; (B,) usable.
-
-        The third-octave bands (those ``set_tones`` kept) leave out the bins within the
-        tones' bands and their window's main lobe (a converging tone is no rise); one left
-        with fewer than three bins is not usable.
-        """
-        masks = [np.abs(self._freqs - f) <= self.half_width_hz for f in tones]
-        masks.append(self._freqs >= BROADBAND_LOW_HZ)
-        near_tone = self._near(tones)
-        for _, lo, hi in self._octaves:
-            masks.append((self._freqs >= lo) & (self._freqs < hi) & ~near_tone)
-        out = np.array(masks, dtype=float).reshape(len(masks), self._freqs.size)
-        usable = np.ones(out.shape[0], bool)
-        usable[tones.size + 1:] = out[tones.size + 1:].sum(axis=1) >= 3
-        return out, usable
-
-    def _tone_masks(self, tones: np.ndarray) -> np.ndarray:
-        """(T, F) float masks of the tones' bands."""
-        return (np.abs(self._freqs[None, :] - np.asarray(tones)[:, None])
-                <= self.half_width_hz).astype(float)
-
-    def _near(self, tones: np.ndarray) -> np.ndarray:
-        """(F,) bins within a tone's band or its window's main lobe."""
-        if not len(tones):
-            return np.zeros(self._freqs.size, bool)
-        return np.any(np.abs(self._freqs[None, :] - np.asarray(tones)[:, None])
-                      <= self._lobe_hz, axis=0)
 
     def follow_tones(self, tone_frequencies_hz: np.ndarray) -> None:
         """The tones moved (tracking, a tachometer): their bands follow; the reference stays.
@@ -395,7 +354,7 @@ class DivergenceGuard:
             self._ref_db.append(10.0 * np.log10(np.maximum(power, 1e-300)))
             self._ref_bins.append(bins)
             self._ref_tones.append(self._following.copy())
-            self._ref_tone_power.append(self._tone_masks(self._following) @ bins)
+            self._ref_tone_power.append(self._bands.tone_masks(self._following) @ bins)
             return None
         if block.judging and self.has_reference:
             if self._moved:
@@ -413,7 +372,7 @@ class DivergenceGuard:
         tones' bins left out, on both.
         """
         tones = self._following
-        masks, judged = self._band_masks(tones)
+        masks, judged = self._bands.masks_for(tones)
         ref_bins = np.array(self._ref_bins)                              # (R, F)
         ref_blocks = ref_bins @ masks.T                                  # (R, B)
         t = tones.size

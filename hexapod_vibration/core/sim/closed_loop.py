@@ -100,16 +100,6 @@ class CoreLoop:
             self.notch.set_reference_frequency(float(self.rotor.speed_hz((n + 1) / self.fs)), n)
         return self.notch.step(n, accel_m_s2)
 
-    def _finish(self, record: LoopRecord) -> None:
-        """Copy the notch's identification and what it reported into the record."""
-        if self.notch is None:
-            return
-        record.plant_response = self.notch.plant_response
-        if record.plant_response is not None:
-            record.coefficients = self.notch.canceller.coefficients
-        record.mu_bound = self.notch.bound
-        record.notes.extend(event.message for event in self.notch.drain_events())
-
     def new_record(self) -> LoopRecord:
         """An empty record of the whole scenario, for :meth:`advance` to fill."""
         sc, n_samples = self.scenario, self.scenario.samples
@@ -140,10 +130,16 @@ class CoreLoop:
             rec.actuator_force_n[n] = self.actuated.apply(n, notch, pointing)
         self.next_sample = max(self.next_sample, stop)
 
-    def finish(self, rec: LoopRecord) -> LoopRecord:
-        """Copy the notch's identification and what it reported into ``rec``; ``rec``."""
-        self._finish(rec)
-        return rec
+
+    def finish(self, record: LoopRecord) -> LoopRecord:
+        """Copy the notch's identification and what it reported into ``record``; ``record``."""
+        if self.notch is not None:
+            record.plant_response = self.notch.plant_response
+            if record.plant_response is not None:
+                record.coefficients = self.notch.canceller.coefficients
+            record.mu_bound = self.notch.bound
+            record.notes.extend(event.message for event in self.notch.drain_events())
+        return record
 
     def run(self) -> LoopRecord:
         """Simulate the whole scenario and return every sample."""
