@@ -11,7 +11,10 @@ seconds. Two independent readings of the same window:
   ``cpu_us_per_sample <stage>``, its last 1000-sample window): where the main thread's
   time goes (wait, take, decode, control law or plant, publish, report).
 
-Realtime set-ups also give the loop's missed samples and latency (the driver's counts).
+Realtime set-ups also give the loop's missed samples and latency (the driver's counts)
+over the same window, which starts once the notch's identification is over (control in
+force, or refused; at most ``settle_limit_s`` past the warm-up): the late commands of the
+start, its identification's analysis above all, are counted apart (``bench/late_window.py``).
 """
 
 from __future__ import annotations
@@ -24,6 +27,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from hexapod_vibration.bench.late_window import LateWindow
 from hexapod_vibration.core.loop.cost_meter import KEY_PREFIX
 from hexapod_vibration.tools.processes import Child, spawn, spawn_module, stop_all
 
@@ -147,12 +151,19 @@ def _us(value: float | None) -> str:
 
 
 def measure(out: Path, params: Path, setup: BudgetSetup, warmup_s: float, measure_s: float,
-            watch: Any) -> dict[str, Any]:
-    """The budget of one set-up (``watch``: a ``tools.graph_monitor.GraphMonitor``)."""
+            watch: Any, settle_limit_s: float = 0.0) -> dict[str, Any]:
+    """The budget of one set-up (``watch``: a ``tools.graph_monitor.GraphMonitor``).
+
+    The window starts after the warm-up, and once the notch's identification is over, at
+    most ``settle_limit_s`` (s, wall) later.
+    """
     load = busy_core() if setup.busy_core else None
     children = start_graph(out, params, setup)
     try:
+        late = LateWindow(watch)
         _wait_until_running(children, watch, warmup_s)
+        _wait_until_settled(children, watch, late, settle_limit_s)
+        start_late = late.start_now()
         first = int(watch.driver.get("sample", 0))
         before = {name: process_cpu_s(child.pid) for name, child in children.items()}
         end = time.monotonic() + measure_s
@@ -165,19 +176,25 @@ def measure(out: Path, params: Path, setup: BudgetSetup, warmup_s: float, measur
                     "pointing_controller": watch.pointing, "pph_recorder": watch.recorder}
         return {"samples": samples, "wall_s": measure_s,
                 "cpu_us_per_sample": cpu_per_sample(before, after, samples),
-                "stages": stage_costs(statuses), "loop": _loop_stats(watch.driver, setup)}
+                "stages": stage_costs(statuses),
+                "loop": _loop_stats(watch.driver, setup, late, start_late)}
     finally:
         stop_all(list(children.values()))
         if load is not None:
             stop_all([load])
 
 
-def _loop_stats(driver: dict[str, str], setup: BudgetSetup) -> dict[str, Any]:
-    samples = float(driver.get("samples", 0) or 1)
+def _loop_stats(driver: dict[str, str], setup: BudgetSetup, late: LateWindow,
+                start_late: tuple[int, int]) -> dict[str, Any]:
+    """Rate; realtime: late commands in the window and before it, latency p99 (ms)."""
     stats = {"rate_hz": float(driver.get("rate_hz", "nan"))}
     if setup.mode == "realtime":
-        stats["missed_fraction"] = float(driver.get("late_commands", 0)) / samples
-        stats["latency_ms_p99"] = driver.get("latency_ms_p99")
+        window = late.report()
+        stats.update(missed_fraction=window["control_missed_fraction"],
+                     missed_samples=window["control_late"],
+                     settled=window["control_settled"],
+                     samples_before=start_late[0], late_before=start_late[1],
+                     latency_ms_p99=driver.get("latency_ms_p99"))
     return stats
 
 
@@ -191,6 +208,15 @@ def _wait_until_running(children: dict[str, Child], watch: Any, warmup_s: float)
             raise RuntimeError("the loop never started")
     end = time.monotonic() + warmup_s
     while time.monotonic() < end:
+        _alive(children)
+        watch.spin(0.2)
+
+
+def _wait_until_settled(children: dict[str, Child], watch: Any, late: LateWindow,
+                        limit_s: float) -> None:
+    """Until the notch's identification is over (``late`` follows it), at most ``limit_s``."""
+    end = time.monotonic() + limit_s
+    while not late.follow() and time.monotonic() < end:
         _alive(children)
         watch.spin(0.2)
 

@@ -27,6 +27,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from hexapod_vibration.bench.late_window import LateWindow
 from hexapod_vibration.bench.message_floor import floor_markdown, measure_floor
 from hexapod_vibration.bench.node_budget import (
     BUDGET_SETUPS,
@@ -81,6 +82,7 @@ def _run(out: Path, mode: str, executor: str, wall_s: float, composed: bool
     """One run; returns the driver's last diagnostics (floats) or a stall note."""
     children = _start_graph(out, mode, executor, composed)
     sup = GraphMonitor()
+    late = LateWindow(sup)
     try:
         start = time.monotonic()
         while sup.sim_time_s < 0.0:           # handshake / discovery
@@ -93,6 +95,7 @@ def _run(out: Path, mode: str, executor: str, wall_s: float, composed: bool
         while time.monotonic() - t0_wall < wall_s:
             _alive(children)
             sup.spin(0.2)
+            late.follow()
             if sup.sim_time_s > last_sim:
                 last_sim, last_progress = sup.sim_time_s, time.monotonic()
             elif time.monotonic() - last_progress > STALL_S:
@@ -102,6 +105,7 @@ def _run(out: Path, mode: str, executor: str, wall_s: float, composed: bool
         stats = {k: _number(v) for k, v in sup.driver.items()}
         stats["measured_sim_s_per_wall_s"] = sim / wall
         stats["wall_s"] = wall
+        stats.update(late.report())
         return stats
     finally:
         sup.close()
@@ -131,6 +135,10 @@ def _realtime_block(stats: dict[str, Any], config: LoopConfiguration, wall_s: fl
             "rate_hz": stats.get("rate_hz"),
             "missed_fraction": stats.get("late_commands", 0.0) / samples,
             "missed_samples": stats.get("late_commands"),
+            # with control in force (from the end of the notch's identification)
+            "control_missed_fraction": stats.get("control_missed_fraction"),
+            "control_missed_samples": stats.get("control_late"),
+            "control_samples": stats.get("control_samples"),
             "period_ms_p50": stats.get("period_ms_p50"),
             "period_ms_p99": stats.get("period_ms_p99"),
             "period_ms_max": stats.get("period_ms_max"),
@@ -212,6 +220,9 @@ BUDGET_S = (15.0, 30.0)
 """Warm-up (past the 10 s identification: control on) and measured wall seconds of every
 budget set-up; ``--quick``: QUICK_BUDGET_S."""
 QUICK_BUDGET_S = (3.0, 4.0)
+SETTLE_LIMIT_S = 30.0
+"""Longest wait (s, wall) past the warm-up for the notch's identification to be over before
+a budget window starts (``--quick``: none)."""
 
 
 def measure_budget(out: Path, quick: bool) -> dict[str, Any]:
@@ -223,7 +234,8 @@ def measure_budget(out: Path, quick: bool) -> dict[str, Any]:
         watch = GraphMonitor()
         try:
             params = _write_params(out, setup.mode, "waitset", setup.priority)
-            budget[setup.key] = measure(out, params, setup, warmup_s, measure_s, watch)
+            budget[setup.key] = measure(out, params, setup, warmup_s, measure_s, watch,
+                                        0.0 if quick else SETTLE_LIMIT_S)
         except (RuntimeError, ExperimentError) as exc:
             budget[setup.key] = {"failed": str(exc)}
         finally:
@@ -231,21 +243,30 @@ def measure_budget(out: Path, quick: bool) -> dict[str, Any]:
     return budget
 
 
+def _control_missed(rt: dict[str, Any]) -> str:
+    """``%`` of the samples late with control in force, and of how many; '-' if none."""
+    fraction, samples = rt.get("control_missed_fraction"), rt.get("control_samples")
+    if fraction is None or not samples:
+        return "-"
+    return f"{_num(100.0 * fraction, 3)} of {samples:.0f}"
+
+
 def ros_summary_markdown(results: dict[str, Any]) -> str:
     """The ROS loop section of the benchmark summary (a Markdown table)."""
-    rows = ["| layout/executor | realtime s | rate Hz | missed % | period p99 ms | "
-            "latency p50 / p99 / max ms | lockstep x real time |",
-            "|---|---:|---:|---:|---:|---:|---:|"]
+    rows = ["| layout/executor | realtime s | rate Hz | missed % | missed %, control on | "
+            "period p99 ms | latency p50 / p99 / max ms | lockstep x real time |",
+            "|---|---:|---:|---:|---:|---:|---:|---:|"]
     for key, loop in results.get("loops", {}).items():
         rt, ls = loop["realtime"], loop["lockstep"]
         lockstep = "stalled" if ls.get("stalled") else _num(ls.get("speedup"), 2)
         if rt.get("stalled"):
-            rows.append(f"| {key} | stalled | | | | | {lockstep} |")
+            rows.append(f"| {key} | stalled | | | | | | {lockstep} |")
             continue
         latency = " / ".join(_num(rt.get(k), 2) for k in
                              ("latency_ms_p50", "latency_ms_p99", "latency_ms_max"))
         rows.append(f"| {key} | {_num(rt.get('duration_s'), 1)} | {_num(rt.get('rate_hz'), 2)}"
                     f" | {_num(100.0 * rt.get('missed_fraction', float('nan')), 3)}"
+                    f" | {_control_missed(rt)}"
                     f" | {_num(rt.get('period_ms_p99'), 2)} | {latency} | {lockstep} |")
     budget = results.get("budget")
     if budget:

@@ -203,9 +203,12 @@ def _summary_ros(results: dict[str, Any]) -> list[str]:
             f"{p99:.2f} ms over {_fmt(rt.get('duration_s'), 1)} s).",
             f"- Lockstep at least 3x faster than real time: {verdict(speedup >= 3.0)} "
             f"({_fmt(speedup)}x).",
-            "Missed: the command of sample n not back when the driver advances past sample n. "
-            "Latency: publication of /pph/accel(n) to reception of /pph/notch_command(n) in "
-            "the driver. Period: between publications of consecutive samples."]
+            "Missed: the command of sample n not back when the driver advances past sample n; "
+            "control on: from the driver's first report after the notch's identification was "
+            "over (its analysis runs ~0.8 s on the notch's loop thread, the canceller off; "
+            "bench/late_window.py). Latency: publication of /pph/accel(n) to reception of "
+            "/pph/notch_command(n) in the driver. Period: between publications of "
+            "consecutive samples."]
 
 
 def write_outputs(results: dict[str, Any], out_dir: Path) -> str:

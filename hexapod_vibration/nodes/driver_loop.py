@@ -189,6 +189,7 @@ def run_driver(node: PPHDriver, spinner: LoopSpinner) -> None:
         (run_lockstep if node.mode == "lockstep" else run_realtime)(node, spinner)
     finally:
         if rclpy.ok():
+            node.outputs.flush_force()
             unacknowledged = node.outputs.readers.wait_for_acks(FLUSH_S)
             if unacknowledged:
                 node.get_logger().warning(

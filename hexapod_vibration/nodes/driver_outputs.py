@@ -38,12 +38,17 @@ class DriverOutputs:
         node: The driver node.
         sample_rate_hz: Loop rate (Hz), for /clock.
         on_matched: Called when a loop publisher's matched readers change.
+        defer_force: Publish a sample's applied force after the next sample's sensors
+            (realtime: the force is for the recorder, the sensors are on the controllers'
+            deadline), not at once.
     """
 
     def __init__(self, node: Node, sample_rate_hz: float,
-                 on_matched: Callable[[], None]) -> None:
+                 on_matched: Callable[[], None], defer_force: bool = False) -> None:
         """Create the publishers."""
         self.fs = sample_rate_hz
+        self.defer_force = defer_force
+        self._pending_force: bytes | None = None
         self.readers = MatchedReaders(on_matched)
         arrays = {topic: self.readers.publisher(node, Float64MultiArray, topic,
                                                 LOOP_PUBLISHER_QOS) for topic in LOOP_TOPICS}
@@ -65,6 +70,7 @@ class DriverOutputs:
         self._reference_msg = (None if reference_hz is None
                                else encode_vector_cdr([reference_hz], n, run))
         self.offer_again()
+        self.flush_force()
 
     def offer_again(self) -> None:
         """Publish the current sample's messages again, as they were."""
@@ -76,8 +82,18 @@ class DriverOutputs:
         self._eddy.publish_bytes(eddy)
 
     def force(self, applied_n, n: int, run: int) -> None:
-        """Publish the force (N) applied over sample ``n``."""
-        self._force.publish(applied_n, n, run)
+        """Publish the force (N) applied over sample ``n`` (deferred: with the next sensors)."""
+        if not self.defer_force:
+            self._force.publish(applied_n, n, run)
+            return
+        self.flush_force()
+        self._pending_force = self._force.encode(applied_n, n, run)
+
+    def flush_force(self) -> None:
+        """Publish the deferred force, if one waits (after the sensors; at exit)."""
+        if self._pending_force is not None:
+            self._force.publish_bytes(self._pending_force)
+            self._pending_force = None
 
     def frequencies(self, frequencies_hz, n: int, run: int) -> None:
         """Publish the true frequency (Hz) of every sounding tone at sample ``n``."""

@@ -80,7 +80,8 @@ class PPHDriver(Node):
                                       delay_samples=values["command_delay_samples"])
         self.topics = {name: f"/pph/{name}_command" for name in LOCKSTEP_STREAMS}
         self.outputs = DriverOutputs(self, self.fs,
-                                     lambda: self.publish_diagnostics(held=self.held()))
+                                     lambda: self.publish_diagnostics(held=self.held()),
+                                     defer_force=self.mode == "realtime")
         self.reports = DriverReports(self) if self.mode == "realtime" else None
         self._pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", DIAGNOSTICS_QOS)
         self.loop_subscriptions = [

@@ -84,6 +84,9 @@ def build_parser() -> argparse.ArgumentParser:
                         "permits it (said at start), else without; --lockstep at 0")
     parser.add_argument("--storage", choices=STORAGES, default="mcap",
                         help="rosbag2 storage of DIR/bag (default mcap, as Jazzy)")
+    parser.add_argument("--no-plots", action="store_true",
+                        help="skip the PNG figures (and spectra.csv): report.json, "
+                             "details.json and the table only, as analyze --no-plots")
     parser.add_argument("--demo", action="store_true",
                         help="run the paper's Tables 1 and 2 and Fig. 4 into DIR/<scenario> "
                              "and write DIR/summary.md")
@@ -208,7 +211,8 @@ def _run_all(args: argparse.Namespace, scenarios: list[Scenario]) -> int:
                 # With --twin the figures come with the comparison (below).
                 result = run_scenario(RunOptions(
                     run_sc, run_out, args.mode, args.storage, composed=args.composed,
-                    realtime_priority=int(args.realtime_priority)), plots=not args.twin)
+                    realtime_priority=int(args.realtime_priority)),
+                    plots=not (args.twin or args.no_plots))
             except KeyboardInterrupt as exc:
                 print(f"\nexperiment: interrupted; processes stopped, bag in "
                       f"{run_out / 'bag'}", file=sys.stderr, flush=True)
@@ -218,7 +222,8 @@ def _run_all(args: argparse.Namespace, scenarios: list[Scenario]) -> int:
                 return 2 if isinstance(exc, ExperimentError) and "exists" in str(exc) else 1
         if args.twin:
             try:
-                result = analyze_run(out, run_model_file(out, sc), out / "twin" / "bag")
+                result = analyze_run(out, run_model_file(out, sc), out / "twin" / "bag",
+                                     plots=not args.no_plots)
             except KeyboardInterrupt as exc:
                 print(f"\nexperiment: interrupted; bags in {out / 'bag'} and "
                       f"{out / 'twin' / 'bag'}", file=sys.stderr, flush=True)

@@ -6,6 +6,7 @@ import os
 
 import pytest
 
+from hexapod_vibration.bench.late_window import LateWindow
 from hexapod_vibration.bench.node_budget import (
     BUDGET_SETUPS,
     budget_summary_markdown,
@@ -45,3 +46,46 @@ def test_stage_costs_and_tables():
     table = budget_summary_markdown(budget).splitlines()
     assert table[2] == f"| {key} | 400 | 300 | 200 | 100 | 1000 | 0.050 | 0.8 |"
     assert "| pph_driver | process | 400.0 |" in stages_markdown(budget, key)
+
+
+class _Monitor:
+    """What LateWindow reads of a GraphMonitor: the latest status values of each node."""
+
+    def __init__(self):
+        self.driver: dict[str, str] = {}
+        self.notch: dict[str, str] = {}
+
+    def report(self, sample: int, late: int, state: str | None = None,
+               notch_sample: int = 0) -> None:
+        self.driver = {"sample": str(sample), "samples": str(sample), "late_commands": str(late)}
+        if state is not None:
+            self.notch = {"state": state, "last_sample": str(notch_sample)}
+
+
+def test_the_late_window_starts_at_the_first_driver_report_after_the_notch_settled():
+    watch = _Monitor()
+    window = LateWindow(watch)
+    watch.report(5000, 3, "identifying", 4990)
+    assert not window.follow() and window.counts() == (0, 0)
+    watch.report(11000, 10, "identifying", 11500)
+    assert not window.follow()
+    watch.report(12000, 800, "adapting", 12100)      # the analysis: 790 late
+    assert not window.follow()                      # this report is older than the notch's
+    watch.report(13000, 805)
+    assert window.follow() and window.settled
+    watch.report(43000, 835)
+    assert window.counts() == (30000, 30)
+    assert window.report() == {"control_samples": 30000, "control_late": 30,
+                               "control_missed_fraction": 0.001, "control_settled": True}
+
+
+def test_a_late_window_started_by_hand_says_the_notch_had_not_settled():
+    watch = _Monitor()
+    window = LateWindow(watch)
+    watch.report(3000, 4, "identifying", 2990)
+    assert window.start_now() == (3000, 4)
+    watch.report(7000, 6)
+    assert window.report()["control_late"] == 2 and not window.report()["control_settled"]
+    watch.report(9000, 6, "refused", 8950)          # refusal also ends the start
+    assert window.follow()                          # started already (by hand)
+    assert not window.settled

@@ -36,7 +36,7 @@ def test_params_yaml_starts_the_same_run(ros_env, ros_context, node_processes, t
     scenario = tmp_path / "scenario.yaml"
     scenario.write_text(yaml.safe_dump(SCENARIO))
     out = tmp_path / "run"
-    result = run_experiment(ros_env, scenario, out, timeout=600)
+    result = run_experiment(ros_env, scenario, out, "--no-plots", timeout=600)
     assert result.returncode == 0, result.stdout[-2000:] + result.stderr[-2000:]
     params_file = out / "params.yaml"
     text = params_file.read_text()

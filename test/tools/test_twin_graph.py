@@ -23,7 +23,8 @@ def test_experiment_twin_runs_the_twin_and_compares_the_same_samples(ros_env, tm
     path = tmp_path / "short.yaml"
     path.write_text(yaml.safe_dump(SCENARIO))
     out = tmp_path / "run"
-    result = run_experiment(ros_env, path, out, "--twin", "--composed", timeout=400)
+    result = run_experiment(ros_env, path, out, "--twin", "--composed", "--no-plots",
+                            timeout=400)
     assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
     assert "against its twin" in result.stdout
     twin_report = json.loads((out / "twin" / "report.json").read_text())
