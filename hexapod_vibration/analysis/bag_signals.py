@@ -47,6 +47,8 @@ class BagSignals:
     path: Path
     series: dict[str, StrutSeries]
     driver_status: dict[str, str] = field(default_factory=dict)
+    driver_statuses: list[dict[str, str]] = field(default_factory=list)
+    """Every driver report, in the bag's order (``driver_status``: the last)."""
     notch_statuses: list[dict[str, str]] = field(default_factory=list)
     weights_index: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     weights: np.ndarray = field(default_factory=lambda: np.zeros((0, 0, 6, 2)))
@@ -110,6 +112,7 @@ def load_signals(bag_path: str | Path, model: ModelConfig,
     for _, name, values in content.diagnostics:
         if name == DRIVER_STATUS:
             signals.driver_status = values
+            signals.driver_statuses.append(values)
         elif name == NOTCH_STATUS:
             signals.notch_statuses.append(values)
     signals.weights_index, signals.weights = content.weights_index, content.weights

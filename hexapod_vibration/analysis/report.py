@@ -28,6 +28,7 @@ from hexapod_vibration.analysis.bag_files import BagError
 from hexapod_vibration.analysis.bag_signals import FS, BagSignals
 from hexapod_vibration.analysis.control_outcome import ControlOutcome, control_outcome
 from hexapod_vibration.analysis.following import configured_tones, following_tones, snap_to_tones
+from hexapod_vibration.analysis.late_commands import late_since
 from hexapod_vibration.analysis.levels import convergence_s, levels_over_time, tone_levels
 from hexapod_vibration.analysis.report_json import report_float, report_jsonable
 from hexapod_vibration.analysis.report_windows import (
@@ -208,7 +209,11 @@ def loop_statistics(signals: BagSignals) -> dict[str, Any]:
     received (its gaps); ``forecast_rows``: the late commands a controller's forecast stood
     in for (a realtime driver's ``<stream>_forecast_applied``, summed over the streams);
     ``stand_in_samples``: the due samples where a force no controller computed went in (a
-    realtime driver's count, ``core/loop/stand_in_log``).
+    realtime driver's count, ``core/loop/stand_in_log``); ``control_on_samples`` and
+    ``control_on_missed_samples``: a realtime driver's samples and late commands from its
+    first report at or after control-on (``control_on_counted_from``) to its last
+    (``analysis/late_commands``: apart from the start, where the notch analyses its
+    identification on its loop thread).
     """
     accel, st = signals.accel, signals.driver_status
     run = signals.run_samples()
@@ -221,6 +226,11 @@ def loop_statistics(signals: BagSignals) -> dict[str, Any]:
         own["forecast_rows"] = sum(forecasts)
     if "stand_in_samples" in st:
         own["stand_in_samples"] = int(st["stand_in_samples"])
+    if st.get("mode") == "realtime" and signals.control_on_sample is not None:
+        since = late_since(signals.driver_statuses, signals.control_on_sample)
+        if since is not None:
+            (own["control_on_counted_from"], own["control_on_samples"],
+             own["control_on_missed_samples"]) = since
     if st:
         return {"mode": st.get("mode", "unknown"),
                 "samples": run,

@@ -77,6 +77,10 @@ def loop_missed_text(loop: dict[str, Any]) -> str:
     notes += [f"{forecast} late commands stood in for by forecasts"] if forecast else []
     stood_in = loop.get("stand_in_samples")
     notes += [f"{stood_in} samples with a force no controller computed"] if stood_in else []
+    if loop.get("control_on_samples"):
+        notes += [f"{loop['control_on_missed_samples']} late of the "
+                  f"{loop['control_on_samples']} from sample "
+                  f"{loop['control_on_counted_from']}, control on"]
     return f"{loop['missed_samples']} missed" + (f" ({'; '.join(notes)})" if notes else "")
 
 

@@ -14,13 +14,16 @@ not back by their deadline) have two sources of very different kinds:
 :class:`LateWindow` follows the graph's ``/diagnostics`` (a ``tools.graph_monitor.
 GraphMonitor``) and counts the second apart: from the first driver report at or after the
 sample where the notch said its control is in force (state ``adapting``), or, if it never
-is, from where the caller starts it. No ROS import: it reads the monitor's dictionaries.
+is, from where the caller starts it (live, the rule of ``analysis/late_commands.late_since``,
+which the report applies from control-on). No ROS import: it reads the monitor's
+dictionaries.
 """
 
 from __future__ import annotations
 
 from typing import Any
 
+from hexapod_vibration.analysis.late_commands import driver_counts
 from hexapod_vibration.contract import NotchState
 
 SETTLED_STATES = (NotchState.ADAPTING.value, NotchState.REFUSED.value)
@@ -45,9 +48,7 @@ class LateWindow:
 
     def _driver(self) -> tuple[int, int, int]:
         """(sample, samples, late commands) of the driver's latest report."""
-        driver = self._watch.driver
-        return (int(driver.get("sample", -1)), int(float(driver.get("samples", 0))),
-                int(float(driver.get("late_commands", 0))))
+        return driver_counts(self._watch.driver)
 
     def follow(self) -> bool:
         """Call after each spin; True once the window started.

@@ -161,3 +161,8 @@ def test_realtime_run_records_every_sample_from_sample_0(ros_env, scenario_file,
     report = json.loads((out / "report.json").read_text())
     assert report["loop"]["mode"] == "realtime"
     assert report["loop"]["samples"] == series.last_sample + 1
+    loop = report["loop"]
+    if (report.get("control") or {}).get("engaged"):    # late commands from control-on
+        assert loop["control_on_counted_from"] > 0
+        assert 0 <= loop["control_on_missed_samples"] <= loop["missed_samples"]
+        assert 0 < loop["control_on_samples"] < loop["samples"]
