@@ -153,6 +153,23 @@ class Diagnostics:
         return int(self.value(name, key, "-1"))
 
 
+class RecorderStatus:
+    """Latest status the recorder published on /diagnostics (subscribed on ``node``)."""
+
+    def __init__(self, node: Node):
+        self.values: dict[str, str] = {}
+        node.create_subscription(DiagnosticArray, "/diagnostics", self.on_diagnostics,
+                                 DIAGNOSTICS_QOS)
+
+    def on_diagnostics(self, msg: DiagnosticArray) -> None:
+        for status in msg.status:
+            if status.name.startswith("pph_recorder"):
+                self.values = {kv.key: kv.value for kv in status.values}
+
+    def count(self, key: str) -> int:
+        return int(self.values.get(key, "0"))
+
+
 def drain(ros_context, budget_s: float = 0.05) -> None:
     """Run ready callbacks without waiting, for ``budget_s`` of wall time.
 

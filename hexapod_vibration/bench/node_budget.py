@@ -163,7 +163,7 @@ def measure(out: Path, params: Path, setup: BudgetSetup, warmup_s: float, measur
         late = LateWindow(watch)
         _wait_until_running(children, watch, warmup_s)
         _wait_until_settled(children, watch, late, settle_limit_s)
-        start_late = late.start_now()
+        late.start_now()
         first = int(watch.driver.get("sample", 0))
         before = {name: process_cpu_s(child.pid) for name, child in children.items()}
         end = time.monotonic() + measure_s
@@ -177,15 +177,15 @@ def measure(out: Path, params: Path, setup: BudgetSetup, warmup_s: float, measur
         return {"samples": samples, "wall_s": measure_s,
                 "cpu_us_per_sample": cpu_per_sample(before, after, samples),
                 "stages": stage_costs(statuses),
-                "loop": _loop_stats(watch.driver, setup, late, start_late)}
+                "loop": _loop_stats(watch.driver, setup, late)}
     finally:
         stop_all(list(children.values()))
         if load is not None:
             stop_all([load])
 
 
-def _loop_stats(driver: dict[str, str], setup: BudgetSetup, late: LateWindow,
-                start_late: tuple[int, int]) -> dict[str, Any]:
+def _loop_stats(driver: dict[str, str], setup: BudgetSetup, late: LateWindow
+                ) -> dict[str, Any]:
     """Rate; realtime: late commands in the window and before it, latency p99 (ms)."""
     stats = {"rate_hz": float(driver.get("rate_hz", "nan"))}
     if setup.mode == "realtime":
@@ -193,7 +193,7 @@ def _loop_stats(driver: dict[str, str], setup: BudgetSetup, late: LateWindow,
         stats.update(missed_fraction=window["control_missed_fraction"],
                      missed_samples=window["control_late"],
                      settled=window["control_settled"],
-                     samples_before=start_late[0], late_before=start_late[1],
+                     samples_before=late.start[0], late_before=late.start[1],
                      latency_ms_p99=driver.get("latency_ms_p99"))
     return stats
 

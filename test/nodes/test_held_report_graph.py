@@ -11,7 +11,7 @@ samples).
 from __future__ import annotations
 
 import numpy as np
-from node_graph import Diagnostics, wait_until
+from node_graph import RecorderStatus, wait_until
 from std_msgs.msg import Float64MultiArray
 
 from hexapod_vibration.contract import HELD_REPORT_EVERY_SAMPLES, NOTCH_HELD_TOPIC, STAND_INS_TOPIC
@@ -21,7 +21,6 @@ from hexapod_vibration.ros.messages import make_strut_array, parse_strut_sample
 from hexapod_vibration.ros.qos import COMMAND_QOS, HELD_QOS, LOOP_QOS
 
 REPORTS = 5
-RECORDER_STATUS = "pph_recorder: bag"
 
 
 def _listen(ros_context) -> list:
@@ -110,21 +109,19 @@ def test_the_recorder_records_the_reports_a_listener_gets(ros_context, node_proc
     the first and the last recorded; the stand-in reports are there (empty: no controller).
     """
     reports = _listen(ros_context)
-    recorder_status = Diagnostics(ros_context.create_node("recorder_status"))
+    recorder_status = RecorderStatus(ros_context.create_node("recorder_status"))
     bag = tmp_path / "bag"
     recorder = node_processes.start("pph_recorder", "--ros-args", "-p", f"bag_path:={bag}")
     driver = node_processes.start("pph_driver", "--ros-args", "-p", "clock_mode:=realtime",
                                   "-p", "lockstep_controllers:=[]",
                                   "-p", "command_delay_samples:=1")
 
-    def written(topic: str) -> int:
-        """Messages of ``topic`` the recorder says it wrote (its own /diagnostics count)."""
-        return int(recorder_status.value(RECORDER_STATUS, f"{topic} messages", "0"))
-
     # The recorder may match the driver's reports seconds after a listener does (its
     # imports): wait for what it says it wrote, not for what the listener heard.
-    assert wait_until(ros_context, lambda: written(NOTCH_HELD_TOPIC) >= REPORTS
-                      and written(STAND_INS_TOPIC) >= 1 and len(reports) >= REPORTS)
+    assert wait_until(ros_context, lambda:
+                      recorder_status.count(f"{NOTCH_HELD_TOPIC} messages") >= REPORTS
+                      and recorder_status.count(f"{STAND_INS_TOPIC} messages") >= 1
+                      and len(reports) >= REPORTS)
     assert driver.stop() == 130, driver.output()
     assert recorder.stop() == 130, recorder.output()
     held = _recorded(bag, NOTCH_HELD_TOPIC, parse_held_report)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import yaml
-from diagnostic_msgs.msg import DiagnosticArray
+from node_graph import RecorderStatus
 from rclpy.duration import Duration
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
@@ -13,7 +13,6 @@ from std_msgs.msg import Float64MultiArray
 
 from hexapod_vibration.analysis.bag_reading import read_clock, read_strut_topics
 from hexapod_vibration.ros.messages import make_strut_array
-from hexapod_vibration.ros.qos import DIAGNOSTICS_QOS
 
 TIMEOUT_S = 60.0  # hang guard only: nothing here asserts how long anything takes
 SKIPPED_SAMPLE = 57
@@ -21,21 +20,6 @@ SIM_TIME_NS = 100_000_000_000
 # Deep enough that a sample sent before the recorder's reader matched is still in the
 # publisher's history when DDS repairs it (the loop's own LOOP_QOS keeps only 10).
 PUBLISHER_QOS = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
-
-
-class RecorderStatus:
-    """Latest status the recorder published on /diagnostics."""
-
-    def __init__(self):
-        self.values: dict[str, str] = {}
-
-    def on_diagnostics(self, msg: DiagnosticArray) -> None:
-        for status in msg.status:
-            if status.name.startswith("pph_recorder"):
-                self.values = {kv.key: kv.value for kv in status.values}
-
-    def count(self, key: str) -> int:
-        return int(self.values.get(key, "0"))
 
 
 def _clock_message(time_ns: int) -> Clock:
@@ -53,10 +37,7 @@ def test_recorder_writes_published_samples(ros_context, node_processes, tmp_path
     node = ros_context.create_node("test_publisher")
     accel = node.create_publisher(Float64MultiArray, "/pph/accel", PUBLISHER_QOS)
     clock = node.create_publisher(Clock, "/clock", PUBLISHER_QOS)
-    status = RecorderStatus()
-    node.create_subscription(
-        DiagnosticArray, "/diagnostics", status.on_diagnostics, DIAGNOSTICS_QOS
-    )
+    status = RecorderStatus(node)
 
     # Handshake: the recorder itself reports our publisher matched and sim time received.
     ready = ros_context.wait_for(
@@ -105,10 +86,7 @@ def test_recorder_writes_queued_messages_at_sigint(ros_context, node_processes, 
     recorder = node_processes.start("pph_recorder", "--ros-args", "-p", f"bag_path:={bag}")
     node = ros_context.create_node("test_publisher")
     accel = node.create_publisher(Float64MultiArray, "/pph/accel", PUBLISHER_QOS)
-    status = RecorderStatus()
-    node.create_subscription(
-        DiagnosticArray, "/diagnostics", status.on_diagnostics, DIAGNOSTICS_QOS
-    )
+    status = RecorderStatus(node)
     ready = ros_context.wait_for(lambda: status.count("/pph/accel publishers") >= 1, TIMEOUT_S)
     assert ready, recorder.output()
 
@@ -158,9 +136,7 @@ def _record(ros_context, node_processes, bag, storage, publish, wait_key, wait_c
     node = ros_context.create_node("test_publisher")
     publishers = {t: node.create_publisher(Float64MultiArray, t, PUBLISHER_QOS)
                   for t in ("/pph/accel", "/pph/notch_command")}
-    status = RecorderStatus()
-    node.create_subscription(DiagnosticArray, "/diagnostics", status.on_diagnostics,
-                             DIAGNOSTICS_QOS)
+    status = RecorderStatus(node)
     ready = ros_context.wait_for(
         lambda: all(status.count(f"{t} publishers") >= 1 for t in publishers), TIMEOUT_S)
     assert ready, recorder.output()

@@ -44,8 +44,7 @@ class GuardBands:
         near_tone = self._near(tones)
         self.octaves = [(centre, lo, hi) for centre, lo, hi
                         in third_octave_bands_hz(THIRD_OCTAVE_LOW_HZ, 0.5 * sample_rate_hz)
-                        if np.count_nonzero((self.freqs >= lo) & (self.freqs < hi)
-                                            & ~near_tone) >= MIN_OCTAVE_BINS]
+                        if np.count_nonzero(self._octave(lo, hi, near_tone)) >= MIN_OCTAVE_BINS]
         self.masks, _ = self.masks_for(tones)
         self.names = ([f"tone {f:g} Hz" for f in tones] + ["broadband"]
                       + [f"1/3 octave {c:.0f} Hz" for c, _, _ in self.octaves])
@@ -59,12 +58,10 @@ class GuardBands:
         tones' bands and their window's main lobe; one left with fewer than
         ``MIN_OCTAVE_BINS`` bins is not usable.
         """
-        masks = [np.abs(self.freqs - f) <= self.half_width_hz for f in tones]
-        masks.append(self.freqs >= BROADBAND_LOW_HZ)
         near_tone = self._near(tones)
-        for _, lo, hi in self.octaves:
-            masks.append((self.freqs >= lo) & (self.freqs < hi) & ~near_tone)
-        out = np.array(masks, dtype=float).reshape(len(masks), self.freqs.size)
+        out = np.vstack([self.tone_masks(tones), self.freqs >= BROADBAND_LOW_HZ,
+                         *(self._octave(lo, hi, near_tone) for _, lo, hi in self.octaves)]
+                        ).astype(float)
         usable = np.ones(out.shape[0], bool)
         usable[tones.size + 1:] = out[tones.size + 1:].sum(axis=1) >= MIN_OCTAVE_BINS
         return out, usable
@@ -73,6 +70,10 @@ class GuardBands:
         """(T, F) float masks of the bands around ``tones`` (Hz)."""
         return (np.abs(self.freqs[None, :] - np.asarray(tones)[:, None])
                 <= self.half_width_hz).astype(float)
+
+    def _octave(self, lo: float, hi: float, near_tone: np.ndarray) -> np.ndarray:
+        """(F,) bins of the third octave ``lo`` .. ``hi`` (Hz) off the tones."""
+        return (self.freqs >= lo) & (self.freqs < hi) & ~near_tone
 
     def _near(self, tones: np.ndarray) -> np.ndarray:
         """(F,) bins within a tone's band or its window's main lobe."""

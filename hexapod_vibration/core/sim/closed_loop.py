@@ -130,7 +130,6 @@ class CoreLoop:
             rec.actuator_force_n[n] = self.actuated.apply(n, notch, pointing)
         self.next_sample = max(self.next_sample, stop)
 
-
     def finish(self, record: LoopRecord) -> LoopRecord:
         """Copy the notch's identification and what it reported into ``record``; ``record``."""
         if self.notch is not None:
