@@ -39,6 +39,8 @@ MU_POLICIES = ("manual", "auto")
 """How the notch sets each tone's rate (``core.control.mu_policy.choose_tone_rates``)."""
 IDENTIFICATION_METHODS = ("tones", "broadband")
 """How the notch identifies the plant (test tones at the tones, or a multisine G(f))."""
+ANALYSIS_PLACES = ("loop", "process")
+"""Where the notch analyses a finished identification (its loop's thread, a worker)."""
 STORAGES = ("mcap", "sqlite3")
 TYPES = ("bool", "int", "double", "string", "int[]", "double[]", "string[]")
 
@@ -584,6 +586,13 @@ NOTCH_CONTROLLER = NodeSpec("notch_controller", summary="six decentralized Adapt
                   "that move (frequency_tracking, reference_harmonics; fixed at start-up)",
                   unit="Hz", low=UPDATE_LOWPASS_AUTO, high=100.0, read_only=True,
                   constraints="-1 or in [0, 100]"),
+    ParameterSpec("identification_analysis", "string", "loop", "where the analysis of a "
+                  "finished identification runs (~0.8 s of CPU after a broadband one): "
+                  "loop = on the loop's thread, one piece per sample (deterministic, for "
+                  "lockstep); process = a worker process on the normal scheduler, while the "
+                  "loop keeps its deadline (realtime; the launch file's clock_mode:=realtime "
+                  "and experiment --realtime choose it)", choices=ANALYSIS_PLACES,
+                  read_only=True),
     *LOOP_SCHEDULING,
 ))
 

@@ -7,6 +7,7 @@
     ros2 launch hexapod_vibration pph.launch.py composed:=true
     ros2 launch hexapod_vibration pph.launch.py clock_mode:=realtime realtime_priority:=50
     ros2 launch hexapod_vibration pph.launch.py clock_mode:=realtime command_delay_samples:=1
+    ros2 launch hexapod_vibration pph.launch.py clock_mode:=realtime identification_analysis:=loop
 
 Starts ``pph_driver``, ``notch_controller`` and ``pointing_controller`` (node names = the
 executable names) with the parameters of ``config/pph.yaml`` from the package's share
@@ -19,7 +20,9 @@ parameters and topics, intra-process delivery; see docs/performance.md).
 start-up where the OS does not permit it; per-node CPUs (``cpu_affinity``) go in the params
 file. ``command_delay_samples`` (default 2 in realtime, as ``experiment --realtime``, 0 in
 lockstep) gives the controllers that many more periods to answer; the notch controller adds
-it to its loop delay.
+it to its loop delay. ``identification_analysis`` (default ``process`` in realtime, as
+``experiment --realtime``, ``loop`` in lockstep) is where the notch controller analyses a
+finished identification: a worker process keeps the loop's deadline through it.
 """
 
 import os
@@ -48,6 +51,7 @@ def generate_launch_description() -> LaunchDescription:
     composed = LaunchConfiguration("composed")
     priority = LaunchConfiguration("realtime_priority")
     command_delay = LaunchConfiguration("command_delay_samples")
+    analysis = LaunchConfiguration("identification_analysis")
     arguments = [
         DeclareLaunchArgument(
             "params_file", default_value=default_params,
@@ -74,6 +78,15 @@ def generate_launch_description() -> LaunchDescription:
                         "driver and both controllers (0-10; default: 2 in realtime, 0 in "
                         "lockstep; overrides the params file)"),
         DeclareLaunchArgument(
+            "identification_analysis",
+            default_value=PythonExpression([
+                "'process' if '", clock_mode, "' == 'realtime' else 'loop'"]),
+            choices=["loop", "process"],
+            description="where the notch controller analyses a finished identification: "
+                        "loop (its loop's thread; default in lockstep) or process (a worker "
+                        "process; default in realtime); separate processes only (composed: "
+                        "the params file's)"),
+        DeclareLaunchArgument(
             "bag_path", default_value="",
             description="bag directory of the recorder (must not exist); empty: "
                         "rosbag2_<date>-<time> in the current directory"),
@@ -83,12 +96,14 @@ def generate_launch_description() -> LaunchDescription:
     controller_parameters = [params_file, scheduling]
     driver_parameters = [*controller_parameters,
                          {"clock_mode": ParameterValue(clock_mode, value_type=str)}]
+    notch_parameters = [*controller_parameters,
+                        {"identification_analysis": ParameterValue(analysis, value_type=str)}]
     separate = UnlessCondition(composed)
     nodes = [
         Node(package=PACKAGE, executable="pph_driver", name="pph_driver", output="screen",
              parameters=driver_parameters, condition=separate),
         Node(package=PACKAGE, executable="notch_controller", name="notch_controller",
-             output="screen", parameters=controller_parameters, condition=separate),
+             output="screen", parameters=notch_parameters, condition=separate),
         Node(package=PACKAGE, executable="pointing_controller", name="pointing_controller",
              output="screen", parameters=controller_parameters, condition=separate),
         # No name=: a name remap would rename all three nodes of the process.

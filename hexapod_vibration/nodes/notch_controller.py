@@ -14,6 +14,8 @@ for the divergence guard); out to it, every 10 samples while it listens, the nex
 
 from __future__ import annotations
 
+from concurrent.futures import ProcessPoolExecutor
+
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.node import Node
@@ -44,6 +46,7 @@ from hexapod_vibration.core.loop.signal_ranges import SignalRanges
 from hexapod_vibration.core.model.config import load_model_config
 from hexapod_vibration.parameter_specs import NOTCH_CONTROLLER
 from hexapod_vibration.paths import config_path
+from hexapod_vibration.ros.analysis_worker import start_analysis_worker
 from hexapod_vibration.ros.command_forecasts import ForecastPublisher, notch_rows
 from hexapod_vibration.ros.diagnostics import diagnostic_array, publish_status_periodically
 from hexapod_vibration.ros.executors import loop_meter
@@ -87,7 +90,9 @@ class NotchControllerNode(Node):
         model = load_model_config(config_path("pph_model.yaml"))
         config = NotchConfig().replaced(self._settings_with_pipeline(values))
         z_row = np.linalg.inv(model.geometry.top_jacobian)[2]       # the z axis, as CoreLoop
-        self.supervisor = NotchSupervisor(config, self.fs, output_weights=z_row)
+        self._worker = self._start_worker(values["identification_analysis"])
+        self.supervisor = NotchSupervisor(config, self.fs, output_weights=z_row,
+                                          analysis_worker=self._worker)
         accel_range = SignalRanges.from_model(model).accel_m_s2      # the accelerometers' +-2 g
         self.readers = MatchedReaders(self.publish_diagnostics)
         arrays = {topic: self.readers.publisher(self, Float64MultiArray, topic, LOOP_PUBLISHER_QOS)
@@ -142,6 +147,26 @@ class NotchControllerNode(Node):
                              f"{base + delay:g} samples of loop delay, more than {highest:g}")
         settings["loop_delay_samples"] = base + delay
         return settings
+
+    def _start_worker(self, place: str) -> ProcessPoolExecutor | None:
+        """The analysis worker of ``identification_analysis: process`` (None: the loop's).
+
+        One the OS cannot start is said in one line, and the loop's thread analyses.
+        """
+        if place != "process":
+            return None
+        try:
+            return start_analysis_worker()
+        except OSError as exc:
+            self.get_logger().warning(f"identification_analysis process: no worker ({exc}); "
+                                      "the loop's thread analyses")
+            return None
+
+    def destroy_node(self) -> None:
+        """Stop the analysis worker (after a job in progress: no resource left), the node."""
+        if self._worker is not None:
+            self._worker.shutdown(wait=True, cancel_futures=True)
+        super().destroy_node()
 
     def _check_parameters(self, values: dict, changed: frozenset) -> str:
         """Validate only: the supervisor checks the changed settings as a whole."""

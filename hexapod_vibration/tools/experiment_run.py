@@ -260,9 +260,15 @@ class ExperimentRun:
         self._wait(lambda: self.graph.sim_time_s >= sc.duration_s, "running")
 
     def stop(self) -> None:
-        """Stop every process (recorder last, so the bag holds everything) and rclpy."""
+        """Stop every process and rclpy: the driver first, the recorder last.
+
+        The driver first: a realtime driver still running while its controllers stop
+        counts their missing answers as late commands (~50 in a run's last samples); the
+        recorder last, so the bag holds everything.
+        """
         self.progress.clear()
-        order = sorted(self.children, key=lambda c: c.name == "pph_recorder")
+        order = sorted(self.children,
+                       key=lambda c: (c.name != "pph_driver", c.name == "pph_recorder"))
         stop_children(order)
         if self.graph is not None:
             self.graph.close()

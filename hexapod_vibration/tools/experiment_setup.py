@@ -85,6 +85,8 @@ def node_parameters(scenario: Scenario, mode: str, model_file: str = "",
         }
     if mode == "realtime":
         _pipeline(params, REALTIME_COMMAND_DELAY_SAMPLES)
+        if has_notch:           # the identification's analysis off the loop's thread
+            params["notch_controller"]["identification_analysis"] = "process"
     if realtime_priority:
         for values in params.values():
             values["realtime_priority"] = int(realtime_priority)

@@ -64,7 +64,11 @@ def test_launch_file_compiles_and_starts_the_three_nodes(tmp_path):
     arguments = {_keywords(c, constants).get("name") or c.args[0].value
                  for c in _calls(tree, "DeclareLaunchArgument")}
     assert arguments == {"params_file", "clock_mode", "record", "bag_path", "composed",
-                         "realtime_priority", "command_delay_samples"}
+                         "realtime_priority", "command_delay_samples",
+                         "identification_analysis"}
+    # The choices of the notch's analysis place are the parameter's.
+    from hexapod_vibration.parameter_specs import ANALYSIS_PLACES
+    assert "choices=" + str(list(ANALYSIS_PLACES)).replace("'", '"') in source
     # The realtime default is the experiment's (one definition, checked here).
     from hexapod_vibration.tools.experiment_setup import REALTIME_COMMAND_DELAY_SAMPLES
     assert constants["REALTIME_COMMAND_DELAY_SAMPLES"] == REALTIME_COMMAND_DELAY_SAMPLES

@@ -29,6 +29,7 @@ the ROS parameter must mirror) is queued as :class:`SupervisorEvent` for
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
+from concurrent.futures import Executor
 from typing import Any
 
 import numpy as np
@@ -42,6 +43,7 @@ from hexapod_vibration.core.control.plant_identification import (
     DisturbanceSpectrum,
     PlantFrequencyResponse,
 )
+from hexapod_vibration.core.control.supervisor.analysis_jobs import JobRunner
 from hexapod_vibration.core.control.supervisor.config import NotchConfig, Settings
 from hexapod_vibration.core.control.supervisor.events import EventLog, SupervisorEvent
 from hexapod_vibration.core.control.supervisor.fader import OutputFader
@@ -90,11 +92,16 @@ class NotchSupervisor:
             prediction reports, ``c^T e`` (e.g. the top plate's z axis, the z row of
             ``J^-1``, what the report measures); None: the 6x6 loop's largest singular
             value (any disturbance direction).
+        analysis_worker: where the heavy computations of an identification's analysis run
+            (:mod:`~hexapod_vibration.core.control.supervisor.analysis_jobs`), e.g. a process
+            beside a realtime loop; None: on the calling thread, one piece per sample (the
+            lockstep schedule).
     """
 
     def __init__(self, config: NotchConfig, sample_rate_hz: float = SAMPLE_RATE_HZ,
                  channels: int = STRUT_COUNT,
-                 output_weights: np.ndarray | None = None) -> None:
+                 output_weights: np.ndarray | None = None,
+                 analysis_worker: Executor | None = None) -> None:
         """Build the canceller and the DC blocker; identification waits for the first sample."""
         self.fs = float(sample_rate_hz)
         self.channels = int(channels)
@@ -118,7 +125,7 @@ class NotchSupervisor:
         """The moving tones (reference, tracking, acquisition)."""
         parts = SupervisorParts(settings, canceller, self._clock, self._plant, self._rates,
                                 self._gate, self.safety, self.follower, events)
-        self.identification = PlantIdentification(parts)
+        self.identification = PlantIdentification(parts, JobRunner(analysis_worker))
         """The plant's identification (running, its span)."""
         self._changes = SettingsChange(parts, self.identification)
         first = {"mu": config.mu, "tone_frequencies_hz": list(config.tone_frequencies_hz),

@@ -4,18 +4,18 @@
 sample (a generator driven by :class:`~.identification.PlantIdentification`): the
 coefficients P of the adaptation mode at the oscillators' tones (from the measured G, or
 from what is known at tones that moved meanwhile), the bound on ``mu`` (eq. 18 after a tone
-identification; the Nyquist test on G(f), one test per piece, after a broadband one), the
+identification; the Nyquist test on G(f), one test per piece and job, after a broadband
+one), the
 clamp, and, after a broadband identification, the mu policy and the type-2 test. A response
 unusable for the mode, or a bound of 0, refuses control with the reason.
 """
 
 from __future__ import annotations
 
-from collections.abc import Generator
-
 import numpy as np
 
 from hexapod_vibration.core.control import adaptation
+from hexapod_vibration.core.control.supervisor.analysis_jobs import Analysis
 from hexapod_vibration.core.control.supervisor.parts import SupervisorParts
 
 
@@ -27,7 +27,7 @@ class ControlEngagement:
         self._parts = parts
 
     def engage(self, measured_tones: list[float], response: np.ndarray, broadband: bool
-               ) -> Generator[None, None, None]:
+               ) -> Analysis:
         """Coefficients and bound at the oscillators; control on, or refused with why.
 
         ``response``: G (T, C, C) measured at ``measured_tones`` (Hz); the oscillators'
@@ -67,7 +67,7 @@ class ControlEngagement:
         rates.clamp(bound)
         if broadband:
             yield
-            rates.choose(tones, coefficients)
+            yield from rates.choose(tones, coefficients)
             yield from rates.check_type2(tones)
         parts.follower.limit_bandwidth()
         parts.safety.restart()

@@ -17,14 +17,17 @@ and its output stays as it was.
 
 The analysis of a finished identification runs one piece per sample
 (:meth:`PlantIdentification.step`), ending with what it measured put in force
-(:class:`~.engagement.ControlEngagement`): with G(f) each Nyquist test takes ~0.1 s, and the
-lockstep driver waits at most ``lockstep_timeout_s`` for a sample's command.
+(:class:`~.engagement.ControlEngagement`): with G(f) each Nyquist test takes ~25 ms, and the
+lockstep driver waits at most ``lockstep_timeout_s`` for a sample's command. Its heavy
+computations are jobs (:mod:`.analysis_jobs`): inline by default, on a worker process beside
+a realtime loop (the loop then keeps its deadline while the analysis waits for them).
 """
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Generator
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -34,7 +37,18 @@ from hexapod_vibration.core.control.held_inputs import (
     HeldCommands,
     input_difference,
 )
-from hexapod_vibration.core.control.plant_identification import BroadbandIdentifier
+from hexapod_vibration.core.control.plant_identification import (
+    BroadbandIdentifier,
+    DisturbanceSpectrum,
+    PlantFrequencyResponse,
+    RemovedLine,
+)
+from hexapod_vibration.core.control.supervisor.analysis_jobs import (
+    Analysis,
+    Job,
+    JobRunner,
+    Pieces,
+)
 from hexapod_vibration.core.control.supervisor.engagement import ControlEngagement
 from hexapod_vibration.core.control.supervisor.parts import SupervisorParts
 from hexapod_vibration.core.control.supervisor.planning import Plan
@@ -56,6 +70,34 @@ class _Measurement:
     uncertainty: float
     limit: float
     what: str
+    lines: tuple[RemovedLine, ...] | list[RemovedLine] = ()
+    """The record's strong disturbance lines (a broadband record; none from tones)."""
+
+
+@dataclass(frozen=True)
+class BroadbandAnalysis:
+    """What a finished broadband record gives (:func:`analyse_broadband`)."""
+
+    response: PlantFrequencyResponse
+    disturbance: DisturbanceSpectrum
+    at_tones: np.ndarray
+    """G (T, C, C) at the tones ((m/s^2)/N)."""
+    uncertainty: float
+    """The largest relative uncertainty of G at the tones."""
+    lines: list[RemovedLine]
+    """The record's strong disturbance lines."""
+
+
+def analyse_broadband(identifier: BroadbandIdentifier, tones: list[float]
+                      ) -> BroadbandAnalysis:
+    """G(f), the disturbance's spectrum and lines of a finished record; G at ``tones`` (Hz).
+
+    A pure job (the heaviest of the analysis, ~0.2 s): the identifier's copy on a worker.
+    """
+    response = identifier.result()
+    return BroadbandAnalysis(response, identifier.disturbance(), response.at(tones),
+                             float(np.max(response.uncertainty_at(tones))),
+                             identifier.disturbance_lines())
 
 
 class PlantIdentification:
@@ -67,9 +109,10 @@ class PlantIdentification:
             was found), the rates, the gate (refuses control or lets it run again), the
             safety monitor (its reference waits for the excitation's decay), the follower
             (the tones acquired on the lines found), the event log.
+        jobs: where the analysis's heavy computations run (inline, or a worker).
     """
 
-    def __init__(self, parts: SupervisorParts) -> None:
+    def __init__(self, parts: SupervisorParts, jobs: JobRunner) -> None:
         """None running."""
         self._settings, self._canceller, self._clock = (parts.settings, parts.canceller,
             parts.clock)
@@ -83,8 +126,10 @@ class PlantIdentification:
         """The tones (Hz) the last identification measured at."""
         self.start_sample = -1
         self.end_sample = -1
-        self.analysis: Iterator[None] | None = None
+        self.analysis: Pieces | None = None
         """The analysis of the finished identification, one piece per sample; None: none."""
+        self._jobs = jobs
+        self._lost_reported = False
         self.held = HeldCommands()
         """The driver's reports of the commands it held (a realtime driver)."""
         self._observed: dict[int, np.ndarray] = {}
@@ -204,7 +249,7 @@ class PlantIdentification:
         self.tones = [float(f) for f in tones]
         if self.analysis is not None:
             self.analysis.close()
-            self.analysis = self._analyse()
+            self.analysis = Pieces(self._analyse(), self._jobs)
         self._events.add("info", f"the broadband identification goes on for the tones "
                                  f"{self.tones} Hz")
 
@@ -230,34 +275,38 @@ class PlantIdentification:
         if self.identifier is not None and self.analysis is None:
             command += self.identifier.step(error)
             if self.identifier.done:
-                self.analysis = self._analyse()
+                self.analysis = Pieces(self._analyse(), self._jobs)
                 self._advance()
         elif self.analysis is not None:
             self._advance()
 
     def _advance(self) -> None:
-        """One piece of the running analysis."""
-        try:
-            next(self.analysis)
-        except StopIteration:
+        """One piece of the running analysis (or a sample of waiting for its job)."""
+        if self.analysis.step():
             self.analysis = None
+        if self._jobs.lost and not self._lost_reported:
+            self._lost_reported = True
+            self._events.add("warn", self._jobs.lost)
 
-    def _measure(self) -> _Measurement:
-        """G at the tones from the finished identifier, into the plant's knowledge."""
+    def _measure(self) -> Generator[Job | None, Any, _Measurement]:
+        """G at the tones from the finished identifier, into the plant's knowledge.
+
+        A broadband record's analysis is one job (:func:`analyse_broadband`).
+        """
         tones, identifier = self.tones, self.identifier
         if isinstance(identifier, BroadbandIdentifier):
-            pfr = identifier.result()
-            self._plant.learn_broadband(pfr, identifier.disturbance())
-            return _Measurement(pfr.at(tones), float(np.max(pfr.uncertainty_at(tones))),
+            found: BroadbandAnalysis = yield Job(analyse_broadband, (identifier, tones))
+            self._plant.learn_broadband(found.response, found.disturbance)
+            return _Measurement(found.at_tones, found.uncertainty,
                                 MAX_IDENTIFICATION_UNCERTAINTY,
-                                "relative uncertainty of G(f) at the tones")
+                                "relative uncertainty of G(f) at the tones", found.lines)
         response = identifier.result()
         change = identifier.baseline_change()
         self._plant.learn_tones(tones, response)
         return _Measurement(response, float(np.max(change)), MAX_BASELINE_CHANGE,
                             "change of the disturbance at the tones during the identification")
 
-    def _analyse(self) -> Iterator[None]:
+    def _analyse(self) -> Analysis:
         """The analysis of a finished identification, one piece per sample (a generator).
 
         G, its confidence, the coefficients, the bound, the policy and the prediction. The
@@ -273,7 +322,7 @@ class PlantIdentification:
             self._gate.refuse(f"identification refused: {missing}; control stays off "
                               "(~/identify to measure again)")
             return
-        measured = self._measure()
+        measured = yield from self._measure()
         identifier, self.identifier = self.identifier, None
         last = self._clock.last
         self.end_sample = last
@@ -290,13 +339,13 @@ class PlantIdentification:
                               f"{100 * measured.limit:.0f} % (a disturbance next to a "
                               "tone?); control stays off")
             return
-        lines = identifier.disturbance_lines() if broadband else []    # an FFT of the record
+        lines = measured.lines
         self._plant.lines_hz = np.array([line.frequency_hz for line in lines])
         if broadband and self._follower.acquires:
             self._follower.acquire(lines)
         yield from self._engagement.engage(self.tones, measured.response, broadband)
 
-    def _correct_for_held_commands(self) -> Iterator[None]:
+    def _correct_for_held_commands(self) -> Analysis:
         """Wait for the driver's report on the run's last sample; tell the identifier.
 
         At most ``HELD_WAIT_SAMPLES`` samples, one per piece; without reports (lockstep, a

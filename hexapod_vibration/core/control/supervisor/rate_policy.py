@@ -22,13 +22,17 @@
 
 from __future__ import annotations
 
-from collections.abc import Generator
 from typing import Any
 
 import numpy as np
 
 from hexapod_vibration.core.control import adaptation, mu_policy, sensitivity
 from hexapod_vibration.core.control.notch import AdaptiveNotchCanceller
+from hexapod_vibration.core.control.plant_identification import (
+    DisturbanceSpectrum,
+    PlantFrequencyResponse,
+)
+from hexapod_vibration.core.control.supervisor.analysis_jobs import Analysis, Job, run_inline
 from hexapod_vibration.core.control.supervisor.config import NotchConfig, Settings
 from hexapod_vibration.core.control.supervisor.events import EventLog
 from hexapod_vibration.core.control.supervisor.plant_knowledge import PlantKnowledge
@@ -80,6 +84,32 @@ def coefficients_and_bound(response: np.ndarray, mode: str,
     bound = min(adaptation.mu_bound(g, c, delay_samples)
                 for g, c in zip(response, coefficients, strict=True))
     return coefficients, float(bound)
+
+
+def choose_and_predict(response: PlantFrequencyResponse, disturbance: DisturbanceSpectrum,
+                       tones: list[float], sample_rate_hz: float, coefficients: np.ndarray,
+                       mu: float, policy: str, max_rise_db: float,
+                       output_weights: np.ndarray | None, update_lowpass_hz: float
+                       ) -> tuple[mu_policy.MuChoice, np.ndarray,
+                                  sensitivity.SensitivityPrediction]:
+    """``mu_policy``'s per-tone rates, P (T, C, C) with them folded in, the predicted |S(f)|.
+
+    A pure job of the analysis (:class:`RatePolicy.choose`): G(f) and the disturbance's
+    spectrum of a broadband identification, the oscillators ``tones`` (Hz), normalised P,
+    ``mu`` > 0, the policy and its largest rise (dB), the output c (None: sigma_max).
+    """
+    choice = mu_policy.choose_tone_rates(response.at, tones, sample_rate_hz, coefficients, mu,
+                                         policy=policy, max_rise_db=max_rise_db,
+                                         output_weights=output_weights,
+                                         disturbance_csd=disturbance.at,
+                                         update_lowpass_hz=update_lowpass_hz)
+    folded = sensitivity.per_tone_coefficients(coefficients, mu, choice.tone_mu)
+    prediction = sensitivity.predict_sensitivity(
+        response.at, tones, sample_rate_hz, folded, mu, output_weights=output_weights,
+        disturbance_csd=disturbance.at, check_stability=False,
+        update_lowpass_hz=update_lowpass_hz)
+    _ = prediction.sigma_max        # cached here, in the job: an SVD per frequency, ~36 ms
+    return choice, folded, prediction
 
 
 class RatePolicy:
@@ -145,30 +175,34 @@ class RatePolicy:
             self._plant.frequency_response.at, tones, self._settings.fs, coefficients,
             update_lowpass_hz=self._settings.update_lowpass_hz)
 
-    def limit_steps(self, tones: list[float], coefficients: np.ndarray
-                    ) -> Generator[None, None, float]:
-        """The Nyquist limit on G(f), one stability test per ``yield`` (a generator).
+    def _stability_job(self, tones: list[float], coefficients: np.ndarray, mu: float,
+                       integral_ratio: np.ndarray | float = 0.0) -> Job:
+        """The Nyquist test on G(f) at the rate ``mu`` (:func:`closed_loop_is_stable`)."""
+        return Job(sensitivity.closed_loop_is_stable,
+                   (self._plant.frequency_response.at, list(tones), self._settings.fs,
+                    np.array(coefficients), float(mu)),
+                   {"integral_ratio": integral_ratio,
+                    "update_lowpass_hz": self._settings.update_lowpass_hz})
+
+    def limit_steps(self, tones: list[float], coefficients: np.ndarray) -> Analysis:
+        """The Nyquist limit on G(f), one stability test (a job) per piece (a generator).
 
         As :func:`~hexapod_vibration.core.control.sensitivity.stable_mu_limit` (the
         largest stable common rate), found by doubling from 1e-5 and bisecting to 2 %, for
         the first-order update that steady tones run (the type-2 update of sweeping tones:
         :meth:`check_type2`).
         """
-        settings = self._settings
-
-        def stable(mu: float) -> bool:
-            return sensitivity.closed_loop_is_stable(
-                self._plant.frequency_response.at, tones, settings.fs, coefficients, mu,
-                update_lowpass_hz=self._settings.update_lowpass_hz)
+        def stable(mu: float) -> Job:
+            return self._stability_job(tones, coefficients, mu)
 
         lo = 1e-5
-        if not stable(lo):
+        if not (yield stable(lo)):
             return 0.0
         hi = lo
         while True:
             yield
             hi = min(2.0 * hi, 1.0)
-            if not stable(hi):
+            if not (yield stable(hi)):
                 break
             lo = hi
             if hi >= 1.0:
@@ -176,7 +210,7 @@ class RatePolicy:
         while hi > lo * 1.02:
             yield
             mid = float(np.sqrt(lo * hi))
-            lo, hi = (mid, hi) if stable(mid) else (lo, mid)
+            lo, hi = (mid, hi) if (yield stable(mid)) else (lo, mid)
         return lo
 
     def forget_choice(self) -> None:
@@ -184,7 +218,7 @@ class RatePolicy:
         self.sensitivity = self.choice = self.unchosen = None
         self.type2_max_mu = float("inf")
 
-    def check_type2(self, tones: list[float]) -> Generator[None, None, None]:
+    def check_type2(self, tones: list[float]) -> Analysis:
         """Whether sweeping tones may adapt with the type-2 update (one Nyquist test).
 
         At the rates in force (the policy's, folded into P) with each tone's ratio
@@ -199,10 +233,7 @@ class RatePolicy:
             self.type2_max_mu = 0.0
             return
         ratio = MOVING_TONE_INTEGRAL_RATIO * self.tone_rates() / mu
-        stable = sensitivity.closed_loop_is_stable(
-            self._plant.frequency_response.at, tones, self._settings.fs,
-            canceller.coefficients, mu, integral_ratio=ratio,
-            update_lowpass_hz=self._settings.update_lowpass_hz)
+        stable = yield self._stability_job(tones, canceller.coefficients, mu, ratio)
         self.type2_max_mu = mu if stable else 0.0
         if not stable and moving_tone_integral_ratio(cfg) > 0.0:
             self._events.add("warn", f"the type-2 update of sweeping tones is unstable at "
@@ -210,11 +241,12 @@ class RatePolicy:
                                      "on G(f)): tones that sweep adapt with the first-order "
                                      "update")
 
-    def choose(self, tones: list[float], coefficients: np.ndarray) -> None:
+    def choose(self, tones: list[float], coefficients: np.ndarray) -> Analysis:
         """Per-tone rates of ``mu_policy`` folded into P; the predicted sensitivity.
 
         The rates are shares of ``mu``: at ``mu`` 0 (nothing adapts) P goes in force as it
-        is and the choice waits for a ``mu`` above 0 (:meth:`choose_pending`).
+        is and the choice waits for a ``mu`` above 0 (:meth:`choose_pending`). The choice
+        and the prediction are one job (:func:`choose_and_predict`).
         """
         cfg, mu = self._settings.config, self._canceller.mu
         if not mu > 0.0:
@@ -224,21 +256,12 @@ class RatePolicy:
                                      "tones' rates once mu is set above 0")
             return
         self.unchosen = None
-        fs = self._settings.fs
-        pfr, phi = self._plant.frequency_response, self._plant.disturbance
-        choice = mu_policy.choose_tone_rates(pfr.at, tones, fs, coefficients, mu,
-                                             policy=cfg.mu_policy,
-                                             max_rise_db=cfg.max_rise_db,
-                                             output_weights=self._output_weights,
-                                             disturbance_csd=phi.at,
-                                             update_lowpass_hz=self._settings.update_lowpass_hz)
+        choice, folded, self.sensitivity = yield Job(choose_and_predict, (
+            self._plant.frequency_response, self._plant.disturbance, list(tones),
+            self._settings.fs, np.array(coefficients), mu, cfg.mu_policy, cfg.max_rise_db,
+            self._output_weights, self._settings.update_lowpass_hz))
         self.choice = choice
-        folded = sensitivity.per_tone_coefficients(coefficients, mu, choice.tone_mu)
         self._canceller.set_coefficients(folded)
-        self.sensitivity = sensitivity.predict_sensitivity(
-            pfr.at, tones, fs, folded, mu, output_weights=self._output_weights,
-            disturbance_csd=phi.at, check_stability=False,
-            update_lowpass_hz=self._settings.update_lowpass_hz)
         self._events.add("warn" if choice.warning else "info",
                          choice.warning or f"mu_policy {choice.policy}: tone rates "
                          f"{np.round(choice.tone_mu, 6).tolist()}, predicted rise "
@@ -264,9 +287,8 @@ class RatePolicy:
             self.unchosen = None
             return
         tones = [float(f) for f in canceller.tone_frequencies_hz]
-        self.choose(tones, unchosen)
-        for _ in self.check_type2(tones):
-            pass
+        run_inline(self.choose(tones, unchosen))
+        run_inline(self.check_type2(tones))
 
     def tone_rates(self) -> np.ndarray:
         """Each oscillator's rate in force (1/sample): the policy's, scaled to ``mu`` now.

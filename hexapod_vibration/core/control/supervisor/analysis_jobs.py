@@ -1,0 +1,155 @@
+"""The heavy computations of an identification's analysis, run inline or on a worker.
+
+The analysis of a finished identification is a generator run one piece per sample
+(:class:`Pieces`). A piece that needs a heavy, pure computation (G(f) from the record, a
+Nyquist test, the mu policy) yields a :class:`Job` and is resumed with its result:
+
+- inline (no worker, lockstep): the job runs at once and the piece goes on in the same
+  sample, so the schedule (which sample control goes on at) is the one of a plain call;
+- on a worker (an :class:`concurrent.futures.Executor`, e.g. a process at normal priority
+  beside a realtime loop): the job is submitted and the analysis waits, sample after sample,
+  until its result is there; the loop thread keeps its deadline meanwhile.
+
+A worker that breaks (its process died) is given up for good: the job and every later one
+run inline, and :attr:`JobRunner.lost` says why, once.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Generator
+from concurrent.futures import BrokenExecutor, Executor, Future
+from dataclasses import dataclass, field
+from typing import Any
+
+
+@dataclass(frozen=True)
+class Job:
+    """A pure computation ``fn(*args, **kwargs)``: module-level, picklable arguments."""
+
+    fn: Callable[..., Any]
+    args: tuple = ()
+    kwargs: dict[str, Any] = field(default_factory=dict)
+
+
+Analysis = Generator["Job | None", Any, Any]
+"""A computation in pieces: yields None to end a piece, a :class:`Job` for its result."""
+
+
+def _inline(job: Job) -> Future:
+    """``job`` run now, as a finished future (its result or its exception)."""
+    future: Future = Future()
+    try:
+        future.set_result(job.fn(*job.args, **job.kwargs))
+    except Exception as exc:  # noqa: BLE001 - handed to the analysis, as a call would raise
+        future.set_exception(exc)
+    return future
+
+
+class JobRunner:
+    """Where jobs run: inline, or on ``worker`` until it breaks (then inline).
+
+    Args:
+        worker: the executor of the jobs; None: inline.
+    """
+
+    def __init__(self, worker: Executor | None = None) -> None:
+        """Inline unless a worker is given."""
+        self._worker = worker
+        self.lost = ""
+        """Why the worker was given up ('' while it serves, or with none)."""
+
+    @property
+    def inline(self) -> bool:
+        """True when jobs run on the calling thread."""
+        return self._worker is None
+
+    def submit(self, job: Job) -> Future:
+        """``job`` started on the worker, or run inline (finished) without one."""
+        if self._worker is None:
+            return _inline(job)
+        try:
+            return self._worker.submit(job.fn, *job.args, **job.kwargs)
+        except (BrokenExecutor, RuntimeError) as exc:     # broken, or shut down
+            return self._give_up(job, exc)
+
+    def outcome(self, job: Job, future: Future) -> tuple[Any, BaseException | None]:
+        """(result, exception) of a finished ``future``; a broken worker's job rerun inline."""
+        exc = future.exception()
+        if isinstance(exc, BrokenExecutor):
+            future = self._give_up(job, exc)
+            exc = future.exception()
+        return (None if exc is not None else future.result()), exc
+
+    def _give_up(self, job: Job, exc: BaseException) -> Future:
+        """The worker is unusable: say why, run ``job`` and every later one inline."""
+        self.lost = (f"the analysis worker is lost ({type(exc).__name__}: {exc}); "
+                     "analysing on the loop thread")
+        self._worker = None
+        return _inline(job)
+
+
+class Pieces:
+    """Runs an :data:`Analysis` one piece per :meth:`step`, its jobs on ``runner``.
+
+    A piece ends at a bare ``yield``, or at a job that is not finished yet (then the next
+    steps wait for it). Inline, a job's piece goes on at once.
+    """
+
+    def __init__(self, analysis: Analysis, runner: JobRunner) -> None:
+        """Not started: the first step runs the first piece."""
+        self._analysis = analysis
+        self._runner = runner
+        self._pending: tuple[Job, Future] | None = None
+        self.waiting_samples = 0
+        """Steps spent waiting for a job's result (0 inline)."""
+        self.value: Any = None
+        """The analysis's return value, once it ended."""
+
+    @property
+    def waiting(self) -> bool:
+        """True while a job of the analysis runs on the worker."""
+        return self._pending is not None
+
+    def step(self) -> bool:
+        """The next piece (or a wait for a job's result). True once the analysis ended.
+
+        An exception of the analysis (or of a job it does not catch) propagates.
+        """
+        value: Any = None
+        exc: BaseException | None = None
+        if self._pending is not None:
+            job, future = self._pending
+            if not future.done():
+                self.waiting_samples += 1
+                return False
+            self._pending = None
+            value, exc = self._runner.outcome(job, future)
+        try:
+            while True:
+                job = (self._analysis.throw(exc) if exc is not None
+                       else self._analysis.send(value))
+                if job is None:
+                    return False
+                future = self._runner.submit(job)
+                if not future.done():
+                    self._pending = (job, future)
+                    return False
+                value, exc = self._runner.outcome(job, future)
+        except StopIteration as stop:
+            self.value = stop.value
+            return True
+
+    def close(self) -> None:
+        """Stop the analysis; a job of it still waiting is cancelled (its result dropped)."""
+        if self._pending is not None:
+            self._pending[1].cancel()
+            self._pending = None
+        self._analysis.close()
+
+
+def run_inline(analysis: Analysis) -> Any:
+    """Run ``analysis`` to its end on this thread, every piece and job at once; its value."""
+    pieces = Pieces(analysis, JobRunner())
+    while not pieces.step():
+        pass
+    return pieces.value

@@ -1,0 +1,168 @@
+"""An identification's analysis in pieces, its heavy jobs inline or on a worker.
+
+Inline, a job's piece goes on in the same step (the lockstep schedule); on a worker the
+analysis waits for the result, step after step. Real executors: a thread pool where a test
+holds a job back with an event, a spawned process pool for the supervisor (every argument
+crosses a pickle), one whose process dies for the fallback.
+"""
+
+import multiprocessing
+import os
+import threading
+import time
+from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor
+
+import numpy as np
+from static_rig import coupled_gain, run
+
+from hexapod_vibration.contract import NotchState
+from hexapod_vibration.core.control.notch_supervisor import NotchConfig, NotchSupervisor
+from hexapod_vibration.core.control.supervisor.analysis_jobs import (
+    Job,
+    JobRunner,
+    Pieces,
+    run_inline,
+)
+from hexapod_vibration.core.sim.scenario import notch_preset
+
+
+def _square(x: float) -> float:
+    return x * x
+
+
+def _fail(message: str) -> float:
+    raise ValueError(message)
+
+
+def _exit_unless_in(pid: int) -> str:
+    """Kills a worker process (its pool breaks); in the process ``pid`` it returns."""
+    if os.getpid() != pid:
+        os._exit(3)
+    return "inline"
+
+
+def _analysis(log: list):
+    """Two pieces: a job and a bare yield, then a job whose error is caught."""
+    log.append((yield Job(_square, (3.0,))))
+    yield
+    try:
+        yield Job(_fail, ("no",))
+    except ValueError as exc:
+        log.append(str(exc))
+    return "done"
+
+
+def test_inline_a_job_goes_on_in_the_same_piece():
+    log: list = []
+    pieces = Pieces(_analysis(log), JobRunner())
+    assert pieces.step() is False and log == [9.0]         # the job's piece went on
+    assert pieces.step() is True and log == [9.0, "no"]     # the error reached the analysis
+    assert pieces.value == "done" and pieces.waiting_samples == 0
+    assert run_inline(_analysis([])) == "done"
+
+
+def test_on_a_worker_the_analysis_waits_for_the_result_step_after_step():
+    release = threading.Event()
+
+    def held(x: float) -> float:
+        release.wait()
+        return x + 1.0
+
+    def analysis(log: list):
+        log.append((yield Job(held, (1.0,))))
+        return "done"
+
+    log: list = []
+    with ThreadPoolExecutor(1) as worker:
+        pieces = Pieces(analysis(log), JobRunner(worker))
+        for _ in range(5):
+            assert pieces.step() is False
+        assert log == [] and pieces.waiting_samples == 4
+        release.set()
+        while not pieces.step():
+            time.sleep(0.001)
+    assert log == [2.0] and pieces.value == "done"
+
+
+def test_closing_drops_a_job_still_waiting():
+    release = threading.Event()
+    closed: list = []
+
+    def analysis():
+        try:
+            yield Job(release.wait)
+            closed.append("resumed")
+        finally:
+            closed.append("closed")
+
+    with ThreadPoolExecutor(1) as worker:
+        pieces = Pieces(analysis(), JobRunner(worker))
+        pieces.step()
+        pieces.close()
+        release.set()
+    assert closed == ["closed"]
+
+
+def test_a_worker_that_dies_is_given_up_and_the_job_runs_inline():
+    def analysis():
+        first = yield Job(_exit_unless_in, (os.getpid(),))
+        second = yield Job(_square, (2.0,))
+        return first, second
+
+    with ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn")) as worker:
+        runner = JobRunner(worker)
+        pieces = Pieces(analysis(), runner)
+        while not pieces.step():
+            time.sleep(0.001)
+    assert pieces.value == ("inline", 4.0)
+    assert runner.inline and "analysis worker is lost" in runner.lost
+
+
+def _broadband() -> NotchConfig:
+    base = {**notch_preset("paper"), "tone_frequencies_hz": (40.0,), "enabled": True,
+            "identify_delay_s": 0.1, "identification": "broadband", "mu_policy": "auto"}
+    return NotchConfig().replaced(base)
+
+
+def _analysing(sup: NotchSupervisor) -> bool:
+    return sup.identification.analysis is not None
+
+
+def _engaged(sup: NotchSupervisor, k: np.ndarray, start: int, wait_s: float) -> int:
+    """Samples until the analysis ends (a worker's: the loop sleeps while it waits)."""
+    n = start
+    while _analysing(sup):
+        run(sup, k, 1, n)
+        n += 1
+        if sup.identification.analysis is not None and sup.identification.analysis.waiting:
+            time.sleep(wait_s)
+    return n
+
+
+def test_an_analysis_on_a_worker_process_puts_in_force_what_the_inline_one_does():
+    """Same G(f), bound, policy rates, P and prediction; control on a few samples later."""
+    k = coupled_gain(0.1)
+    inline = NotchSupervisor(_broadband())
+    start = len(run(inline, k, 20_000, until=_analysing))
+    inline_end = _engaged(inline, k, start, 0.0)
+    with ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn")) as worker:
+        sup = NotchSupervisor(_broadband(), analysis_worker=worker)
+        assert len(run(sup, k, 20_000, until=_analysing)) == start
+        end = _engaged(sup, k, start, 0.0005)
+    assert inline.state == sup.state == NotchState.ADAPTING
+    assert end > inline_end > start
+    assert sup.bound == inline.bound and sup.canceller.mu == inline.canceller.mu
+    assert np.array_equal(sup.canceller.coefficients, inline.canceller.coefficients)
+    mine, theirs = sup.status(), inline.status()
+    for key in ("tone_mu", "predicted_rise_db", "mu_limit", "plant_gain_m_s2_per_n"):
+        assert mine[key] == theirs[key], key
+    assert mine["identification_end_sample"] > theirs["identification_end_sample"]
+    assert not [e for e in sup.drain_events() if "lost" in e.message]
+
+
+def test_a_worker_shut_down_is_given_up_and_the_job_runs_inline():
+    worker = ThreadPoolExecutor(1)
+    worker.shutdown()
+    runner = JobRunner(worker)
+    assert runner.submit(Job(_square, (5.0,))).result() == 25.0
+    assert runner.inline and "RuntimeError" in runner.lost
