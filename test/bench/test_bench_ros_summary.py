@@ -53,3 +53,19 @@ def test_summary_table_and_target_verdicts():
     assert "Lockstep at least 3x faster than real time: **not met** (1.70x)" in text
     results["realtime"] = bad
     assert "under 1 ms: **not met** (1.000 % missed" in "\n".join(_summary_ros(results))
+    assert "separate processes" not in text            # no CPU budget measured
+
+
+def test_the_separate_processes_verdict_is_the_fifo_budget_window():
+    from hexapod_vibration.bench.summary import FIFO_RECORDER_SETUP
+
+    good = _realtime_block(_diagnostics(60000.0, 30.0), CONFIGURATIONS[0], 60.0)
+    results = {"realtime": good, "lockstep_speedup": 1.7,
+               "loops": {"composed/waitset": {"realtime": good, "lockstep": {"speedup": 1.7}}}}
+    for missed, p99, verdict in ((0.0009, "0.98", "met"), (0.00107, "0.98", "**not met**"),
+                                 (0.0005, "1.20", "**not met**")):
+        results["budget"] = {FIFO_RECORDER_SETUP: {"wall_s": 30.0, "loop": {
+            "missed_fraction": missed, "latency_ms_p99": p99}}}
+        line = [t for t in _summary_ros(results) if "separate processes" in t]
+        assert len(line) == 1 and f"window): {verdict} ({100 * missed:.3f} % missed" in line[0]
+        assert f"p99 {float(p99):.2f} ms over 30.0 s" in line[0]

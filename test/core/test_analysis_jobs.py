@@ -57,7 +57,7 @@ def test_inline_a_job_goes_on_in_the_same_piece():
     pieces = Pieces(_analysis(log), JobRunner())
     assert pieces.step() is False and log == [9.0]         # the job's piece went on
     assert pieces.step() is True and log == [9.0, "no"]     # the error reached the analysis
-    assert pieces.value == "done" and pieces.waiting_samples == 0
+    assert pieces.value == "done" and not pieces.waiting
     assert run_inline(_analysis([])) == "done"
 
 
@@ -76,8 +76,8 @@ def test_on_a_worker_the_analysis_waits_for_the_result_step_after_step():
     with ThreadPoolExecutor(1) as worker:
         pieces = Pieces(analysis(log), JobRunner(worker))
         for _ in range(5):
-            assert pieces.step() is False
-        assert log == [] and pieces.waiting_samples == 4
+            assert pieces.step() is False and pieces.waiting
+        assert log == []
         release.set()
         while not pieces.step():
             time.sleep(0.001)

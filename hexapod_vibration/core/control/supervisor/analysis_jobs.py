@@ -100,8 +100,6 @@ class Pieces:
         self._analysis = analysis
         self._runner = runner
         self._pending: tuple[Job, Future] | None = None
-        self.waiting_samples = 0
-        """Steps spent waiting for a job's result (0 inline)."""
         self.value: Any = None
         """The analysis's return value, once it ended."""
 
@@ -120,7 +118,6 @@ class Pieces:
         if self._pending is not None:
             job, future = self._pending
             if not future.done():
-                self.waiting_samples += 1
                 return False
             self._pending = None
             value, exc = self._runner.outcome(job, future)
