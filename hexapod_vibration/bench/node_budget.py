@@ -61,6 +61,7 @@ BUDGET_SETUPS = (
     BudgetSetup("processes", "realtime"),
     BudgetSetup("processes", "realtime", recorder=False),
     BudgetSetup("processes", "realtime", priority=50),
+    BudgetSetup("processes", "realtime", recorder=False, priority=50),
     BudgetSetup("processes", "realtime", busy_core=True),
     BudgetSetup("processes", "realtime", priority=50, busy_core=True),
     BudgetSetup("composed", "lockstep"),

@@ -25,6 +25,17 @@ from hexapod_vibration.core.control.supervisor.analysis_jobs import (
 )
 from hexapod_vibration.core.sim.scenario import notch_preset
 
+HANG_GUARD_S = 120.0
+"""A worker's job takes ~1 s; this only ends a test whose worker never answers."""
+
+
+def _finish(pieces: Pieces) -> None:
+    """Step ``pieces`` until the analysis ends (a hang guard, not a timing check)."""
+    deadline = time.monotonic() + HANG_GUARD_S
+    while not pieces.step():
+        assert time.monotonic() < deadline, "the worker never answered"
+        time.sleep(0.001)
+
 
 def _square(x: float) -> float:
     return x * x
@@ -79,8 +90,7 @@ def test_on_a_worker_the_analysis_waits_for_the_result_step_after_step():
             assert pieces.step() is False and pieces.waiting
         assert log == []
         release.set()
-        while not pieces.step():
-            time.sleep(0.001)
+        _finish(pieces)
     assert log == [2.0] and pieces.value == "done"
 
 
@@ -112,10 +122,10 @@ def test_a_worker_that_dies_is_given_up_and_the_job_runs_inline():
     with ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn")) as worker:
         runner = JobRunner(worker)
         pieces = Pieces(analysis(), runner)
-        while not pieces.step():
-            time.sleep(0.001)
+        _finish(pieces)
     assert pieces.value == ("inline", 4.0)
-    assert runner.inline and "analysis worker is lost" in runner.lost
+    assert runner.inline and "analysis worker is lost" in runner.lost_news()
+    assert runner.lost_news() == ""                        # said once
 
 
 def _broadband() -> NotchConfig:
@@ -130,8 +140,9 @@ def _analysing(sup: NotchSupervisor) -> bool:
 
 def _engaged(sup: NotchSupervisor, k: np.ndarray, start: int, wait_s: float) -> int:
     """Samples until the analysis ends (a worker's: the loop sleeps while it waits)."""
-    n = start
+    n, deadline = start, time.monotonic() + HANG_GUARD_S
     while _analysing(sup):
+        assert time.monotonic() < deadline, "the worker never answered"
         run(sup, k, 1, n)
         n += 1
         if sup.identification.analysis is not None and sup.identification.analysis.waiting:
@@ -166,3 +177,32 @@ def test_a_worker_shut_down_is_given_up_and_the_job_runs_inline():
     runner = JobRunner(worker)
     assert runner.submit(Job(_square, (5.0,))).result() == 25.0
     assert runner.inline and "RuntimeError" in runner.lost
+
+
+def test_new_tones_while_a_job_runs_on_the_worker_take_over():
+    """The analysis waiting for the worker stops for new tones; they are engaged after it."""
+    k = coupled_gain(0.1)
+    with ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn")) as worker:
+        sup = NotchSupervisor(_broadband(), analysis_worker=worker)
+        start = len(run(sup, k, 20_000, until=_analysing))
+        n = start + len(run(sup, k, 100, start,
+                            until=lambda s: s.identification.analysis.waiting))
+        assert sup.identification.analysis.waiting         # G(f) from the record, on it
+        sup.apply({"tone_frequencies_hz": [40.0, 80.0]})
+        assert sup.state == NotchState.IDENTIFYING
+        _engaged(sup, k, n, 0.0005)
+    assert sup.state == NotchState.ADAPTING
+    assert sup.canceller.coefficients.shape == (2, 6, 6)
+    assert sup.plant_response.shape == (2, 6, 6)
+
+
+def test_a_lost_worker_is_said_once_and_the_loop_thread_analyses():
+    k = coupled_gain(0.1)
+    worker = ThreadPoolExecutor(1)
+    worker.shutdown()
+    sup = NotchSupervisor(_broadband(), analysis_worker=worker)
+    start = len(run(sup, k, 20_000, until=_analysing))
+    _engaged(sup, k, start, 0.0)
+    assert sup.state == NotchState.ADAPTING
+    lost = [e for e in sup.drain_events() if "analysis worker is lost" in e.message]
+    assert [e.level for e in lost] == ["warn"]

@@ -11,7 +11,7 @@ Nyquist test, the mu policy) yields a :class:`Job` and is resumed with its resul
   until its result is there; the loop thread keeps its deadline meanwhile.
 
 A worker that breaks (its process died) is given up for good: the job and every later one
-run inline, and :attr:`JobRunner.lost` says why, once.
+run inline, and :meth:`JobRunner.lost_news` says why, once.
 """
 
 from __future__ import annotations
@@ -57,11 +57,19 @@ class JobRunner:
         self._worker = worker
         self.lost = ""
         """Why the worker was given up ('' while it serves, or with none)."""
+        self._told = False
 
     @property
     def inline(self) -> bool:
         """True when jobs run on the calling thread."""
         return self._worker is None
+
+    def lost_news(self) -> str:
+        """Why the worker was given up, the first time it is asked after; else ''."""
+        if not self.lost or self._told:
+            return ""
+        self._told = True
+        return self.lost
 
     def submit(self, job: Job) -> Future:
         """``job`` started on the worker, or run inline (finished) without one."""

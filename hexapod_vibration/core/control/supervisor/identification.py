@@ -129,7 +129,6 @@ class PlantIdentification:
         self.analysis: Pieces | None = None
         """The analysis of the finished identification, one piece per sample; None: none."""
         self._jobs = jobs
-        self._lost_reported = False
         self.held = HeldCommands()
         """The driver's reports of the commands it held (a realtime driver)."""
         self._observed: dict[int, np.ndarray] = {}
@@ -284,9 +283,9 @@ class PlantIdentification:
         """One piece of the running analysis (or a sample of waiting for its job)."""
         if self.analysis.step():
             self.analysis = None
-        if self._jobs.lost and not self._lost_reported:
-            self._lost_reported = True
-            self._events.add("warn", self._jobs.lost)
+        lost = self._jobs.lost_news()
+        if lost:
+            self._events.add("warn", lost)
 
     def _measure(self) -> Generator[Job | None, Any, _Measurement]:
         """G at the tones from the finished identifier, into the plant's knowledge.
