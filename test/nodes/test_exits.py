@@ -13,6 +13,7 @@ import time
 from pathlib import Path
 
 import pytest
+from process_tree import children_of, wait_gone
 from rosbags.rosbag2 import Reader
 
 HANG_GUARD_S = 90.0
@@ -80,26 +81,6 @@ def test_signal_during_start_up(node_processes, tmp_path, name, signum):
     assert "Traceback" not in process.output(), process.output()
 
 
-def child_pids(pid: int) -> set[int]:
-    """The live children of process ``pid`` (every thread's), empty once it is gone."""
-    children: set[int] = set()
-    for task in Path(f"/proc/{pid}/task").glob("*"):
-        try:
-            children.update(int(c) for c in (task / "children").read_text().split())
-        except OSError:
-            pass
-    return children
-
-
-def alive(pid: int) -> bool:
-    """True while ``pid`` runs (a zombie, exited and not yet reaped, counts as gone)."""
-    try:
-        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
-    except OSError:
-        return False
-    return state != "Z"
-
-
 @pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGKILL], ids=["SIGINT", "SIGKILL"])
 def test_the_notch_analysis_worker_dies_with_its_node(node_processes, signum):
     """identification_analysis:=process: its children go with it, even when it is killed.
@@ -109,15 +90,12 @@ def test_the_notch_analysis_worker_dies_with_its_node(node_processes, signum):
     process = node_processes.start("notch_controller", "--ros-args", "-p",
                                    "identification_analysis:=process")
     wait_for(lambda: "notch controller up" in process.output(), "notch_controller", process)
-    children = child_pids(process.pid)
+    children = children_of(process.pid)
     assert children, process.output()
     process.process.send_signal(signum)
     code = process.wait(HANG_GUARD_S)
     assert code == (128 + signum if signum == signal.SIGINT else -signum), process.output()
-    deadline = time.monotonic() + HANG_GUARD_S
-    while any(alive(pid) for pid in children):
-        assert time.monotonic() < deadline, f"a child outlived its node\n{process.output()}"
-        time.sleep(0.05)
+    assert wait_gone(children) == [], f"a child outlived its node\n{process.output()}"
     assert "Traceback" not in process.output(), process.output()
     if signum == signal.SIGINT:
         assert "leaked" not in process.output(), process.output()

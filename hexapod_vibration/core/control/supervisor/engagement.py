@@ -5,9 +5,8 @@ sample (a generator driven by :class:`~.identification.PlantIdentification`): th
 coefficients P of the adaptation mode at the oscillators' tones (from the measured G, or
 from what is known at tones that moved meanwhile), the bound on ``mu`` (eq. 18 after a tone
 identification; the Nyquist test on G(f), one test per piece and job, after a broadband
-one), the
-clamp, and, after a broadband identification, the mu policy and the type-2 test. A response
-unusable for the mode, or a bound of 0, refuses control with the reason.
+one), the clamp, and, after a broadband identification, the mu policy and the type-2 test.
+A response unusable for the mode, or a bound of 0, refuses control with the reason.
 """
 
 from __future__ import annotations

@@ -25,7 +25,7 @@ a realtime loop (the loop then keeps its deadline while the analysis waits for t
 
 from __future__ import annotations
 
-from collections.abc import Generator
+from collections.abc import Generator, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -70,7 +70,7 @@ class _Measurement:
     uncertainty: float
     limit: float
     what: str
-    lines: tuple[RemovedLine, ...] | list[RemovedLine] = ()
+    lines: Sequence[RemovedLine] = ()
     """The record's strong disturbance lines (a broadband record; none from tones)."""
 
 
