@@ -427,8 +427,8 @@ PPH_DRIVER = NodeSpec("pph_driver", summary="the simulated hexapod (plant, senso
                   "commands of one sample before advancing without them", unit="s",
                   low=0.001, high=10.0),
     ParameterSpec("hold_at_time_s", "double", -1.0, "breakpoint: stop before publishing "
-                  "the sample at this sim time until it is changed (realtime: 0 only, the "
-                  "clock starting when it is released); -1 = never",
+                  "the sample at this sim time until it is changed (realtime: the clock "
+                  "stops there and resumes when it is released); -1 = never",
                   unit="s", low=-1.0, high=1e6),
     *LOOP_SCHEDULING,
     ParameterSpec("lockstep_controllers", "string[]", list(LOCKSTEP_STREAMS), "controllers "

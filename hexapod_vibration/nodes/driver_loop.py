@@ -40,6 +40,7 @@ class PPHDriver(Protocol):
     lockstep_timeout_s: float
 
     def held(self) -> bool: ...                                 # noqa: D102
+    def paused(self, held: bool) -> None: ...                   # noqa: D102
     def commands_ready(self) -> bool: ...                       # noqa: D102
     def unanswered(self) -> list[str]: ...                      # noqa: D102
     def publish_sample(self) -> None: ...                       # noqa: D102
@@ -55,20 +56,25 @@ class PPHDriver(Protocol):
 def wait_while_held(node: PPHDriver, spinner: LoopSpinner) -> None:
     """The breakpoint: serve callbacks (parameters) until ``hold_at_time_s`` moves on.
 
-    Lockstep at any sample; realtime only before sample 0 (the clock starts once released).
+    At any sample, in both clock modes (realtime: the clock stops; it resumes from the
+    breakpoint, :func:`run_realtime`).
 
-    On entering the hold the driver reports ``held: true`` with its sample on
+    On entering the hold the driver publishes the force it applied last (a realtime
+    driver defers it to the next sample) and reports ``held: true`` with its sample on
     /diagnostics, so a supervisor (the experiment runner) knows the loop stopped exactly
-    before publishing that sample.
+    before publishing that sample, with everything before it published.
     """
     if not node.held():
         return
+    node.outputs.flush_force()
+    node.paused(True)
     announced = 0.0
     while node.held() and rclpy.ok():
         if time.perf_counter() - announced > 0.5:      # late subscribers hear it too
             node.publish_diagnostics(held=True)
             announced = time.perf_counter()
         spinner.spin_once(timeout_sec=0.01)
+    node.paused(False)
 
 
 def wait_for_controllers(node: PPHDriver, spinner: LoopSpinner,
@@ -151,6 +157,10 @@ def run_realtime(node: PPHDriver, spinner: LoopSpinner) -> None:
 
     The clock starts once the expected controllers answered sample 0 (at most
     ``REALTIME_HANDSHAKE_S``), so a restarted driver is answered from its first samples.
+    A breakpoint (``hold_at_time_s``) stops the clock before its sample; released, the
+    clock resumes there (the sample is due one period after the release): a hold is a
+    pause of the loop, not samples missed. The experiment runner ends a realtime run at a
+    breakpoint, so the recorder can catch up with every sample before the driver exits.
     """
     period = 1.0 / node.fs
     wait_while_held(node, spinner)             # the start breakpoint (hold_at_time_s 0)
@@ -159,6 +169,9 @@ def run_realtime(node: PPHDriver, spinner: LoopSpinner) -> None:
     if rclpy.ok():
         node.apply_and_step()      # sample 0 is out (and answered, unless the wait ran out)
     while rclpy.ok():
+        if node.held():
+            wait_while_held(node, spinner)
+            start = time.perf_counter() - node.sample * period
         node.publish_sample()
         deadline = start + (node.sample + 1) * period
         spinner.spin_once(timeout_sec=0.0)   # after an overrun: what is here is not late

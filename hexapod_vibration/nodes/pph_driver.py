@@ -114,15 +114,17 @@ class PPHDriver(Node):
         return self.settings.lockstep_timeout_s
 
     def held(self) -> bool:
-        """True while the breakpoint ``hold_at_time_s`` stops the loop here.
+        """True while the breakpoint ``hold_at_time_s`` stops the loop here (any clock mode).
 
-        Lockstep: at any sample. Realtime: only the start breakpoint (0) before sample 0,
-        so that the clock starts when the graph (a recorder) is ready.
+        Realtime: the start breakpoint (0) starts the clock when the graph (a recorder) is
+        ready; a later one stops the clock until it is moved on.
         """
         hold = self.settings.hold_at_time_s
-        if self.mode == "lockstep":
-            return hold >= 0.0 and self.sample >= round(hold * self.fs)
-        return hold == 0.0 and self.sample == 0
+        return hold >= 0.0 and self.sample >= round(hold * self.fs)
+
+    def paused(self, held: bool) -> None:
+        """The loop stops at (``held``) or leaves a breakpoint: its statistics skip the pause."""
+        (self.arbiter.pause if held else self.arbiter.resume)(time.perf_counter())
 
     def commands_ready(self) -> bool:
         """Lockstep: every waited controller answered the current sample."""

@@ -16,7 +16,8 @@ its last flush.
 
 Every second (wall time) it publishes its status on ``/diagnostics``: per recorded topic,
 the messages written (``<topic> messages``), the publishers matched (``<topic>
-publishers``), the duplicate samples dropped (``<topic> duplicates``) and its CPU budget. A
+publishers``), on the loop topics the duplicate samples dropped (``<topic> duplicates``) and
+the highest sample written (``<topic> last sample``, -1: none), and its CPU budget. A
 runner waits for every publisher it needs to be matched on the recorder's side before
 starting the loop. SIGINT or SIGTERM stops it cleanly: messages already queued are
 written, then the bag is closed and the message counts are logged.
@@ -152,6 +153,7 @@ class BagRecorder(Node):
             values[f"{name} publishers"] = subscription.get_publisher_count()
             if name in rec.duplicates:
                 values[f"{name} duplicates"] = rec.duplicates[name]
+                values[f"{name} last sample"] = rec.last_sample[name]
         if rec.open:
             values["flushed messages"] = rec.flushed
         values.update(self.meter.report())

@@ -11,8 +11,10 @@
    ``--control-on`` and at the end. At the control-on breakpoint the runner switches the
    notch controller on through its parameter service, so the switch lands on the same
    sample in every run and a run is reproducible. Realtime: the driver runs free at 1 kHz
-   and the runner switches control on when ``/clock`` passes ``--control-on``.
-4. Stops every process with SIGINT (the recorder closes the bag), analyses the bag into
+   from its start breakpoint to the end one, and the runner switches control on when
+   ``/clock`` passes ``--control-on``.
+4. Waits at the end until the recorder wrote the last sample of every loop topic, stops
+   every process with SIGINT (the recorder closes the bag), analyses the bag into
    ``DIR/report.json``, ``DIR/details.json`` and PNG plots, and prints the table.
 
 Ctrl-C at any time stops all processes and leaves a readable bag. ``--demo`` runs the

@@ -4,8 +4,10 @@ The recorder first, then the controllers and the driver (each a process that die
 one), which holds before sample 0 until the recorder matched every publisher; lockstep: it
 holds at breakpoints (control-on, the end too) and the runner switches control on at its
 breakpoint, so a run is reproducible; realtime: control goes on when the sim time (the
-driver's reports, paced by the wall clock) passes control-on. A run fails when a process dies or
-nothing moves for ``STALL_TIMEOUT_S``.
+driver's reports, paced by the wall clock) passes control-on, and the clock stops at the end
+breakpoint. At the end (both modes) the runner waits until the recorder wrote the last sample
+of every loop topic, then stops the processes. A run fails when a process dies or nothing
+moves for ``STALL_TIMEOUT_S``.
 """
 
 from __future__ import annotations
@@ -189,11 +191,11 @@ class ExperimentRun:
         if key != self._progress_key:
             self._progress_key, self._progress_at = key, now
         elif now - self._progress_at > STALL_TIMEOUT_S:
-            behind = ", ".join(f"{t} {graph.recorder.get(f'{t} messages', '0')}"
+            behind = ", ".join(f"{t} {graph.recorder.get(f'{t} last sample', '-1')}"
                                for t in graph.recorder_behind(self.loop_topics(), self.n_end))
             if what == RECORDER_DRAIN and behind:
-                detail = (f" (recorded of {self.n_end} samples: {behind}; the rest never "
-                          "reached the recorder)")
+                detail = (f" (last sample recorded, of {self.n_end - 1}: {behind}; the rest "
+                          "never reached the recorder)")
             elif what == WRITERS_MATCHING:
                 detail = (" (publishers short of the subscriptions on: "
                           f"{', '.join(graph.writers_unmatched(self.matched_topics()))})")
@@ -233,9 +235,12 @@ class ExperimentRun:
         if self.lockstep:
             self._run_lockstep()
         else:
-            self.graph.set_parameter("pph_driver", "hold_at_time_s", -1.0)
             self._run_realtime()
-        self.graph.spin(1.0)       # let the recorder drain its queues
+        # The loop is held at its last sample: wait until the recorder wrote the last sample
+        # of every loop topic (it may lag the loop by seconds, a starved recorder on a busy
+        # machine in realtime too; stopping the driver then would lose them).
+        loop = self.loop_topics()
+        self._wait(lambda: not self.graph.recorder_behind(loop, self.n_end), RECORDER_DRAIN)
 
     def _run_lockstep(self) -> None:
         sc = self.o.scenario
@@ -246,25 +251,23 @@ class ExperimentRun:
             self.say(f"  [{sc.name}] control on at {sc.control_on_s:.3f} s (sample {self.n_on})")
         self.graph.set_parameter("pph_driver", "hold_at_time_s", sc.duration_s)
         self._wait(lambda: self.graph.held_at(self.n_end), "running")
-        # The loop is held at its last sample: wait until the recorder wrote every sample
-        # (it may lag a fast lockstep loop by seconds; stopping it then would lose them).
-        loop = self.loop_topics()
-        self._wait(lambda: not self.graph.recorder_behind(loop, self.n_end), RECORDER_DRAIN)
 
     def _run_realtime(self) -> None:
+        """Release the start breakpoint to the end one: the clock runs to the run's end."""
         sc = self.o.scenario
+        self.graph.set_parameter("pph_driver", "hold_at_time_s", sc.duration_s)
         if self.n_on > 0:
             self._wait(lambda: self.graph.sim_time_s >= sc.control_on_s, "running, control off")
             self.graph.set_parameter("notch_controller", "enabled", True)
             self.say(f"  [{sc.name}] control on at sim {self.graph.sim_time_s:.3f} s")
-        self._wait(lambda: self.graph.sim_time_s >= sc.duration_s, "running")
+        self._wait(lambda: self.graph.held_at(self.n_end), "running")
 
     def stop(self) -> None:
         """Stop every process and rclpy: the driver first, the recorder last.
 
-        The driver first: a realtime driver still running while its controllers stop
-        counts their missing answers as late commands (~50 in a run's last samples); the
-        recorder last, so the bag holds everything.
+        The driver first: a driver still running while its controllers stop (a run
+        interrupted before its end breakpoint, in realtime) counts their missing answers as
+        late commands; the recorder last, so the bag holds everything.
         """
         self.progress.clear()
         order = sorted(self.children,

@@ -118,8 +118,9 @@ PARAMS_FILE_HEADER = """\
 #       clock_mode:={mode} record:=true bag_path:=$PWD/bag_launch
 #   ros2 param set /notch_controller enabled true     # at sim time {control_on_s:g} s
 # The runner did the same, plus breakpoints it gave on the driver's command line
-# (lockstep: -p hold_at_time_s:=0.0, moved to {control_on_s:g} s, then {duration_s:g} s),
-# so that its control-on switch landed on sample {control_on_sample} exactly.
+# (-p hold_at_time_s:=0.0, moved to {control_on_s:g} s in lockstep, then {duration_s:g} s),
+# so that the bag starts at sample 0, ends at the run's end and (lockstep) its control-on
+# switch landed on sample {control_on_sample} exactly.
 """
 
 

@@ -103,8 +103,15 @@ class GraphMonitor:
         return all(needed)
 
     def recorder_behind(self, topics: list[str], samples: int) -> list[str]:
-        """Topics of which the recorder reports fewer than ``samples`` messages written."""
-        return [t for t in topics if int(self.recorder.get(f"{t} messages", "0")) < samples]
+        """Topics of which the recorder has not written sample ``samples - 1`` yet.
+
+        Its last sample written (``<topic> last sample``): a reliable topic is delivered in
+        order, so with its last sample every earlier one its publisher still held is
+        written too (a realtime controller's skipped samples never come: a count of
+        messages would wait for them).
+        """
+        return [t for t in topics
+                if int(self.recorder.get(f"{t} last sample", "-1")) < samples - 1]
 
     def recorder_unmatched(self, topics: list[str]) -> list[str]:
         """Topics on which the recorder itself reports no matched publisher yet."""

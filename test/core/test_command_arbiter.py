@@ -184,6 +184,22 @@ def test_latency_and_period_from_the_given_times():
     assert 2.0 <= values["latency_ms_p99"] <= 2.0101 and 5.0 <= values["period_ms_p50"] <= 5.0101
 
 
+def test_a_breakpoint_is_neither_loop_time_nor_a_period():
+    """Held 100 s between two samples 1 ms apart: rate 2 samples / 2 ms, period 1 ms."""
+    arbiter = _arbiter()
+    arbiter.restart_stats(10.000)
+    arbiter.published(10.000)
+    _step(arbiter)
+    arbiter.pause(10.001)
+    assert arbiter.report(50.0, lockstep=False)[0]["rate_hz"] == pytest.approx(1000.0)
+    arbiter.resume(110.001)
+    arbiter.published(110.001)
+    _step(arbiter)
+    values, _, _ = arbiter.report(110.002, lockstep=False)
+    assert values["rate_hz"] == pytest.approx(1000.0)
+    assert values["period_ms_max"] == pytest.approx(1.0)
+
+
 def test_unknown_expected_stream_is_refused():
     with pytest.raises(ValueError, match="unknown"):
         CommandArbiter(("notch", "pointing"), ("other",), RUN, LIMIT_N)

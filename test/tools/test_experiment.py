@@ -147,12 +147,20 @@ def test_realtime_run_records_every_sample_from_sample_0(ros_env, scenario_file,
     series = read_strut_topics(out / "bag", ["/pph/accel"])["/pph/accel"]
     assert series.first_sample == 0 and series.missing_samples == 0, (
         series.first_sample, series.missing_samples)
-    # A realtime driver publishes the force applied over a sample after the next sample's
-    # sensors (off the controllers' deadline), the last one at exit: none is lost.
-    force = read_strut_topics(out / "bag", ["/pph/actuator_force"])["/pph/actuator_force"]
+    # The clock stops at the end breakpoint and the runner waits there for the recorder
+    # (a starved recorder was seconds behind the loop: CI once lost the last 5.4 s of
+    # /pph/actuator_force when the driver exited). A realtime driver publishes the force
+    # applied over a sample after the next sample's sensors (off the controllers'
+    # deadline), the last one at the breakpoint: none is lost.
+    end = round(SCENARIO["duration_s"] * 1000) - 1
+    assert series.last_sample == end, series.last_sample
+    commands = read_strut_topics(out / "bag", ["/pph/actuator_force", "/pph/notch_command",
+                                               "/pph/pointing_command"])
+    force = commands["/pph/actuator_force"]
     assert force.first_sample == 0 and force.missing_samples == 0, (
         force.first_sample, force.missing_samples)
-    assert force.last_sample >= series.last_sample - 1, (force.last_sample, series.last_sample)
+    last = {topic: s.last_sample for topic, s in commands.items()}
+    assert list(last.values()) == [end] * 3, last
     if not (out / "report.json").exists():
         assert result.returncode == 1, result.stderr[-3000:]
         assert "window's usable run is" in result.stderr, result.stderr[-3000:]

@@ -121,6 +121,8 @@ class LoopStats:
     latencies_ms: RollingPercentiles = field(default_factory=RollingPercentiles)
     periods_ms: RollingPercentiles = field(default_factory=RollingPercentiles)
     last_publish_s: float = 0.0
+    paused_at_s: float | None = None
+    """Wall time (s) the loop stopped at a breakpoint (None: running)."""
 
 
 def _apply_due(stream: CommandStream, due: int) -> None:
@@ -344,6 +346,21 @@ class CommandArbiter:
         """Lockstep gave up waiting for the current sample's commands."""
         self.stats.timeouts += 1
 
+    def pause(self, now_s: float) -> None:
+        """The loop stopped at a breakpoint at ``now_s`` (s): its rate leaves the pause out."""
+        if self.stats.paused_at_s is None:
+            self.stats.paused_at_s = now_s
+
+    def resume(self, now_s: float) -> None:
+        """The loop left its breakpoint at ``now_s`` (s): the pause is no period either."""
+        stats = self.stats
+        if stats.paused_at_s is not None:
+            pause_s = now_s - stats.paused_at_s
+            stats.start_s += pause_s
+            if stats.last_publish_s:
+                stats.last_publish_s += pause_s
+            stats.paused_at_s = None
+
     def restart_stats(self, now_s: float) -> None:
         """Start the statistics afresh (after the handshake)."""
         self.stats = LoopStats(start_s=now_s)
@@ -351,7 +368,7 @@ class CommandArbiter:
     def report(self, now_s: float, lockstep: bool) -> tuple[dict[str, object], bool, str]:
         """Key/values for /diagnostics, whether to warn, and the status message."""
         st = self.stats
-        wall = max(now_s - st.start_s, 1e-9)
+        wall = max((now_s if st.paused_at_s is None else st.paused_at_s) - st.start_s, 1e-9)
         lat50, lat99 = st.latencies_ms.percentiles((50, 99))
         per50, per99 = st.periods_ms.percentiles((50, 99))
         # Stale: connected, or sent commands before (a controller that went away).
