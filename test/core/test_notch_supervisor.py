@@ -413,3 +413,36 @@ def test_a_setting_changed_while_identifying_waits_for_the_identification(change
         assert tone_rms(on) < 0.1 * tone_rms(run(off, k, 1000))
     else:
         assert sup.state == NotchState.REFUSED and "bound is 0" in sup.status()["refusal"]
+
+
+def test_a_tone_change_checked_then_applied_runs_its_nyquist_limit_once(monkeypatch):
+    """The node validates a change (check) and then applies it: one Nyquist limit, not two.
+
+    Defaults (broadband identification: G(f) known), adapting; the same change applied to
+    a twin without a check gives the same bound.
+    """
+    from hexapod_vibration.core.control import sensitivity
+
+    def adapting() -> tuple[NotchSupervisor, int]:
+        sup = NotchSupervisor(NotchConfig().replaced({"tone_frequencies_hz": [TONE],
+                                                      "identify_delay_s": 0.1}))
+        k = coupled_gain(0.2)
+        n = len(run(sup, k, 30_000, until=lambda s: s.state == NotchState.ADAPTING))
+        assert sup.state == NotchState.ADAPTING and sup.plant_frequency_response is not None
+        return sup, n
+
+    tests = []
+    stable = sensitivity.closed_loop_is_stable
+    monkeypatch.setattr(sensitivity, "closed_loop_is_stable",
+                        lambda *a, **kw: tests.append(a[4]) or stable(*a, **kw))
+    change = {"tone_frequencies_hz": [TONE, 2 * TONE]}
+    twin, _ = adapting()
+    tests.clear()
+    twin.apply(change)
+    alone = len(tests)
+    sup, _ = adapting()
+    tests.clear()
+    sup.check(change)
+    sup.apply(change)
+    assert alone > 0 and len(tests) == alone
+    assert sup.bound == twin.bound > 0.0

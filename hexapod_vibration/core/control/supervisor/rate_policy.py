@@ -148,6 +148,8 @@ class RatePolicy:
         self.unchosen: np.ndarray | None = None
         """Normalised P (T, C, C) in force without the policy's choice (it needs ``mu`` > 0,
         and new tones or a new mode bring a new P): :meth:`choose_pending` makes it."""
+        self._last_limit: tuple[object, tuple, float] | None = None
+        """(G(f), (tones, P bytes), limit) of the last Nyquist limit computed."""
 
     def normalised_bound(self) -> float:
         """The bound of a normalised mode (M = I) with the loop delay."""
@@ -170,10 +172,22 @@ class RatePolicy:
         return None, self.normalised_bound()
 
     def _nyquist_limit(self, tones: list[float], coefficients: np.ndarray) -> float:
-        """Largest common rate the Nyquist test finds stable on the identified G(f)."""
-        return sensitivity.stable_mu_limit(
-            self._plant.frequency_response.at, tones, self._settings.fs, coefficients,
+        """Largest common rate the Nyquist test finds stable on the identified G(f).
+
+        The last one is kept: a parameter change is planned twice, when it is validated
+        and when it is applied (~0.6 s of Nyquist tests each, on the node's thread).
+        """
+        response = self._plant.frequency_response
+        p = np.ascontiguousarray(coefficients)
+        key = (tuple(tones), p.shape, p.tobytes())
+        last = self._last_limit
+        if last is not None and last[0] is response and last[1] == key:
+            return last[2]
+        limit = sensitivity.stable_mu_limit(
+            response.at, tones, self._settings.fs, coefficients,
             update_lowpass_hz=self._settings.update_lowpass_hz)
+        self._last_limit = (response, key, limit)
+        return limit
 
     def _stability_job(self, tones: list[float], coefficients: np.ndarray, mu: float,
                        integral_ratio: np.ndarray | float = 0.0) -> Job:
