@@ -590,8 +590,10 @@ NOTCH_CONTROLLER = NodeSpec("notch_controller", summary="six decentralized Adapt
                   "finished identification runs (~0.8 s of CPU after a broadband one): "
                   "loop = on the loop's thread, one piece per sample (deterministic, for "
                   "lockstep); process = a worker process on the normal scheduler, while the "
-                  "loop keeps its deadline (realtime; the launch file's clock_mode:=realtime "
-                  "and experiment --realtime choose it)", choices=ANALYSIS_PLACES,
+                  "loop keeps its deadline, and so does a change of tones or adaptation "
+                  "with G(f) known (its Nyquist limit, ~0.6 s; executor waitset) "
+                  "(realtime; the launch file's clock_mode:=realtime and experiment "
+                  "--realtime choose it)", choices=ANALYSIS_PLACES,
                   read_only=True),
     *LOOP_SCHEDULING,
 ))

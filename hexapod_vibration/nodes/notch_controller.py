@@ -49,7 +49,7 @@ from hexapod_vibration.paths import config_path
 from hexapod_vibration.ros.analysis_worker import start_analysis_worker
 from hexapod_vibration.ros.command_forecasts import ForecastPublisher, notch_rows
 from hexapod_vibration.ros.diagnostics import diagnostic_array, publish_status_periodically
-from hexapod_vibration.ros.executors import loop_meter
+from hexapod_vibration.ros.executors import LoopSpinner, loop_meter
 from hexapod_vibration.ros.held_reports import (
     subscribe_held_reports,
     subscribe_stand_in_reports,
@@ -75,6 +75,8 @@ WEIGHTS_EVERY_SAMPLES = 10
 """Samples between two /pph/notch_weights messages (100 Hz)."""
 DIAGNOSTICS_PHASE = DIAGNOSTICS_PHASE_SAMPLES["notch_controller"]
 SETTINGS = frozenset(NotchConfig.__dataclass_fields__)
+LOOP_WAIT_S = 0.001
+"""Longest wait (s) for a loop message between two looks at a setting change's worker job."""
 """Parameters that are notch settings (the rest, e.g. executor, are the node's own)."""
 
 
@@ -161,6 +163,16 @@ class NotchControllerNode(Node):
             self.get_logger().warning(f"identification_analysis process: no worker ({exc}); "
                                       "the loop's thread analyses")
             return None
+
+    def serve_loop_with(self, spinner: LoopSpinner) -> None:
+        """With an analysis worker, a setting change's Nyquist limit and mu policy run on it.
+
+        Checked (the on-set callback) or applied (post-set), a change of tones or mode
+        while G(f) is known waits for them (~0.6 s on the loop's thread before) serving the
+        1 kHz loop meanwhile (``executor: waitset`` only: the loop's own wait set).
+        """
+        if self._worker is not None and spinner.fast:
+            self.supervisor.serve_while_waiting(lambda: spinner.serve_loop(LOOP_WAIT_S))
 
     def destroy_node(self) -> None:
         """Stop the analysis worker (after a job in progress: no resource left), the node."""

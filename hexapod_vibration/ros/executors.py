@@ -152,6 +152,16 @@ class LoopSpinner:
         for sub in self._wait(max(timeout_sec, 0.0)):
             self._take_all_of(sub)
 
+    def serve_loop(self, timeout_sec: float) -> None:
+        """Only the loop subscriptions' callbacks, waiting up to ``timeout_sec`` (s) for one.
+
+        Not the executor: this is for a callback of it that waits (a parameter change's
+        computation on a worker) while the loop keeps its deadline; the executor's other
+        work waits with it. Fast path only (``fast``).
+        """
+        for sub in self._wait(max(timeout_sec, 0.0)):
+            self._take_all_of(sub)
+
     def _wait(self, timeout_sec: float) -> list[Subscription]:
         """The loop subscriptions with data, waiting up to ``timeout_sec`` for one."""
         try:

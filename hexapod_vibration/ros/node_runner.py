@@ -86,6 +86,9 @@ def _run(name: str, factory, loop, args, companions) -> int:
             spinner = LoopSpinner(executor, subscriptions, fast=executor_name == "waitset",
                                   latest_only=latest, skipped=skipped,
                                   answered=_command_delay(built[0]) + 1)
+        for node in built:      # a node whose callbacks may wait serves the loop meanwhile
+            if hasattr(node, "serve_loop_with"):
+                node.serve_loop_with(spinner)
         _schedule(built[0], apply_scheduling)
         # One BLAS thread: a node's computation (an identification's analysis) must not
         # spread over the cores the loop runs on; under SCHED_FIFO, OpenBLAS's spinning

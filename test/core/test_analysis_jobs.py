@@ -21,6 +21,7 @@ from hexapod_vibration.core.control.supervisor.analysis_jobs import (
     Job,
     JobRunner,
     Pieces,
+    WaitingJobs,
     run_inline,
 )
 from hexapod_vibration.core.sim.scenario import notch_preset
@@ -206,3 +207,70 @@ def test_a_lost_worker_is_said_once_and_the_loop_thread_analyses():
     assert sup.state == NotchState.ADAPTING
     lost = [e for e in sup.drain_events() if "analysis worker is lost" in e.message]
     assert [e.level for e in lost] == ["warn"]
+
+
+def _one(job: Job):
+    return (yield job)
+
+
+def test_waiting_jobs_serve_the_loop_only_while_a_job_runs_on_the_worker():
+    """Inline: no idle. On a worker: idle until the result; nested or in inline(): none."""
+    assert WaitingJobs().run(_one(Job(_square, (3.0,)))) == 9.0
+    release = threading.Event()
+    idles: list[str] = []
+    with ThreadPoolExecutor(1) as worker:
+        waits = WaitingJobs(JobRunner(worker))
+        assert waits.run(_one(Job(_square, (2.0,)))) == 4.0    # no loop to serve: inline
+
+        def idle() -> None:
+            # The loop served meanwhile may need a computation itself: inline, no nesting.
+            idles.append(f"nested {waits.run(_one(Job(_square, (len(idles),))))}")
+            if len(idles) == 3:
+                release.set()
+
+        waits.serve_with(idle)
+        assert waits.run(_one(Job(lambda: release.wait() and "held"))) == "held"
+        assert idles[:3] == ["nested 0", "nested 1", "nested 4"]
+        idles.clear()
+        with waits.inline():
+            assert waits.run(_one(Job(_square, (5.0,)))) == 25.0
+        assert idles == []
+
+
+def test_a_tone_change_checked_with_a_worker_serves_the_loop_and_decides_as_inline():
+    """The check's Nyquist limit on a spawned process while the loop runs; then apply.
+
+    The node's idle, here: one sample of the static rig per call (it does not wait for the
+    worker's answer, so the count of samples it served depends on the machine).
+    """
+    k = coupled_gain(0.2)
+    config = NotchConfig().replaced({"tone_frequencies_hz": [40.0], "identify_delay_s": 0.1})
+    change = {"tone_frequencies_hz": [40.0, 80.0]}
+    inline = NotchSupervisor(config)
+    n = _engaged(inline, k, len(run(inline, k, 30_000, until=_analysing)), 0.0)
+    run(inline, k, 1000, n)
+    inline.check(change)
+    inline.apply(change)
+    with ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn")) as worker:
+        sup = NotchSupervisor(config, analysis_worker=worker)
+        n = _engaged(sup, k, len(run(sup, k, 30_000, until=_analysing)), 0.0005)
+        run(sup, k, 1000, n)
+        assert sup.state == NotchState.ADAPTING
+        served = [n + 1000]
+
+        def idle() -> None:
+            run(sup, k, 1, served[-1])
+            served.append(served[-1] + 1)
+            time.sleep(0.0005)
+
+        sup.serve_while_waiting(idle)
+        sup.check(change)                          # the Nyquist limit, on the worker
+        in_check = len(served) - 1
+        sup.apply(change)                          # the same limit, kept; the policy's job
+        in_apply = len(served) - 1 - in_check
+    assert in_check > 0 and in_apply > 0 and sup.last_sample == served[-1] - 1
+    assert sup.bound == inline.bound > 0.0
+    assert sup.state == inline.state == NotchState.ADAPTING
+    assert np.array_equal(sup.canceller.coefficients, inline.canceller.coefficients)
+    assert sup.status()["tone_mu"] == inline.status()["tone_mu"]
+

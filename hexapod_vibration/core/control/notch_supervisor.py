@@ -28,7 +28,7 @@ the ROS parameter must mirror) is queued as :class:`SupervisorEvent` for
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from concurrent.futures import Executor
 from typing import Any
 
@@ -43,7 +43,7 @@ from hexapod_vibration.core.control.plant_identification import (
     DisturbanceSpectrum,
     PlantFrequencyResponse,
 )
-from hexapod_vibration.core.control.supervisor.analysis_jobs import JobRunner
+from hexapod_vibration.core.control.supervisor.analysis_jobs import JobRunner, WaitingJobs
 from hexapod_vibration.core.control.supervisor.config import NotchConfig, Settings
 from hexapod_vibration.core.control.supervisor.events import EventLog, SupervisorEvent
 from hexapod_vibration.core.control.supervisor.fader import OutputFader
@@ -115,7 +115,9 @@ class NotchSupervisor:
         self._clock, self._gaps = SampleClock(), GapReport(int(round(sample_rate_hz)))
         self._plant = PlantKnowledge()
         self._gate = ControlGate(settings, canceller, events)
-        self._rates = RatePolicy(settings, canceller, self._plant, events, self.output_weights)
+        jobs = JobRunner(analysis_worker)
+        self._rates = RatePolicy(settings, canceller, self._plant, events, self.output_weights,
+                                 WaitingJobs(jobs))
         self._fader = OutputFader(canceller, self.fs)
         self.safety = SafetyMonitor(settings, canceller, self._plant, self._rates, self._gate,
                                     self._fader, events, tones)
@@ -125,7 +127,7 @@ class NotchSupervisor:
         """The moving tones (reference, tracking, acquisition)."""
         parts = SupervisorParts(settings, canceller, self._clock, self._plant, self._rates,
                                 self._gate, self.safety, self.follower, events)
-        self.identification = PlantIdentification(parts, JobRunner(analysis_worker))
+        self.identification = PlantIdentification(parts, jobs)
         """The plant's identification (running, its span)."""
         self._changes = SettingsChange(parts, self.identification)
         first = {"mu": config.mu, "tone_frequencies_hz": list(config.tone_frequencies_hz),
@@ -155,6 +157,16 @@ class NotchSupervisor:
             KeyError, ValueError: refused (nothing changed), as :meth:`check` would say.
         """
         self._changes.apply(changes)
+
+    def serve_while_waiting(self, idle: Callable[[], None] | None) -> None:
+        """Run a setting change's heavy computations on the analysis worker, ``idle`` meanwhile.
+
+        A change of tones or mode while G(f) is known needs its Nyquist limit (~0.6 s) when
+        it is checked, and the mu policy's choice when it is applied: with an analysis
+        worker and ``idle`` (the node serving its 1 kHz loop for a moment), the caller
+        waits for them without stalling that loop. None (or no worker): inline.
+        """
+        self._rates.waits.serve_with(idle)
 
     def start_identification(self, tones: list[float] | None = None) -> str:
         """Measure G at ``tones`` (Hz; None: the canceller's) from the next sample, frozen.

@@ -12,12 +12,17 @@ Nyquist test, the mu policy) yields a :class:`Job` and is resumed with its resul
 
 A worker that breaks (its process died) is given up for good: the job and every later one
 run inline, and :meth:`JobRunner.lost_news` says why, once.
+
+A computation that must finish before its caller goes on (a setting change's Nyquist limit,
+which decides whether the change is accepted) runs to its end at once
+(:func:`run_waiting`): on a worker, the caller serves its loop meanwhile.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Generator
+from collections.abc import Callable, Generator, Iterator
 from concurrent.futures import BrokenExecutor, Executor, Future
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -154,7 +159,59 @@ class Pieces:
 
 def run_inline(analysis: Analysis) -> Any:
     """Run ``analysis`` to its end on this thread, every piece and job at once; its value."""
-    pieces = Pieces(analysis, JobRunner())
+    return run_waiting(analysis, JobRunner(), _nothing)
+
+
+def run_waiting(analysis: Analysis, runner: JobRunner, idle: Callable[[], None]) -> Any:
+    """Run ``analysis`` to its end now, its jobs on ``runner``; its value.
+
+    While a job runs on the worker, ``idle()`` is called again and again (e.g. the node
+    serving its 1 kHz loop for a moment): the caller waits for the result without stalling
+    what ``idle`` serves. Inline every job is done at once and ``idle`` is never called.
+    """
+    pieces = Pieces(analysis, runner)
     while not pieces.step():
-        pass
+        if pieces.waiting:
+            idle()
     return pieces.value
+
+
+def _nothing() -> None:
+    """No wait: inline, nothing is ever waited for."""
+
+
+class WaitingJobs:
+    """Computations that must finish before their caller goes on (:func:`run_waiting`).
+
+    Inline unless :meth:`serve_with` gave the function that serves the caller's loop while
+    a job runs on ``runner``'s worker. Inline too: a computation started while another one
+    waits (the loop served meanwhile may need one: no nesting), and any inside
+    :meth:`inline` (a caller that is changing state the loop reads).
+    """
+
+    def __init__(self, runner: JobRunner | None = None) -> None:
+        """Jobs on ``runner`` (None: inline) once a loop to serve is given."""
+        self._runner = runner or JobRunner()
+        self._idle: Callable[[], None] | None = None
+        self._blocked = 0
+
+    def serve_with(self, idle: Callable[[], None] | None) -> None:
+        """Call ``idle`` while a job runs on the worker (None: run every job inline)."""
+        self._idle = idle
+
+    def run(self, analysis: Analysis) -> Any:
+        """Run ``analysis`` to its end; its value (see the class)."""
+        idle = self._idle
+        if idle is None or self._blocked or self._runner.inline:
+            return run_inline(analysis)
+        with self.inline():
+            return run_waiting(analysis, self._runner, idle)
+
+    @contextmanager
+    def inline(self) -> Iterator[None]:
+        """Every computation inside runs inline (the loop is not served meanwhile)."""
+        self._blocked += 1
+        try:
+            yield
+        finally:
+            self._blocked -= 1

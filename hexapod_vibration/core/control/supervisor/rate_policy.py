@@ -32,7 +32,7 @@ from hexapod_vibration.core.control.plant_identification import (
     DisturbanceSpectrum,
     PlantFrequencyResponse,
 )
-from hexapod_vibration.core.control.supervisor.analysis_jobs import Analysis, Job, run_inline
+from hexapod_vibration.core.control.supervisor.analysis_jobs import Analysis, Job, WaitingJobs
 from hexapod_vibration.core.control.supervisor.config import NotchConfig, Settings
 from hexapod_vibration.core.control.supervisor.events import EventLog
 from hexapod_vibration.core.control.supervisor.plant_knowledge import PlantKnowledge
@@ -112,6 +112,11 @@ def choose_and_predict(response: PlantFrequencyResponse, disturbance: Disturbanc
     return choice, folded, prediction
 
 
+def _one(job: Job) -> Analysis:
+    """An analysis of one job: its result."""
+    return (yield job)
+
+
 class RatePolicy:
     """P and the bound on mu from the identified plant; the mu policy and its prediction.
 
@@ -122,12 +127,17 @@ class RatePolicy:
         events: where the changes of ``mu`` are reported.
         output_weights: c (C,): the output whose rise ``mu_policy`` bounds and the
             prediction reports (``c^T e``); None: the 6x6 loop's largest singular value.
+        waits: where a setting change's Nyquist limit and mu policy run (default inline).
     """
 
     def __init__(self, settings: Settings, canceller: AdaptiveNotchCanceller,
                  plant: PlantKnowledge, events: EventLog,
-                 output_weights: np.ndarray | None) -> None:
+                 output_weights: np.ndarray | None,
+                 waits: WaitingJobs | None = None) -> None:
         """The normalised modes' bound until something is identified."""
+        self.waits = waits or WaitingJobs()
+        """How a setting change's computations run: inline, or on the analysis worker
+        while the node serves its loop."""
         self._settings = settings
         self._canceller = canceller
         self._plant = plant
@@ -175,7 +185,8 @@ class RatePolicy:
         """Largest common rate the Nyquist test finds stable on the identified G(f).
 
         The last one is kept: a parameter change is planned twice, when it is validated
-        and when it is applied (~0.6 s of Nyquist tests each, on the node's thread).
+        and when it is applied (~0.6 s of Nyquist tests each). It runs as :attr:`waits`
+        says: inline, or on the analysis worker while the node serves its loop.
         """
         response = self._plant.frequency_response
         p = np.ascontiguousarray(coefficients)
@@ -183,9 +194,10 @@ class RatePolicy:
         last = self._last_limit
         if last is not None and last[0] is response and last[1] == key:
             return last[2]
-        limit = sensitivity.stable_mu_limit(
-            response.at, tones, self._settings.fs, coefficients,
-            update_lowpass_hz=self._settings.update_lowpass_hz)
+        limit = self.waits.run(_one(Job(
+            sensitivity.stable_mu_limit, (response.at, list(tones), self._settings.fs,
+                                          p.copy()),
+            {"update_lowpass_hz": self._settings.update_lowpass_hz})))
         self._last_limit = (response, key, limit)
         return limit
 
@@ -301,8 +313,8 @@ class RatePolicy:
             self.unchosen = None
             return
         tones = [float(f) for f in canceller.tone_frequencies_hz]
-        run_inline(self.choose(tones, unchosen))
-        run_inline(self.check_type2(tones))
+        self.waits.run(self.choose(tones, unchosen))
+        self.waits.run(self.check_type2(tones))
 
     def tone_rates(self) -> np.ndarray:
         """Each oscillator's rate in force (1/sample): the policy's, scaled to ``mu`` now.

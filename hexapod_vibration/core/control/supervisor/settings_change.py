@@ -40,8 +40,13 @@ class SettingsChange:
                             self._rates)
 
     def apply(self, changes: Mapping[str, Any]) -> None:
-        """Apply ``changes`` (refused as :meth:`plan` would say, nothing changed)."""
-        plan = self.plan(changes)
+        """Apply ``changes`` (refused as :meth:`plan` would say, nothing changed).
+
+        The plan is made inline (the check before it usually left its Nyquist limit to
+        reuse): the loop must not run between the plan and the state it changes.
+        """
+        with self._rates.waits.inline():
+            plan = self.plan(changes)
         canceller, settings = self._canceller, self._settings
         identification = self._identification
         settings.config = plan.config
