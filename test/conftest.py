@@ -30,6 +30,7 @@ import sys
 from collections.abc import Iterator
 from pathlib import Path
 
+import forked_nodes
 import pytest
 
 from hexapod_vibration.tools import processes
@@ -151,9 +152,11 @@ def ros_env() -> dict[str, str]:
 class NodeProcess:
     """A console script of the package run as a separate process, output kept in files.
 
-    Started with ``hexapod_vibration.tools.processes.spawn``: own session (signals from the
-    terminal go to pytest only) and a parent-death signal (it dies with pytest, even when
-    pytest is killed).
+    Forked from a warm process that imported rclpy, numpy and scipy once
+    (``test/forked_nodes.py``; ``HEXAPOD_TEST_FORK=0``, or a ``command``: started with
+    ``hexapod_vibration.tools.processes.spawn``): own session (signals from the terminal go
+    to pytest only) and a parent-death signal (it dies with pytest, even when pytest is
+    killed).
     """
 
     def __init__(self, executable: str, args: list[str], env: dict[str, str], log_dir: Path,
@@ -162,9 +165,13 @@ class NodeProcess:
         self.name = executable
         self.stdout_path = log_dir / f"{executable}.{id(self)}.stdout"
         self.stderr_path = log_dir / f"{executable}.{id(self)}.stderr"
-        self.child = processes.spawn(executable, command or [str(BIN_DIR / executable), *args],
-                                     log=self.stdout_path, stderr_log=self.stderr_path,
-                                     env=env, cwd=cwd)
+        argv = command or [str(BIN_DIR / executable), *args]
+        if command is None and forked_nodes.enabled():
+            self.child = forked_nodes.start(executable, argv, env, cwd, self.stdout_path,
+                                            self.stderr_path)
+        else:
+            self.child = processes.spawn(executable, argv, log=self.stdout_path,
+                                         stderr_log=self.stderr_path, env=env, cwd=cwd)
         self.process = self.child.process
 
     @property
