@@ -66,8 +66,10 @@ class BagRecording:
         self.duplicates: dict[str, int] = dict.fromkeys(loop_topics, 0)
         """Loop samples dropped as written already, per loop topic."""
         self._seen = {topic: SampleSet() for topic in self.duplicates}
-        self.last_sample: dict[str, int] = dict.fromkeys(loop_topics, -1)
-        """Highest sample index written, per loop topic (-1: none yet)."""
+
+    def last_sample(self, topic: str) -> int:
+        """Highest sample index written on loop topic ``topic`` (-1: none yet)."""
+        return self._seen[topic].highest
 
     @property
     def open(self) -> bool:
@@ -116,8 +118,6 @@ class BagRecording:
                 self.duplicates[topic] += 1
                 return None
             if repeated is not None:
-                if sample > self.last_sample[topic]:
-                    self.last_sample[topic] = sample
                 return sample * 1_000_000
         carried = stamp_of_cdr(topic, data)
         return carried if carried else now_ns()

@@ -153,7 +153,7 @@ class BagRecorder(Node):
             values[f"{name} publishers"] = subscription.get_publisher_count()
             if name in rec.duplicates:
                 values[f"{name} duplicates"] = rec.duplicates[name]
-                values[f"{name} last sample"] = rec.last_sample[name]
+                values[f"{name} last sample"] = rec.last_sample(name)
         if rec.open:
             values["flushed messages"] = rec.flushed
         values.update(self.meter.report())

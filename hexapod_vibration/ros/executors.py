@@ -149,8 +149,7 @@ class LoopSpinner:
             self.executor.spin_once(timeout_sec=0.0)
             self.meter.lap(self._service_stage)
             timeout_sec = 0.0
-        for sub in self._wait(max(timeout_sec, 0.0)):
-            self._take_all_of(sub)
+        self.serve_loop(timeout_sec)
 
     def serve_loop(self, timeout_sec: float) -> None:
         """Only the loop subscriptions' callbacks, waiting up to ``timeout_sec`` (s) for one.

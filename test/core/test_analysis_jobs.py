@@ -23,6 +23,7 @@ from hexapod_vibration.core.control.supervisor.analysis_jobs import (
     Pieces,
     WaitingJobs,
     run_inline,
+    single_job,
 )
 from hexapod_vibration.core.sim.scenario import notch_preset
 
@@ -209,31 +210,27 @@ def test_a_lost_worker_is_said_once_and_the_loop_thread_analyses():
     assert [e.level for e in lost] == ["warn"]
 
 
-def _one(job: Job):
-    return (yield job)
-
-
 def test_waiting_jobs_serve_the_loop_only_while_a_job_runs_on_the_worker():
     """Inline: no idle. On a worker: idle until the result; nested or in inline(): none."""
-    assert WaitingJobs().run(_one(Job(_square, (3.0,)))) == 9.0
+    assert WaitingJobs().run(single_job(Job(_square, (3.0,)))) == 9.0
     release = threading.Event()
     idles: list[str] = []
     with ThreadPoolExecutor(1) as worker:
         waits = WaitingJobs(JobRunner(worker))
-        assert waits.run(_one(Job(_square, (2.0,)))) == 4.0    # no loop to serve: inline
+        assert waits.run(single_job(Job(_square, (2.0,)))) == 4.0    # no loop to serve: inline
 
         def idle() -> None:
             # The loop served meanwhile may need a computation itself: inline, no nesting.
-            idles.append(f"nested {waits.run(_one(Job(_square, (len(idles),))))}")
+            idles.append(f"nested {waits.run(single_job(Job(_square, (len(idles),))))}")
             if len(idles) == 3:
                 release.set()
 
         waits.serve_with(idle)
-        assert waits.run(_one(Job(lambda: release.wait() and "held"))) == "held"
+        assert waits.run(single_job(Job(lambda: release.wait() and "held"))) == "held"
         assert idles[:3] == ["nested 0", "nested 1", "nested 4"]
         idles.clear()
         with waits.inline():
-            assert waits.run(_one(Job(_square, (5.0,)))) == 25.0
+            assert waits.run(single_job(Job(_square, (5.0,)))) == 25.0
         assert idles == []
 
 

@@ -34,7 +34,7 @@ from typing import Any
 
 import numpy as np
 
-from hexapod_vibration.contract import SAMPLE_RATE_HZ, STRUT_COUNT, NotchState
+from hexapod_vibration.contract import SAMPLE_RATE_HZ, STRUT_COUNT
 from hexapod_vibration.core.control import mu_policy, sensitivity
 from hexapod_vibration.core.control.filters import DCBlocker
 from hexapod_vibration.core.control.notch import FADE_S, AdaptiveNotchCanceller
@@ -58,6 +58,7 @@ from hexapod_vibration.core.control.supervisor.rate_policy import RatePolicy
 from hexapod_vibration.core.control.supervisor.safety import SafetyMonitor
 from hexapod_vibration.core.control.supervisor.sample_clock import GapReport, SampleClock
 from hexapod_vibration.core.control.supervisor.settings_change import SettingsChange
+from hexapod_vibration.core.control.supervisor.status_report import StatusReport
 from hexapod_vibration.core.control.supervisor.tone_follower import ToneFollower
 
 __all__ = ["NotchConfig", "NotchSupervisor", "SupervisorEvent"]
@@ -130,6 +131,7 @@ class NotchSupervisor:
         self.identification = PlantIdentification(parts, jobs)
         """The plant's identification (running, its span)."""
         self._changes = SettingsChange(parts, self.identification)
+        self._report = StatusReport(parts, self.identification)
         first = {"mu": config.mu, "tone_frequencies_hz": list(config.tone_frequencies_hz),
                  "adaptation": config.adaptation, "harmonics": config.harmonics}
         self._rates.bound = self._changes.plan(first).bound
@@ -304,35 +306,16 @@ class NotchSupervisor:
     @property
     def state(self) -> str:
         """One of :class:`NotchState`'s names."""
-        return self._gate.state(self.identification.busy, self._plant.response is not None)
+        return self._report.state()
 
     @property
     def guard_state(self) -> str:
         """The guard's state: disabled, referencing, watching, backed_off or off."""
-        return self.safety.state(self._settings.config.divergence_guard,
-                                 self.state == NotchState.ADAPTING)
+        return self._report.guard_state()
 
     def status(self) -> dict[str, Any]:
-        """The controller's state as plain values, for ``/diagnostics``."""
-        cfg, canceller, identification = self._settings.config, self.canceller, self.identification
-        values: dict[str, Any] = {
-            "state": self.state, "enabled": cfg.enabled,
-            "enabled_since_sample": self._gate.enabled_since_sample,
-            "last_sample": self._clock.last, "mu": canceller.mu, "mu_bound": self._rates.bound,
-            "adaptation": cfg.adaptation,
-            "tones_hz": [float(f) for f in canceller.tone_frequencies_hz],
-            "identified_tones_hz": self._plant.tones,
-            "identification_start_sample": identification.start_sample,
-            "identification_end_sample": identification.end_sample,
-            **self._clock.counters}
-        values.update(self.follower.status())
-        if self._gate.held:
-            values["refusal"] = self._gate.reason
-        values.update({"identification": cfg.identification,
-                       "identification_confidence": round(self._plant.confidence, 4),
-                       **self._rates.status(), **self.safety.status(self.guard_state)})
-        values.update(self._plant.status())
-        return values
+        """The controller's state as plain values, for ``/diagnostics`` (:class:`StatusReport`)."""
+        return self._report.values()
 
     def drain_events(self) -> Sequence[SupervisorEvent]:
         """The events since the last call, oldest first (and forget them)."""

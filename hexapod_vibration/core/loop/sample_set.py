@@ -14,6 +14,8 @@ class SampleSet:
     def __init__(self) -> None:
         """Nothing seen."""
         self._bits = bytearray()
+        self.highest = -1
+        """The highest sample index marked (-1: none)."""
 
     def add(self, sample: int) -> bool | None:
         """Mark ``sample`` (>= 0) seen; True if it was seen already.
@@ -30,4 +32,6 @@ class SampleSet:
         if bits[byte] >> bit & 1:
             return True
         bits[byte] |= 1 << bit
+        if sample > self.highest:
+            self.highest = sample
         return False

@@ -40,6 +40,11 @@ Analysis = Generator["Job | None", Any, Any]
 """A computation in pieces: yields None to end a piece, a :class:`Job` for its result."""
 
 
+def single_job(job: Job) -> Analysis:
+    """The analysis that is ``job`` alone: its value is the job's result."""
+    return (yield job)
+
+
 def _inline(job: Job) -> Future:
     """``job`` run now, as a finished future (its result or its exception)."""
     future: Future = Future()

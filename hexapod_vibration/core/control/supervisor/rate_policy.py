@@ -32,7 +32,12 @@ from hexapod_vibration.core.control.plant_identification import (
     DisturbanceSpectrum,
     PlantFrequencyResponse,
 )
-from hexapod_vibration.core.control.supervisor.analysis_jobs import Analysis, Job, WaitingJobs
+from hexapod_vibration.core.control.supervisor.analysis_jobs import (
+    Analysis,
+    Job,
+    WaitingJobs,
+    single_job,
+)
 from hexapod_vibration.core.control.supervisor.config import NotchConfig, Settings
 from hexapod_vibration.core.control.supervisor.events import EventLog
 from hexapod_vibration.core.control.supervisor.plant_knowledge import PlantKnowledge
@@ -112,11 +117,6 @@ def choose_and_predict(response: PlantFrequencyResponse, disturbance: Disturbanc
     return choice, folded, prediction
 
 
-def _one(job: Job) -> Analysis:
-    """An analysis of one job: its result."""
-    return (yield job)
-
-
 class RatePolicy:
     """P and the bound on mu from the identified plant; the mu policy and its prediction.
 
@@ -194,7 +194,7 @@ class RatePolicy:
         last = self._last_limit
         if last is not None and last[0] is response and last[1] == key:
             return last[2]
-        limit = self.waits.run(_one(Job(
+        limit = self.waits.run(single_job(Job(
             sensitivity.stable_mu_limit, (response.at, list(tones), self._settings.fs,
                                           p.copy()),
             {"update_lowpass_hz": self._settings.update_lowpass_hz})))
