@@ -22,18 +22,22 @@ file. ``command_delay_samples`` (default 2 in realtime, as ``experiment --realti
 lockstep) gives the controllers that many more periods to answer; the notch controller adds
 it to its loop delay. ``identification_analysis`` (default ``process`` in realtime, as
 ``experiment --realtime``, ``loop`` in lockstep) is where the notch controller analyses a
-finished identification: a worker process keeps the loop's deadline through it.
+finished identification: a worker process keeps the loop's deadline through it. In
+realtime the nodes use Fast DDS's UDP transport only (``FASTDDS_BUILTIN_TRANSPORTS=UDPv4``)
+unless the environment chose the transports: see docs/performance.md.
 """
 
 import os
 
 from ament_index_python.packages import get_package_share_directory
 from launch import LaunchDescription
-from launch.actions import DeclareLaunchArgument
+from launch.actions import DeclareLaunchArgument, SetEnvironmentVariable
 from launch.conditions import IfCondition, UnlessCondition
 from launch.substitutions import LaunchConfiguration, PythonExpression
 from launch_ros.actions import Node
 from launch_ros.parameter_descriptions import ParameterValue
+
+from hexapod_vibration.ros.dds_transport import realtime_transport_env
 
 PACKAGE = "hexapod_vibration"
 PARAMS_FILE = "pph.yaml"
@@ -99,6 +103,12 @@ def generate_launch_description() -> LaunchDescription:
     notch_parameters = [*controller_parameters,
                         {"identification_analysis": ParameterValue(analysis, value_type=str)}]
     separate = UnlessCondition(composed)
+    realtime = IfCondition(PythonExpression(["'", clock_mode, "' == 'realtime'"]))
+    # Realtime: Fast DDS's UDP transport only, unless the user chose the transports (a
+    # participant joining the domain stalls shared-memory senders ~333 ms; dds_transport).
+    transports = [SetEnvironmentVariable(name, value, condition=realtime)
+                  for name, value in realtime_transport_env(os.environ)[0].items()
+                  if os.environ.get(name) != value]
     nodes = [
         Node(package=PACKAGE, executable="pph_driver", name="pph_driver", output="screen",
              parameters=driver_parameters, condition=separate),
@@ -113,4 +123,4 @@ def generate_launch_description() -> LaunchDescription:
              parameters=[{"bag_path": ParameterValue(bag_path, value_type=str)}],
              condition=IfCondition(record)),
     ]
-    return LaunchDescription([*arguments, *nodes])
+    return LaunchDescription([*arguments, *transports, *nodes])

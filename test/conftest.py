@@ -128,10 +128,13 @@ def next_domain_id() -> int:
                          + worker) % span
 
 
-# UDP only, for the test process and every node it starts: the tests SIGKILL nodes on
-# purpose, which leaves Fast DDS shared-memory port files locked in /dev/shm, and a later
-# participant can then pick a dead shared-memory channel and silently receive nothing
-# (seen: a controller that never got /pph/accel). Loopback UDP has no such state.
+# UDP only where it takes effect: the tests SIGKILL nodes on purpose, which leaves Fast
+# DDS shared-memory port files locked in /dev/shm, and a later participant can then pick
+# a dead shared-memory channel and silently receive nothing (seen: a controller that never
+# got /pph/accel). Under ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST (``ros_env``) rmw_fastrtps
+# replaces the built-in transports with its own shared-memory + UDP pair, so the graph
+# tests' nodes still open shared-memory ports (their threads dds.shm.*: seen 2026-12-05;
+# hexapod_vibration.ros.dds_transport).
 os.environ.setdefault("FASTDDS_BUILTIN_TRANSPORTS", "UDPv4")
 
 

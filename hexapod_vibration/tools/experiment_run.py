@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import os
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -27,6 +28,7 @@ from hexapod_vibration.contract import (
     REFERENCE_FREQUENCY_TOPIC,
 )
 from hexapod_vibration.paths import config_path
+from hexapod_vibration.ros.dds_transport import realtime_transport_env
 from hexapod_vibration.tools import outputs
 from hexapod_vibration.tools.experiment_setup import (
     model_file_text,
@@ -55,9 +57,10 @@ NOTCH_TOPICS = ("/pph/notch_command", "/pph/notch_weights", NOTCH_FREQUENCIES_TO
 POINTING_TOPICS = ("/pph/pointing_command",)
 
 
-def start_child(name: str, module: str, ros_args: list[str], log_dir: Path) -> Child:
+def start_child(name: str, module: str, ros_args: list[str], log_dir: Path,
+                env: dict[str, str] | None = None) -> Child:
     """``python -m module --ros-args ...`` (output in ``log_dir/name.log``), dying with us."""
-    return spawn_module(name, module, ["--ros-args", *ros_args], log_dir)
+    return spawn_module(name, module, ["--ros-args", *ros_args], log_dir, env)
 
 
 def stop_children(children: list[Child]) -> None:
@@ -125,23 +128,32 @@ class ExperimentRun:
         """
         logs = self.o.out
         common = ["--params-file", str(self.params_file)]
+        env = None
+        if not self.lockstep:
+            env, note = realtime_transport_env(os.environ)
+            if note:
+                print(f"experiment: realtime: {note}", flush=True)
         self.children.append(start_child("pph_recorder", "hexapod_vibration.nodes.recorder", [
-            *common, "-p", f"bag_path:={self.bag}", "-p", f"storage:={self.o.storage}"], logs))
+            *common, "-p", f"bag_path:={self.bag}", "-p", f"storage:={self.o.storage}"], logs,
+            env))
         # The breakpoints and the progress come from the driver's status (in realtime paced
         # by the wall clock): a 1 kHz /clock reader here would cost the runner three quarters
         # of its CPU (rclpy's executor waking for it) and the driver a reader to serve.
         self.graph = GraphMonitor(paced=not self.lockstep)
         if self.o.composed:
             self.children.append(start_child("pph_graph", "hexapod_vibration.nodes.pph_graph",
-                                             common + self._breakpoint("pph_driver:"), logs))
+                                             common + self._breakpoint("pph_driver:"), logs,
+                                             env))
             return
         if self.has_notch:
             self.children.append(start_child(
-                "notch_controller", "hexapod_vibration.nodes.notch_controller", common, logs))
+                "notch_controller", "hexapod_vibration.nodes.notch_controller", common, logs,
+                env))
         self.children.append(start_child(
-            "pointing_controller", "hexapod_vibration.nodes.pointing_controller", common, logs))
+            "pointing_controller", "hexapod_vibration.nodes.pointing_controller", common, logs,
+            env))
         self.children.append(start_child("pph_driver", "hexapod_vibration.nodes.pph_driver",
-                                         common + self._breakpoint(), logs))
+                                         common + self._breakpoint(), logs, env))
 
     def recorded_topics(self) -> list[str]:
         """Every topic whose publishers the recorder must match before sample 0."""

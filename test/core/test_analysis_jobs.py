@@ -234,26 +234,45 @@ def test_waiting_jobs_serve_the_loop_only_while_a_job_runs_on_the_worker():
         assert idles == []
 
 
-def test_a_tone_change_checked_with_a_worker_serves_the_loop_and_decides_as_inline():
-    """The check's Nyquist limit on a spawned process while the loop runs; then apply.
-
-    The node's idle, here: one sample of the static rig per call (it does not wait for the
-    worker's answer, so the count of samples it served depends on the machine).
-    """
-    k = coupled_gain(0.2)
+def _adapting_pair(worker, k: np.ndarray, change: dict) -> tuple[NotchSupervisor, ...]:
+    """An inline supervisor with ``change`` applied, a worker's one adapting, at the same sample."""
     config = NotchConfig().replaced({"tone_frequencies_hz": [40.0], "identify_delay_s": 0.1})
-    change = {"tone_frequencies_hz": [40.0, 80.0]}
     inline = NotchSupervisor(config)
     n = _engaged(inline, k, len(run(inline, k, 30_000, until=_analysing)), 0.0)
     run(inline, k, 1000, n)
     inline.check(change)
     inline.apply(change)
+    sup = NotchSupervisor(config, analysis_worker=worker)
+    n = _engaged(sup, k, len(run(sup, k, 30_000, until=_analysing)), 0.0005)
+    run(sup, k, 1000, n)
+    assert sup.state == NotchState.ADAPTING
+    return inline, sup, n + 1000
+
+
+def _chosen(sup: NotchSupervisor, k: np.ndarray, n: int) -> int:
+    """Samples until the mu policy's choice is in force (the loop sleeps while it waits)."""
+    deadline = time.monotonic() + HANG_GUARD_S
+    while sup.mu_choice is None or sup._choice.running:
+        assert time.monotonic() < deadline, "the worker never answered"
+        run(sup, k, 1, n)
+        n += 1
+        time.sleep(0.0005)
+    return n
+
+
+def test_a_tone_change_with_a_worker_serves_the_loop_and_decides_as_inline():
+    """The check's limit on a worker while the loop runs; the apply waits for nothing.
+
+    The mu policy's choice is made on the worker while the loop adapts with the normalised P.
+
+    The node's idle, here: one sample of the static rig per call (it does not wait for the
+    worker's answer, so the count of samples it served depends on the machine).
+    """
+    k = coupled_gain(0.2)
+    change = {"tone_frequencies_hz": [40.0, 80.0]}
     with ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn")) as worker:
-        sup = NotchSupervisor(config, analysis_worker=worker)
-        n = _engaged(sup, k, len(run(sup, k, 30_000, until=_analysing)), 0.0005)
-        run(sup, k, 1000, n)
-        assert sup.state == NotchState.ADAPTING
-        served = [n + 1000]
+        inline, sup, n = _adapting_pair(worker, k, change)
+        served = [n]
 
         def idle() -> None:
             run(sup, k, 1, served[-1])
@@ -263,11 +282,43 @@ def test_a_tone_change_checked_with_a_worker_serves_the_loop_and_decides_as_inli
         sup.serve_while_waiting(idle)
         sup.check(change)                          # the Nyquist limit, on the worker
         in_check = len(served) - 1
-        sup.apply(change)                          # the same limit, kept; the policy's job
-        in_apply = len(served) - 1 - in_check
-    assert in_check > 0 and in_apply > 0 and sup.last_sample == served[-1] - 1
+        sup.apply(change)                          # the same limit, kept; nothing waited for
+        assert len(served) - 1 == in_check > 0 and sup.last_sample == served[-1] - 1
+        assert sup.mu_choice is None and sup._choice.running
+        assert sup.canceller.adapting.all() and sup.canceller.mu > 0.0
+        assert sup.status()["tone_mu"] == []
+        after = _chosen(sup, k, served[-1])
+        assert after > served[-1]
     assert sup.bound == inline.bound > 0.0
     assert sup.state == inline.state == NotchState.ADAPTING
     assert np.array_equal(sup.canceller.coefficients, inline.canceller.coefficients)
-    assert sup.status()["tone_mu"] == inline.status()["tone_mu"]
+    assert sup.status()["tone_mu"] == inline.status()["tone_mu"] != []
+    assert sup._rates.type2_max_mu == inline._rates.type2_max_mu
 
+
+def test_a_second_change_while_the_choice_is_made_drops_it_and_chooses_again():
+    """A change drops a choice in progress (held on the worker) and starts it again."""
+    k = coupled_gain(0.2)
+    first, second = {"tone_frequencies_hz": [40.0, 80.0]}, {"tone_frequencies_hz": [40.0, 90.0]}
+    release = threading.Event()
+    with ThreadPoolExecutor(1) as worker:
+        try:
+            inline, sup, n = _adapting_pair(worker, k, second)
+            sup.serve_while_waiting(lambda: time.sleep(0.0005))
+            sup.apply(first)
+            worker.submit(release.wait)            # the choice's job queues behind this one
+            kept = sup.canceller.weights[0].copy()
+            run(sup, k, 5, n)
+            assert sup._choice.running and sup.mu_choice is None
+            assert not sup.canceller.coefficients.any()            # adaptation held
+            assert np.array_equal(sup.canceller.weights[0], kept) and kept.any()
+            sup.apply({"enabled": True})           # dropped, and started again for its P
+            assert sup._choice.running and sup._rates.unchosen is not None
+        finally:
+            release.set()                          # (the next change's limit runs there)
+        sup.apply(second)                          # dropped, and made for the new tones
+        _chosen(sup, k, n + 5)
+    assert sup.canceller.tone_frequencies_hz.tolist() == [40.0, 90.0]
+    assert np.array_equal(sup.mu_choice.tone_mu, inline.mu_choice.tone_mu)
+    assert np.array_equal(sup.canceller.coefficients, inline.canceller.coefficients)
+    assert sup._rates.unchosen is None

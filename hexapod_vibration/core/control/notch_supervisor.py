@@ -44,6 +44,7 @@ from hexapod_vibration.core.control.plant_identification import (
     PlantFrequencyResponse,
 )
 from hexapod_vibration.core.control.supervisor.analysis_jobs import JobRunner, WaitingJobs
+from hexapod_vibration.core.control.supervisor.background_choice import BackgroundChoice
 from hexapod_vibration.core.control.supervisor.config import NotchConfig, Settings
 from hexapod_vibration.core.control.supervisor.events import EventLog, SupervisorEvent
 from hexapod_vibration.core.control.supervisor.fader import OutputFader
@@ -130,7 +131,8 @@ class NotchSupervisor:
                                 self._gate, self.safety, self.follower, events)
         self.identification = PlantIdentification(parts, jobs)
         """The plant's identification (running, its span)."""
-        self._changes = SettingsChange(parts, self.identification)
+        self._choice = BackgroundChoice(self._rates, canceller, jobs, events)
+        self._changes = SettingsChange(parts, self.identification, self._choice)
         self._report = StatusReport(parts, self.identification)
         first = {"mu": config.mu, "tone_frequencies_hz": list(config.tone_frequencies_hz),
                  "adaptation": config.adaptation, "harmonics": config.harmonics}
@@ -239,6 +241,11 @@ class NotchSupervisor:
             self.follower.step(index, error, running)
         if running or identification.analysis is not None:
             identification.step(error, command)
+        if self._choice.running:
+            if identification.busy:
+                self._choice.cancel()           # its analysis chooses again
+            else:
+                self._choice.step()
         return command
 
     def observe(self, index: int, accel_m_s2: np.ndarray) -> None:

@@ -204,6 +204,11 @@ class WaitingJobs:
         """Call ``idle`` while a job runs on the worker (None: run every job inline)."""
         self._idle = idle
 
+    @property
+    def serving(self) -> bool:
+        """True when a computation could run on the worker while the loop is served."""
+        return self._idle is not None and not self._blocked and not self._runner.inline
+
     def run(self, analysis: Analysis) -> Any:
         """Run ``analysis`` to its end; its value (see the class)."""
         idle = self._idle

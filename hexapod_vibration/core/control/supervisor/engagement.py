@@ -66,8 +66,7 @@ class ControlEngagement:
         rates.clamp(bound)
         if broadband:
             yield
-            yield from rates.choose(tones, coefficients)
-            yield from rates.check_type2(tones)
+            yield from rates.choose_and_check(tones, coefficients)
         parts.follower.limit_bandwidth()
         parts.safety.restart()
         gate.resume()

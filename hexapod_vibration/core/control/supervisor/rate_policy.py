@@ -305,16 +305,29 @@ class RatePolicy:
         tone adapts at ``mu``, as the policy ``manual``); then the type-2 test of sweeping
         tones (:meth:`check_type2`) at the rates chosen. Dropped if the oscillators changed.
         """
+        pending = self.pending_choice()
+        if pending is not None:
+            self.waits.run(self.choose_and_check(*pending))
+
+    def pending_choice(self) -> tuple[list[float], np.ndarray] | None:
+        """(tones in Hz, normalised P) of the choice :meth:`choose_pending` would make, or None.
+
+        None without G(f), at ``mu`` 0, or with nothing pending; a pending P that no longer
+        fits the oscillators is dropped.
+        """
         canceller, unchosen = self._canceller, self.unchosen
         if (unchosen is None or not canceller.mu > 0.0
                 or self._plant.frequency_response is None):
-            return
+            return None
         if unchosen.shape[0] != canceller.n_tones:
             self.unchosen = None
-            return
-        tones = [float(f) for f in canceller.tone_frequencies_hz]
-        self.waits.run(self.choose(tones, unchosen))
-        self.waits.run(self.check_type2(tones))
+            return None
+        return [float(f) for f in canceller.tone_frequencies_hz], unchosen
+
+    def choose_and_check(self, tones: list[float], coefficients: np.ndarray) -> Analysis:
+        """:meth:`choose`, then :meth:`check_type2` at the rates chosen (one analysis)."""
+        yield from self.choose(tones, coefficients)
+        yield from self.check_type2(tones)
 
     def tone_rates(self) -> np.ndarray:
         """Each oscillator's rate in force (1/sample): the policy's, scaled to ``mu`` now.

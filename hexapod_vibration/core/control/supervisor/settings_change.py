@@ -4,7 +4,8 @@
 (only a different value is the user's new choice: the node mirrors a mu the supervisor
 lowered back into it), new oscillators or a new adaptation mode with their P and bound, the
 safety monitor's retry, control switched on or off, the identification retargeted, the tone
-follower rebuilt, and the mu policy's choice for a P put in force without one.
+follower rebuilt, and the mu policy's choice for a P put in force without one (now, or
+on the analysis worker while the loop runs: :mod:`.background_choice`).
 """
 
 from __future__ import annotations
@@ -12,19 +13,23 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
+from hexapod_vibration.core.control.supervisor.background_choice import BackgroundChoice
 from hexapod_vibration.core.control.supervisor.identification import PlantIdentification
 from hexapod_vibration.core.control.supervisor.parts import SupervisorParts
 from hexapod_vibration.core.control.supervisor.planning import Plan, plan_changes
 from hexapod_vibration.core.control.supervisor.tone_follower import (
     FOLLOW_SETTINGS,
 )
+from hexapod_vibration.parameter_specs import moving_tones
 
 
 class SettingsChange:
     """Checks and applies sets of setting changes (see the module)."""
 
-    def __init__(self, parts: SupervisorParts, identification: PlantIdentification) -> None:
+    def __init__(self, parts: SupervisorParts, identification: PlantIdentification,
+                 choice: BackgroundChoice) -> None:
         """The supervisor's collaborators the changes act through."""
+        self._choice = choice
         self._settings, self._canceller, self._clock = (parts.settings, parts.canceller,
             parts.clock)
         self._plant, self._rates, self._gate = parts.plant, parts.rates, parts.gate
@@ -47,6 +52,7 @@ class SettingsChange:
         """
         with self._rates.waits.inline():
             plan = self.plan(changes)
+        self._choice.cancel()           # a choice in progress: made again below if pending
         canceller, settings = self._canceller, self._settings
         identification = self._identification
         settings.config = plan.config
@@ -75,4 +81,4 @@ class SettingsChange:
         if tones_changed or any(name in changes for name in FOLLOW_SETTINGS):
             self._follower.rebuild()
         if not identification.busy:
-            self._rates.choose_pending()
+            self._choice.choose_pending(steady=not moving_tones(vars(plan.config)))
