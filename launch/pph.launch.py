@@ -37,7 +37,7 @@ from launch.substitutions import LaunchConfiguration, PythonExpression
 from launch_ros.actions import Node
 from launch_ros.parameter_descriptions import ParameterValue
 
-from hexapod_vibration.ros.dds_transport import realtime_transport_env
+from hexapod_vibration.ros.dds_transport import realtime_transport_variables
 
 PACKAGE = "hexapod_vibration"
 PARAMS_FILE = "pph.yaml"
@@ -107,8 +107,7 @@ def generate_launch_description() -> LaunchDescription:
     # Realtime: Fast DDS's UDP transport only, unless the user chose the transports (a
     # participant joining the domain stalls shared-memory senders ~333 ms; dds_transport).
     transports = [SetEnvironmentVariable(name, value, condition=realtime)
-                  for name, value in realtime_transport_env(os.environ)[0].items()
-                  if os.environ.get(name) != value]
+                  for name, value in realtime_transport_variables(os.environ)[0].items()]
     nodes = [
         Node(package=PACKAGE, executable="pph_driver", name="pph_driver", output="screen",
              parameters=driver_parameters, condition=separate),

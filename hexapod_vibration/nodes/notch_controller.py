@@ -75,9 +75,9 @@ WEIGHTS_EVERY_SAMPLES = 10
 """Samples between two /pph/notch_weights messages (100 Hz)."""
 DIAGNOSTICS_PHASE = DIAGNOSTICS_PHASE_SAMPLES["notch_controller"]
 SETTINGS = frozenset(NotchConfig.__dataclass_fields__)
+"""Parameters that are notch settings (the rest, e.g. executor, are the node's own)."""
 LOOP_WAIT_S = 0.001
 """Longest wait (s) for a loop message between two looks at a setting change's worker job."""
-"""Parameters that are notch settings (the rest, e.g. executor, are the node's own)."""
 
 
 class NotchControllerNode(Node):
@@ -167,9 +167,10 @@ class NotchControllerNode(Node):
     def serve_loop_with(self, spinner: LoopSpinner) -> None:
         """With an analysis worker, a setting change's Nyquist limit and mu policy run on it.
 
-        Checked (the on-set callback) or applied (post-set), a change of tones or mode
-        while G(f) is known waits for them (~0.6 s on the loop's thread before) serving the
-        1 kHz loop meanwhile (``executor: waitset`` only: the loop's own wait set).
+        The check (the on-set callback) of a change of tones or mode while G(f) is known
+        waits for its limit serving the 1 kHz loop meanwhile (``executor: waitset`` only:
+        the loop's own wait set); the apply leaves the policy's choice to the worker
+        (``supervisor/background_choice.py``).
         """
         if self._worker is not None and spinner.fast:
             self.supervisor.serve_while_waiting(lambda: spinner.serve_loop(LOOP_WAIT_S))

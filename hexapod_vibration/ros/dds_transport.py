@@ -40,21 +40,25 @@ def localhost_only(env: Mapping[str, str]) -> bool:
             or env.get("ROS_LOCALHOST_ONLY", "").strip() == "1")
 
 
-def realtime_transport_env(env: Mapping[str, str]) -> tuple[dict[str, str], str]:
-    """``env`` for a realtime graph's node processes, and a one-line note ('' for none).
+def realtime_transport_variables(env: Mapping[str, str]) -> tuple[dict[str, str], str]:
+    """The variables to add to ``env`` for a realtime graph, and a one-line note ('' if none).
 
-    Adds ``FASTDDS_BUILTIN_TRANSPORTS=UDPv4`` unless another RMW is chosen, the user chose
-    the transports (:data:`USER_CHOICES`), or discovery is localhost-only (then the note
-    says why the stalls may come).
+    ``FASTDDS_BUILTIN_TRANSPORTS=UDPv4`` unless another RMW is chosen, the user chose the
+    transports (:data:`USER_CHOICES`), or discovery is localhost-only (then none, and the
+    note says why the stalls may come).
     """
-    out = dict(env)
-    if not out.get("RMW_IMPLEMENTATION", "rmw_fastrtps_cpp").startswith("rmw_fastrtps"):
-        return out, ""
-    if any(out.get(name) for name in USER_CHOICES):
-        return out, ""
-    if localhost_only(out):
-        return out, ("localhost-only discovery: rmw_fastrtps adds Fast DDS's shared-memory "
-                     "transport, and a ROS process joining the domain may stall the loop "
-                     "~333 ms (docs/performance.md)")
-    out[TRANSPORT_VARIABLE] = REALTIME_TRANSPORTS
-    return out, ""
+    if not env.get("RMW_IMPLEMENTATION", "rmw_fastrtps_cpp").startswith("rmw_fastrtps"):
+        return {}, ""
+    if any(env.get(name) for name in USER_CHOICES):
+        return {}, ""
+    if localhost_only(env):
+        return {}, ("localhost-only discovery: rmw_fastrtps adds Fast DDS's shared-memory "
+                    "transport, and a ROS process joining the domain may stall the loop "
+                    "~333 ms (docs/performance.md)")
+    return {TRANSPORT_VARIABLE: REALTIME_TRANSPORTS}, ""
+
+
+def realtime_transport_env(env: Mapping[str, str]) -> tuple[dict[str, str], str]:
+    """A copy of ``env`` with :func:`realtime_transport_variables`, and the one-line note."""
+    added, note = realtime_transport_variables(env)
+    return {**env, **added}, note

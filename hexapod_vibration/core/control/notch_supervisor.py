@@ -166,9 +166,10 @@ class NotchSupervisor:
         """Run a setting change's heavy computations on the analysis worker, ``idle`` meanwhile.
 
         A change of tones or mode while G(f) is known needs its Nyquist limit (~0.6 s) when
-        it is checked, and the mu policy's choice when it is applied: with an analysis
-        worker and ``idle`` (the node serving its 1 kHz loop for a moment), the caller
-        waits for them without stalling that loop. None (or no worker): inline.
+        it is checked: with an analysis worker and ``idle`` (the node serving its 1 kHz loop
+        for a moment), the caller waits for it without stalling that loop, and the mu
+        policy's choice after the apply is made on the worker while the loop runs
+        (:class:`BackgroundChoice`). None (or no worker): inline.
         """
         self._rates.waits.serve_with(idle)
 
