@@ -65,13 +65,14 @@ named in ``layout.dim[0].label`` (``SENSITIVITY_ROWS_PREFIX`` + comma-separated 
 ``frequency_hz`` then |S| in dB per view), ``layout.dim[1] = ("frequency", F, 1)``."""
 
 NOTCH_HELD_TOPIC = "/pph/notch_held"
-"""The notch commands a realtime driver did not apply when due (every
+"""The notch commands a realtime driver did not apply as they were when due (every
 ``HELD_REPORT_EVERY_SAMPLES``, reliable): rows ``(first due sample, last due sample, sample
-whose command stood in)`` (-1: zero force, the watchdog) flattened,
-``layout.dim[0] = (HELD_ROWS_LABEL, 3 R, 3 R)``, then the sample label (the last due sample
+whose command stood in, gain)`` (the force was gain (0..1, the watchdog's ramp) times that
+command; -1: no command yet, zero force) flattened,
+``layout.dim[0] = (HELD_ROWS_LABEL, 4 R, 4 R)``, then the sample label (the last due sample
 the report is complete up to) and the run label."""
 
-HELD_ROWS_LABEL = "held:first_due,last_due,applied"
+HELD_ROWS_LABEL = "held:first_due,last_due,applied,gain"
 
 HELD_REPORT_EVERY_SAMPLES = 100
 """Samples between two reports on ``NOTCH_HELD_TOPIC`` and ``STAND_INS_TOPIC`` (10 Hz, empty
@@ -80,11 +81,12 @@ ones included)."""
 STAND_INS_TOPIC = "/pph/stand_ins"
 """The due samples at which a realtime driver applied, for some controller's late command, a
 stand-in that controller did not compute (:mod:`hexapod_vibration.core.loop.stand_in_log`),
-every ``HELD_REPORT_EVERY_SAMPLES``, reliable: rows ``(first due sample, last due sample)``
-flattened, ``layout.dim[0] = (STAND_IN_ROWS_LABEL, 2 R, 2 R)``, then the sample label (the
-last due sample the report is complete up to) and the run label."""
+every ``HELD_REPORT_EVERY_SAMPLES``, reliable: rows ``(first due sample, last due sample,
+watchdog)`` (watchdog 1: the run holds the watchdog's ramp or zero force) flattened,
+``layout.dim[0] = (STAND_IN_ROWS_LABEL, 3 R, 3 R)``, then the sample label (the last due
+sample the report is complete up to) and the run label."""
 
-STAND_IN_ROWS_LABEL = "stand_ins:first_due,last_due"
+STAND_IN_ROWS_LABEL = "stand_ins:first_due,last_due,watchdog"
 
 NOTCH_FORECAST_TOPIC = "/pph/notch_forecast"
 POINTING_FORECAST_TOPIC = "/pph/pointing_forecast"

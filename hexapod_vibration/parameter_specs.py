@@ -423,6 +423,10 @@ PPH_DRIVER = NodeSpec("pph_driver", summary="the simulated hexapod (plant, senso
     ParameterSpec("command_timeout_samples", "int", 5, "watchdog: a command stream older "
                   "than this many samples (1 ms each) is dropped to zero force",
                   unit="samples", low=1, high=1000),
+    ParameterSpec("command_fade_samples", "int", 100, "watchdog: a dropped stream's force "
+                  "falls to zero over this many samples (a smooth ramp from its last "
+                  "command) and rises back as smoothly when it commands again; 0 = a step",
+                  unit="samples", low=0, high=1000),
     ParameterSpec("lockstep_timeout_s", "double", 2.0, "lockstep: longest wait for the "
                   "commands of one sample before advancing without them", unit="s",
                   low=0.001, high=10.0),

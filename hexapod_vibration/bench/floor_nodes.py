@@ -59,6 +59,8 @@ RUN = 1
 """The run id of every floor message (one run)."""
 TIMEOUT_SAMPLES = PPH_DRIVER["command_timeout_samples"].default
 """The driver's ``command_timeout_samples`` default: how long a silent stream is waited for."""
+FADE_SAMPLES = PPH_DRIVER["command_fade_samples"].default
+"""The driver's ``command_fade_samples`` default: its watchdog's ramp to zero force."""
 
 
 class CpuWindow:
@@ -151,7 +153,7 @@ class FloorDriver:
 
     def step(self) -> None:
         """Apply the due commands (realtime: a missing one counted late) and advance."""
-        self.arbiter.close_sample(self.lockstep, TIMEOUT_SAMPLES)
+        self.arbiter.close_sample(self.lockstep, TIMEOUT_SAMPLES, FADE_SAMPLES)
         self.arbiter.advance()
 
     def result(self) -> dict[str, float]:

@@ -6,6 +6,9 @@
   in (:class:`~hexapod_vibration.core.loop.stand_in_log.StandInLog`), so that the notch's
   divergence guard judges control on the blocks its commands were applied in.
 
+Both best effort, each report with the rows of the reports before it
+(:mod:`~hexapod_vibration.core.loop.repeated_reports`).
+
 Lockstep applies every command when due (or counts the sample as missed): no report.
 """
 
@@ -25,6 +28,7 @@ from hexapod_vibration.contract import (
 )
 from hexapod_vibration.core.loop.command_arbiter import CommandArbiter
 from hexapod_vibration.core.loop.held_log import HeldLog
+from hexapod_vibration.core.loop.repeated_reports import RepeatedRows
 from hexapod_vibration.core.loop.stand_in_log import StandInLog
 from hexapod_vibration.ros.qos import HELD_QOS
 from hexapod_vibration.ros.rclpy_internals import serialized_publish
@@ -41,6 +45,7 @@ class DriverReports:
         self._held, self._stand_ins = publisher(NOTCH_HELD_TOPIC), publisher(STAND_INS_TOPIC)
         self.held_log = HeldLog()
         self.stand_in_log = StandInLog()
+        self._held_rows, self._stand_in_rows = RepeatedRows(), RepeatedRows()
 
     def answered(self, stream: str, index: int, command_n: np.ndarray) -> None:
         """A command of ``stream`` for sample ``index`` was accepted (clears a right stand-in)."""
@@ -52,19 +57,20 @@ class DriverReports:
         Called once per sample, after ``arbiter.close_sample`` returned ``forces`` (N).
         """
         due, notch = arbiter.due, arbiter.streams["notch"]
-        self.held_log.note(due, notch.applied, notch.stale)
+        self.held_log.note(due, notch.applied, notch.fade.gain)
         stand_ins = self.stand_in_log
         for name, stream in arbiter.streams.items():
             if stream.stood_in and due >= 0:
-                stand_ins.note(due, name, forces[name])
+                stand_ins.note(due, name, forces[name], watchdog=not stream.fade.full)
         stand_ins.settle(due)
         if arbiter.sample % HELD_REPORT_EVERY_SAMPLES:
             return
         held = self.held_log
         if held.covered >= 0:
-            flat = [float(v) for row in held.drain() for v in row]
+            flat = [float(v) for row in self._held_rows.rows(held.drain()) for v in row]
             self._held(encode_vector_cdr(flat, held.covered, run, label=HELD_ROWS_LABEL))
         if stand_ins.covered >= 0:
-            flat = [float(v) for row in stand_ins.drain() for v in row]
+            rows = self._stand_in_rows.rows(stand_ins.drain())
+            flat = [float(v) for row in rows for v in row]
             self._stand_ins(encode_vector_cdr(flat, stand_ins.covered, run,
                                               label=STAND_IN_ROWS_LABEL))

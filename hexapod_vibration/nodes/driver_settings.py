@@ -54,6 +54,8 @@ class DriverSettings:
         """The settings the loop reads every sample, as attributes (from ``values``)."""
         self.timeout_samples = int(values["command_timeout_samples"])
         """Watchdog: a stream older than this many samples gets zero force."""
+        self.fade_samples = int(values["command_fade_samples"])
+        """Watchdog: samples of the ramp to zero force (and back); 0 = a step."""
         self.lockstep_timeout_s = float(values["lockstep_timeout_s"])
         """Longest wait (s, wall) for the commands of one sample in lockstep."""
         self.hold_at_time_s = float(values["hold_at_time_s"])

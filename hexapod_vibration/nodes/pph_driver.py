@@ -7,7 +7,8 @@ sample n (lockstep) or until the sample's wall-clock deadline (realtime) (the pa
 ``/pph/pointing_command`` through :class:`~hexapod_vibration.core.model.actuation.
 ActuatedPlant` (summed, saturated, held), publishes ``/pph/actuator_force`` (what is applied
 over [n, n+1)) and advances the plant. Which command of each stream applies (the first valid
-one per sample; zero force once a stream is older than ``command_timeout_samples``) is
+one per sample; zero force once a stream is older than ``command_timeout_samples``, reached
+over ``command_fade_samples``) is
 decided by :class:`~hexapod_vibration.core.loop.command_arbiter.CommandArbiter`. Health, loop
 statistics and the CPU budget go to ``/diagnostics`` once per simulated second.
 
@@ -190,13 +191,14 @@ class PPHDriver(Node):
 
     def apply_and_step(self) -> None:
         """Apply the current sample's commands, publish the applied force, advance one sample."""
-        timeout = self.settings.timeout_samples
-        forces, newly_stale = self.arbiter.close_sample(self.mode == "lockstep", timeout)
+        timeout, fade = self.settings.timeout_samples, self.settings.fade_samples
+        forces, newly_stale = self.arbiter.close_sample(self.mode == "lockstep", timeout, fade)
         if self.reports is not None:
             self.reports.note(self.arbiter, forces, self.run_id)
         for name in newly_stale:
             self.get_logger().warn(f"{self.topics[name]}: no command for {timeout} samples "
-                                   "(nor a forecast), force set to zero")
+                                   f"(nor a forecast), force falling to zero over {fade} "
+                                   "samples")
         applied = self.actuated.apply(self.sample, forces["notch"], forces["pointing"])
         self.meter.lap(self._stage["plant"])
         self.outputs.force(applied, self.sample, self.run_id)

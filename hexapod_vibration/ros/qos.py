@@ -151,10 +151,13 @@ LATCHED_QOS = QoSProfile(
 is published after it joined; the recorder and the tools subscribe TRANSIENT_LOCAL."""
 
 HELD_QOS = QoSProfile(
-    reliability=ReliabilityPolicy.RELIABLE,
+    reliability=ReliabilityPolicy.BEST_EFFORT,
     history=HistoryPolicy.KEEP_LAST,
     depth=100,
     durability=DurabilityPolicy.VOLATILE,
 )
-"""``/pph/notch_held`` (10 Hz): RELIABLE and 100 deep (10 s of reports), so a notch
-controller that is busy for a while (an identification's analysis) still gets every row."""
+"""``/pph/notch_held`` and ``/pph/stand_ins`` (10 Hz): 100 deep (10 s of reports), so a notch
+controller busy for a while (an identification's analysis) still gets every report its DDS
+layer received; BEST_EFFORT, each report repeating the rows of the 9 before it
+(``core/loop/repeated_reports``): RELIABLE held every report after a lost one until the
+writer's next heartbeat repaired it, 1.1-3 s after a controller stopped for 350 ms."""

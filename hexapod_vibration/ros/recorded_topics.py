@@ -18,6 +18,7 @@ from hexapod_vibration.analysis.bag_format import (
 )
 from hexapod_vibration.contract import NOTCH_HELD_TOPIC, STAND_INS_TOPIC
 from hexapod_vibration.ros.qos import (
+    HELD_QOS,
     LATCHED_QOS,
     PARAMETER_EVENTS_QOS,
     RECORDER_CLOCK_QOS,
@@ -31,7 +32,8 @@ LOOP_TOPICS = frozenset((*STRUT_TOPICS, WEIGHTS_TOPIC, *FREQUENCY_TOPICS))
 
 REPORT_TOPICS = (NOTCH_HELD_TOPIC, STAND_INS_TOPIC)
 """A realtime driver's reports (10 Hz): the held notch commands and the stand-ins, so that
-a bag can replay what the identification and the guard were told. The forecasts
+a bag can replay what the identification and the guard were told (best effort, as sent:
+each report repeats the rows of the 9 before it). The forecasts
 (``/pph/*_forecast``, 100 Hz x 200 rows) are not recorded: the reports say where a stand-in
 went in."""
 
@@ -51,8 +53,7 @@ RECORDED_TOPICS: tuple[RecordedTopic, ...] = (
     RecordedTopic(WEIGHTS_TOPIC, Float64MultiArray, ARRAY_TYPE, RECORDER_QOS),
     *(RecordedTopic(t, Float64MultiArray, ARRAY_TYPE, RECORDER_QOS) for t in FREQUENCY_TOPICS),
     RecordedTopic(SENSITIVITY_TOPIC, Float64MultiArray, ARRAY_TYPE, LATCHED_QOS),
-    *(RecordedTopic(t, Float64MultiArray, ARRAY_TYPE, RECORDER_QOS)
-      for t in REPORT_TOPICS),
+    *(RecordedTopic(t, Float64MultiArray, ARRAY_TYPE, HELD_QOS) for t in REPORT_TOPICS),
     RecordedTopic("/clock", Clock, "rosgraph_msgs/msg/Clock", RECORDER_CLOCK_QOS),
     RecordedTopic("/diagnostics", DiagnosticArray, "diagnostic_msgs/msg/DiagnosticArray",
                   RECORDER_QOS),

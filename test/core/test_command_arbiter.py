@@ -272,7 +272,7 @@ def test_a_command_delay_is_a_whole_number_of_samples(delay):
 
 
 def test_the_held_log_has_the_runs_the_arbiter_held():
-    from hexapod_vibration.core.loop.held_log import ZERO_FORCE, HeldLog
+    from hexapod_vibration.core.loop.held_log import HeldLog
 
     arbiter, log = _delayed(1), HeldLog()
     answered = {0, 1, 2, 5, 6, 14, 15}
@@ -281,10 +281,67 @@ def test_the_held_log_has_the_runs_the_arbiter_held():
             arbiter.offer("notch", _force(n + 1.0), n, RUN, 0.0)
         arbiter.close_sample(False, TIMEOUT)
         stream = arbiter.streams["notch"]
-        log.note(arbiter.due, stream.applied, stream.stale)
+        log.note(arbiter.due, stream.applied, stream.fade.gain)
         arbiter.advance()
     # due 3, 4: the answer to 2 stood in; due 7..10: that of 6; at samples 12 and 13 (due
     # 11, 12) the newest answer (6) was more than 5 samples old: zero force; at sample 14
     # the answer to 14 made the stream fresh again, and the answer to 6 stood in for 13.
-    assert log.drain() == [(3, 4, 2), (7, 10, 6), (11, 12, ZERO_FORCE), (13, 13, 6)]
+    assert log.drain() == [(3, 4, 2, 1.0), (7, 10, 6, 1.0), (11, 12, 6, 0.0),
+                           (13, 13, 6, 1.0)]
     assert log.covered == 15 and log.drain() == []
+
+
+def test_a_stale_stream_falls_to_zero_force_along_the_ramp_and_rises_back():
+    """The watchdog's ramp: gain times the held command down, gain times the new up."""
+    from hexapod_vibration.core.loop.held_log import HeldLog
+
+    fade = 8
+    arbiter, log = _arbiter(expected=()), HeldLog()
+    arbiter.offer("notch", _force(4.0), 0, RUN, 0.0)
+    applied = []
+    for n in range(40):
+        if n >= 30:
+            arbiter.offer("notch", _force(2.0), n, RUN, 0.0)
+        forces, _ = arbiter.close_sample(False, TIMEOUT, fade)
+        log.note(arbiter.due, arbiter.streams["notch"].applied,
+                 arbiter.streams["notch"].fade.gain)
+        applied.append(float(forces["notch"][0]))
+        arbiter.advance()
+    held, fall = applied[:TIMEOUT + 1], np.array(applied[TIMEOUT + 1:TIMEOUT + 1 + fade])
+    assert held == [4.0] * (TIMEOUT + 1)
+    assert np.all(np.diff(fall) < 0) and 0.0 < fall[-2] and fall[0] < 4.0
+    assert applied[TIMEOUT + fade:30] == [0.0] * (30 - TIMEOUT - fade)   # fully down
+    rise = np.array(applied[30:30 + fade])
+    assert np.all(np.diff(rise) > 0) and rise[0] > 0.0 and applied[30 + fade - 1:] == [2.0] * (
+        40 - 30 - fade + 1)
+    # the ramp is symmetric: rising on 2 N it passes the gains it fell through on 4 N
+    np.testing.assert_allclose(rise[:-1] / 2.0, fall[::-1][1:] / 4.0)
+    # the held log: held at full gain, one row per sample of the fall, zero, the rise
+    rows = log.drain()
+    assert rows[0] == (1, TIMEOUT, 0, 1.0)
+    fall_rows = rows[1:fade]
+    assert [row[:3] for row in fall_rows] == [(n, n, 0) for n in range(TIMEOUT + 1,
+                                                                     TIMEOUT + fade)]
+    np.testing.assert_allclose([row[3] * 4.0 for row in fall_rows], fall[:-1])
+    assert rows[fade] == (TIMEOUT + fade, 29, 0, 0.0)
+    assert [row[:3] for row in rows[fade + 1:]] == [(n, n, n) for n in range(30, 30 + fade - 1)]
+    np.testing.assert_allclose([row[3] * 2.0 for row in rows[fade + 1:]], rise[:-1])
+
+
+def test_a_stall_shorter_than_the_ramp_turns_back_where_it_is():
+    fade = 100
+    arbiter = _arbiter(expected=())
+    applied = []
+    for n in range(400):
+        if n < 50 or n >= 80:                    # 30 samples silent: 55..79 stale
+            arbiter.offer("notch", _force(1.0), n, RUN, 0.0)
+        applied.append(float(_step_faded(arbiter, fade)["notch"][0]))
+    low = min(applied)
+    assert 0.0 < low < 1.0 and applied.index(low) == 79     # the lowest: the last stale one
+    assert applied[103] < 1.0 and applied[104:] == [1.0] * (400 - 104)   # 25 samples up
+
+
+def _step_faded(arbiter, fade):
+    forces, _ = arbiter.close_sample(False, TIMEOUT, fade)
+    arbiter.advance()
+    return forces

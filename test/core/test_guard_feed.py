@@ -11,7 +11,12 @@ import numpy as np
 import pytest
 
 from hexapod_vibration.core.control.divergence_guard import DivergenceGuard
-from hexapod_vibration.core.control.guard_feed import KICK_SAMPLES, MAX_HELD_SAMPLES, GuardFeed
+from hexapod_vibration.core.control.guard_feed import (
+    KICK_SAMPLES,
+    MAX_HELD_SAMPLES,
+    WATCHDOG_SETTLE_SAMPLES,
+    GuardFeed,
+)
 
 FS, TONE, BLOCK, DELAY = 1000.0, 40.0, 250, 2
 START = 4000                 # the first judged sample
@@ -52,7 +57,7 @@ def _judge(feed: GuardFeed, x: np.ndarray, stand_ins: list[int] | None) -> list:
         n = START + k
         if stand_ins is not None and n % 100 == 0:
             covered = n - 1 - DELAY                        # due samples settled so far
-            rows = [(s - DELAY, s - DELAY) for s in stand_ins if n - 100 <= s < n]
+            rows = [(s - DELAY, s - DELAY, 0) for s in stand_ins if n - 100 <= s < n]
             feed.note(rows, covered, DELAY)
         verdicts += [(sample, v) for v, sample in feed.step(e, False, True, n)]
     return verdicts
@@ -87,10 +92,37 @@ def test_a_real_rise_is_still_caught_one_report_later(feed_and_rng):
 def test_samples_not_covered_go_on_unmarked_after_the_longest_hold(feed_and_rng):
     feed, rng = feed_and_rng
     feed.note([], START - 1, DELAY)                 # one report, then none
-    x = _signal(rng, 4 * BLOCK, START)
+    x = _signal(rng, MAX_HELD_SAMPLES + 2 * BLOCK, START)
     released = [n for k, e in enumerate(x)
                 for _, n in feed.step(e, False, True, START + k)]
-    assert released == [START + BLOCK - 1, START + 2 * BLOCK - 1]     # to 4499: 500 held
+    assert released == [START + BLOCK - 1, START + 2 * BLOCK - 1]     # the newest held
     assert feed.held_samples == MAX_HELD_SAMPLES
     feed.restart()
     assert not feed.reported and feed.held_samples == 0
+
+
+def test_a_watchdog_run_leaves_the_platform_s_settling_out_and_then_judges_again(feed_and_rng):
+    """After the watchdog's ramp the next WATCHDOG_SETTLE_SAMPLES' blocks are left out.
+
+    A lost pointing force rings for seconds; a rise after them is caught.
+    """
+    feed, rng = feed_and_rng
+    settle_blocks = WATCHDOG_SETTLE_SAMPLES // BLOCK
+    blocks = 2 + settle_blocks + 4
+    x = _signal(rng, blocks * BLOCK, START)
+    ringing = slice(BLOCK + 50, (2 + settle_blocks) * BLOCK)        # the platform's answer
+    x[ringing] += 0.05 * rng.standard_normal((ringing.stop - ringing.start, 6))
+    worse = slice((2 + settle_blocks + 1) * BLOCK, None)            # control's own doing
+    x[worse] *= 10 ** (6 / 20)
+    watchdog = (START + BLOCK - DELAY, START + BLOCK + 40 - DELAY)  # due samples of the run
+    verdicts = []
+    for k, e in enumerate(x):
+        n = START + k
+        if n % 100 == 0:
+            rows = [(*watchdog, 1)] if n - 100 <= watchdog[1] < n else []
+            feed.note(rows, n - 1 - DELAY, DELAY)
+        verdicts += [(sample, v) for v, sample in feed.step(e, False, True, n)]
+    acted = [(n, v.action) for n, v in verdicts if v.action]
+    assert acted and acted[0][0] >= START + (2 + settle_blocks + 1) * BLOCK, acted
+    assert feed.watchdog_samples == 41 + WATCHDOG_SETTLE_SAMPLES
+    assert feed.stand_in_samples == feed.watchdog_samples

@@ -13,10 +13,12 @@ import pytest
 
 from hexapod_vibration.core.control.held_inputs import (
     HeldCommands,
+    HeldRow,
     held_input_response,
     input_difference,
 )
 from hexapod_vibration.core.control.plant_identification import BroadbandIdentifier
+from hexapod_vibration.parameter_specs import PPH_DRIVER
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from linear_plants import (  # noqa: E402
@@ -26,6 +28,8 @@ from linear_plants import (  # noqa: E402
     resonance_bank,
 )
 
+FADE_SAMPLES = PPH_DRIVER["command_fade_samples"].default
+"""The driver's watchdog ramp: the 20 ms stalls below fall along it (rows with gains)."""
 FREQUENCIES_HZ = np.arange(20.0, 300.0, 0.37)
 
 
@@ -35,19 +39,19 @@ def _coupled_plant(seed=1):
     return a, b @ mix, c
 
 
-def _held_rows(n: int, fraction: float, burst: int, start: int) -> list[tuple[int, int, int]]:
+def _held_rows(n: int, fraction: float, burst: int, start: int) -> list[HeldRow]:
     """Runs of ``burst`` held samples (sample indices from ``start``).
 
     The command before the run stands in, zero force from the sixth sample of a run (the
-    driver's watchdog).
+    driver's watchdog with a ramp of 0 samples).
     """
     rows = []
     for first in np.flatnonzero(np.random.default_rng(7).random(n) < fraction / burst):
         last = min(first + burst - 1, n - 1)
         first, last = int(first) + start, int(last) + start
-        rows.append((first, min(last, first + 4), first - 1))
+        rows.append((first, min(last, first + 4), first - 1, 1.0))
         if last > first + 4:
-            rows.append((first + 5, last, -1))
+            rows.append((first + 5, last, -1, 0.0))
     return rows
 
 
@@ -102,11 +106,13 @@ def test_a_correction_that_does_not_help_is_not_kept():
 
 def test_the_input_difference_of_held_rows():
     table = np.arange(12.0).reshape(4, 3)           # a period of 4 samples, 3 channels
-    du = input_difference([(101, 102, 100), (104, 104, -1), (99, 100, 95)], 100, table, 6)
+    rows = [(101, 102, 100, 1.0), (104, 104, -1, 0.0), (99, 100, 95, 1.0), (105, 105, 101, 0.25)]
+    du = input_difference(rows, 100, table, 6)
     expected = np.zeros((6, 3))
     expected[1] = table[0] - table[1]               # sample 101: the command of 100
     expected[2] = table[0] - table[2]
     expected[4] = -table[0]                         # sample 104: zero force
+    expected[5] = 0.25 * table[1] - table[1]        # sample 105: a quarter of that of 101
     expected[0] = -table[0]                         # sample 100: a command before the run
     np.testing.assert_array_equal(du, expected)
 
@@ -127,12 +133,12 @@ def test_the_response_to_an_impulse_is_the_impulse_response():
 def test_the_reports_cover_what_they_say():
     held = HeldCommands()
     assert held.covers(10_000)                      # no reports: nothing to wait for
-    held.add([(5, 7, 4)], covered=99)
-    held.add([(150, 150, -1)], covered=199)
+    held.add([(5, 7, 4, 1.0)], covered=99)
+    held.add([(150, 150, -1, 0.0)], covered=199)
     assert held.covers(199) and not held.covers(200)
-    assert held.rows(0, 100) == [(5, 7, 4)]
+    assert held.rows(0, 100) == [(5, 7, 4, 1.0)]
     held.forget_before(100)
-    assert held.rows(0, 1_000) == [(150, 150, -1)]
+    assert held.rows(0, 1_000) == [(150, 150, -1, 0.0)]
 
 
 def _supervised_identification(report: bool):
@@ -152,8 +158,9 @@ def _supervised_identification(report: bool):
         command = supervisor.step(n, c @ x + shaker[n])
         if not late[n]:
             arbiter.offer("notch", command.copy(), n, 1, 0.0)
-        forces, _ = arbiter.close_sample(False, 5)
-        log.note(arbiter.due, arbiter.streams["notch"].applied, arbiter.streams["notch"].stale)
+        forces, _ = arbiter.close_sample(False, 5, FADE_SAMPLES)
+        notch = arbiter.streams["notch"]
+        log.note(arbiter.due, notch.applied, notch.fade.gain)
         if report and n % 100 == 0 and log.covered >= 0:
             supervisor.note_held(log.drain(), log.covered)
         x = a @ x + b @ forces["notch"]

@@ -446,3 +446,50 @@ def test_a_tone_change_checked_then_applied_runs_its_nyquist_limit_once(monkeypa
     sup.apply(change)
     assert alone > 0 and len(tests) == alone
     assert sup.bound == twin.bound > 0.0
+
+
+def _adapting_with_a_line_monitor() -> tuple[NotchSupervisor, int]:
+    """A supervisor (mu_policy auto: a prediction) adapting 1.9 s, its line monitor ready."""
+    sup = NotchSupervisor(NotchConfig().replaced(
+        {"tone_frequencies_hz": (TONE,), "enabled": True, "identify_delay_s": 0.1}))
+    end = 100 + 10_000 + 2000
+    run(sup, coupled_gain(0.0), end)
+    monitor = sup.safety.line_monitor
+    assert sup.state == NotchState.ADAPTING and monitor.started and monitor.ready
+    return sup, end
+
+
+def test_a_long_gap_restarts_the_line_monitor_and_a_short_one_does_not():
+    """Its blocks count samples (``safety.LINE_GAP_SAMPLES``); gaps of a few are common."""
+    from hexapod_vibration.core.control.supervisor.safety import LINE_GAP_SAMPLES
+
+    sup, end = _adapting_with_a_line_monitor()
+    monitor = sup.safety.line_monitor
+    short = frozenset(range(end, end + LINE_GAP_SAMPLES))
+    run(sup, coupled_gain(0.0), 200, end, skip=short)
+    assert sup.safety.line_monitor is monitor and monitor.ready
+    long = frozenset(range(end + 200, end + 201 + LINE_GAP_SAMPLES))
+    run(sup, coupled_gain(0.0), LINE_GAP_SAMPLES + 2, end + 200, skip=long)
+    assert monitor.started and not monitor.ready        # one sample since the reset
+
+
+def test_the_watchdog_s_samples_restart_the_line_monitor_and_a_forecast_s_do_not():
+    """The weights re-converge after the driver's ramp back up: no reading of their turning.
+
+    A realtime driver's reports (every 100 samples, command delay 0): a forecast stood in
+    at one sample, then a run of the watchdog's.
+    """
+    sup, end = _adapting_with_a_line_monitor()
+    monitor = sup.safety.line_monitor
+
+    def run_reported(first: int, rows: list[tuple[int, int, int]]) -> None:
+        sup.note_stand_ins([], first - 1, 0)
+        run(sup, coupled_gain(0.0), 100, first)
+        sup.note_stand_ins(rows, first + 99, 0)
+
+    run_reported(end, [(end + 50, end + 50, 0)])
+    run(sup, coupled_gain(0.0), 1, end + 100)           # the report's samples released
+    assert monitor.ready and sup.safety.feed.stand_in_samples > 0
+    run_reported(end + 101, [(end + 150, end + 160, 1)])
+    run(sup, coupled_gain(0.0), 1, end + 201)
+    assert sup.safety.feed.watchdog_samples > 0 and monitor.started and not monitor.ready

@@ -59,8 +59,11 @@ def test_a_realtime_driver_applies_forecast_rows_when_no_command_comes(
     force = StrutTopic(node, "/pph/actuator_force")
     diagnostics = Diagnostics(node)
     publisher = node.create_publisher(Float64MultiArray, NOTCH_FORECAST_TOPIC, LOOP_QOS)
+    # Without the watchdog's ramp (command_fade_samples 0): a row goes in as it is, at once
+    # (the ramp, on a stream that was stale, is test_watchdog's).
     node_processes.start("pph_driver", "--ros-args", "-p", "clock_mode:=realtime",
-                         "-p", "lockstep_controllers:=[]", "-p", "command_delay_samples:=1")
+                         "-p", "lockstep_controllers:=[]", "-p", "command_delay_samples:=1",
+                         "-p", "command_fade_samples:=0")
     sent: dict[int, np.ndarray] = {}
 
     def publish_ahead() -> None:

@@ -16,11 +16,13 @@ from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 from hexapod_vibration.cdr import decode_strut_cdr, encode_strut_cdr
 from hexapod_vibration.core.model.config import load_model_config
 from hexapod_vibration.core.model.plant import saturate_commands
+from hexapod_vibration.parameter_specs import PPH_DRIVER
 from hexapod_vibration.paths import config_path
 from hexapod_vibration.ros.messages import make_strut_array
 from hexapod_vibration.ros.qos import LOOP_QOS
 
-TIMEOUT_SAMPLES = 5          # the driver's command_timeout_samples default (documented)
+TIMEOUT_SAMPLES = PPH_DRIVER["command_timeout_samples"].default
+FADE_SAMPLES = PPH_DRIVER["command_fade_samples"].default
 DRIVER = "pph_driver: loop"
 LOST_TAIL_SAMPLES = 20
 """Most commands a SIGKILLed controller had in flight that this listener may never get."""
@@ -32,6 +34,12 @@ POINTING_HOLD_SAMPLES = 20
 def _notch_part(force: StrutTopic, pointing: StrutTopic, n: int) -> np.ndarray:
     """What the driver applied at sample n beyond the pointing command of sample n."""
     return force.by_index[n] - saturate_commands(np.zeros(6), pointing.by_index[n], STRUT)
+
+
+def _gain_on(part: np.ndarray, command: np.ndarray) -> float | None:
+    """The gain g with ``part == g * command`` (to 1e-9 N), or None."""
+    gain = float(part @ command / (command @ command))
+    return gain if np.allclose(part, gain * command, rtol=0.0, atol=1e-9) else None
 
 
 def _applied_commands(force: StrutTopic, notch: dict[int | None, np.ndarray],
@@ -124,7 +132,8 @@ def test_killed_notch_controller_is_dropped_within_the_timeout(ros_context, node
 
     # Per sample: before the kill the driver applied notch + pointing of the same sample;
     # after the last notch command, the held command for at most TIMEOUT_SAMPLES samples,
-    # then pointing only (notch force zero).
+    # then the watchdog's ramp (the held command times a falling gain) for fewer than
+    # FADE_SAMPLES samples, then pointing only (notch force zero).
     for n in range(seen - 50, seen + 1):
         expected = saturate_commands(notch_cmd.by_index[n], pointing_cmd.by_index[n], STRUT)
         np.testing.assert_allclose(force.by_index[n], expected, atol=1e-9, err_msg=str(n))
@@ -141,24 +150,26 @@ def test_killed_notch_controller_is_dropped_within_the_timeout(ros_context, node
              **{j: notch_cmd.by_index[j] for j in (last + 1, last + 2)
                 if j in notch_cmd.by_index}}
     applied = {n: _applied_commands(force, notch, pointing_cmd, n) for n in after}
-
-    def notch_applied(n: int) -> object:
-        """The notch command applied at n (a later one this listener missed: its value)."""
-        if applied[n] is None:
-            return tuple(np.round(_notch_part(force, pointing_cmd, n), 9))
-        return applied[n][0]
-
-    held = [n for n in after if notch_applied(n) is not None]
+    held = [n for n in after if applied[n] is not None and applied[n][0] is not None]
     assert held == list(range(last + 1, last + 1 + len(held))), held
     pointing_held = [n for n in after if applied[n] is not None and applied[n][1] != n]
-    print(f"last notch command: sample {last}; held for {len(held)} samples; pointing "
-          f"command held at {pointing_held}; driver: {diagnostics.values(DRIVER)}")
     extra = len(held) - TIMEOUT_SAMPLES
     assert 0 <= extra <= 2, held
-    commands = [notch_applied(n) for n in held]
+    commands = [applied[n][0] for n in held]
     assert len(set(commands)) <= 1 + extra, commands
     if extra == 0:          # the held command is the last one (as applied at its sample)
         assert set(commands) == {last}, commands
+    # The ramp: each sample's notch force is the held command times one gain, falling.
+    ramp = range(held[-1] + 1, held[-1] + FADE_SAMPLES)
+    gains = [_gain_on(_notch_part(force, pointing_cmd, n), notch[commands[-1]]) for n in ramp]
+    assert all(g is not None for g in gains), gains
+    assert 0.0 < gains[-1] and np.all(np.diff([1.0, *gains]) < 0.0) and gains[0] > 0.99, gains
+    zero = range(held[-1] + FADE_SAMPLES, last + 300)
+    assert all(applied[n] is not None and applied[n][0] is None for n in zero), (
+        [n for n in zero if applied[n] is None or applied[n][0] is not None])
+    print(f"last notch command: sample {last}; held for {len(held)} samples, then a ramp "
+          f"of {len(gains)} (gains {gains[0]:.6f} .. {gains[-1]:.6f}); pointing command "
+          f"held at {pointing_held}; driver: {diagnostics.values(DRIVER)}")
     for process in (driver, pointing):
         assert process.stop() == 130, process.output()   # SIGINT: 128 + 2
 
@@ -221,13 +232,20 @@ def test_invalid_notch_commands_are_counted_and_never_applied(ros_context, node_
         np.testing.assert_array_equal(_notch_part(force, pointing_cmd, n), np.zeros(6),
                                       err_msg=str(n))
 
-    # The same check sees a valid command (no sample index: taken for the current sample).
+    # The same check sees a valid command (no sample index: taken for the current sample):
+    # sent now and then, each one rises along the watchdog's ramp for a few samples before
+    # the stream is stale again, so it goes in times a gain (0, 1].
     valid = np.arange(1.0, 7.0)
     start = force.last_index
+
+    def applied_valid(n: int) -> bool:
+        if n not in force.by_index or n not in pointing_cmd.by_index:
+            return False
+        gain = _gain_on(_notch_part(force, pointing_cmd, n), valid)
+        return gain is not None and 0.0 < gain <= 1.0
+
     seen = wait_until(ros_context,
-        lambda: any(n in force.by_index and n in pointing_cmd.by_index and np.array_equal(
-            _notch_part(force, pointing_cmd, n), valid)
-            for n in range(start + 1, force.last_index + 1)),
+        lambda: any(applied_valid(n) for n in range(start + 1, force.last_index + 1)),
         HANG_GUARD_S, step=lambda: publisher.publish(make_strut_array(valid, None)))
     assert seen, driver.output()
     assert driver.running() and pointing.running()

@@ -10,10 +10,12 @@ out, all held: ``docs/performance.md``).
 :class:`GuardFeed` passes each sample to the guard at once until a first report comes.
 From then on it holds the samples until the reports cover them (their due samples plus the
 command delay) and marks each sample a stand-in disturbed (the applied sample and the
-platform's next ``KICK_SAMPLES`` answers): the guard leaves such a sample's block out, as one
-with samples missing. The verdicts come up to one report later (<= ~0.15 s); samples not
-covered after ``MAX_HELD_SAMPLES`` (reports that stopped) go on unmarked. Lockstep and the
-core loop have no reports: their guard is exactly the one without this. No ROS import.
+platform's next ``KICK_SAMPLES`` answers; after a run of the watchdog's, a stream's ramp to
+zero force and back, the next ``WATCHDOG_SETTLE_SAMPLES``): the guard leaves such a sample's
+block out, as one with samples missing. The verdicts come up to one report later
+(<= ~0.15 s); samples not covered after ``MAX_HELD_SAMPLES`` (reports that stopped) go on
+unmarked. Lockstep and the core loop have no reports: their guard is exactly the one
+without this. No ROS import.
 """
 
 from __future__ import annotations
@@ -28,8 +30,21 @@ from hexapod_vibration.core.control.divergence_guard import DivergenceGuard, Gua
 KICK_SAMPLES = 2
 """Samples after a stand-in's applied sample that are marked too (the platform's answer)."""
 
-MAX_HELD_SAMPLES = 500
-"""Most samples held for the reports (0.5 s at 1 kHz); older ones go on unmarked."""
+WATCHDOG_SETTLE_SAMPLES = 3000
+"""Samples after a run of the watchdog's that are marked too: the platform's answer to a lost
+pointing force. Measured (``single_tone_harmonic`` in realtime, both controllers stopped
+for 350 ms under control; the six accelerations' power in 8-500 Hz per 250-ms block
+against the blocks before): +45 dB at the end of the ramp back up (+51 dB with a step),
+falling ~20 dB/s, within 3.5 dB 2.25 s later in both runs; the third octaves >= 50 Hz
+off the tones within 3 dB after 1 s with the ramp. The guard judged those blocks as
+control's doing: lower_mu (+9.7 dB broadband) or, through the weights' re-convergence,
+the line-offset check faded control out."""
+
+MAX_HELD_SAMPLES = 2000
+"""Most samples held for the reports (2 s at 1 kHz); older ones go on unmarked. A controller
+that stalled catches up on its queue of samples before the reports on them come: with 500
+(0.5 s) a 350 ms stall of both controllers under control let the platform's answer through
+unmarked, and the guard faded control out on it."""
 
 
 class GuardFeed:
@@ -44,17 +59,22 @@ class GuardFeed:
         """The last sample index whose stand-ins are known (-1: none)."""
         self.stand_in_samples = 0
         """Samples the guard got marked as stand-in disturbed."""
-        self._rows: deque[tuple[int, int]] = deque()
+        self.watchdog_samples = 0
+        """Of those, the samples marked for a run of the watchdog's (and its settling)."""
+        self._rows: deque[tuple[int, int, bool]] = deque()
         self._held: deque[tuple[int, np.ndarray, bool, bool]] = deque()
 
-    def note(self, rows: Sequence[tuple[int, int]], covered: int, delay_samples: int) -> None:
-        """A report: stand-ins at due samples ``rows`` (first, last), complete to ``covered``.
+    def note(self, rows: Sequence[tuple[int, int, int]], covered: int,
+             delay_samples: int) -> None:
+        """A report: stand-ins at due samples ``rows`` (first, last, watchdog), to ``covered``.
 
         ``delay_samples``: the driver's command delay (due sample j is applied at j + d).
         """
         self.reported = True
         d = int(delay_samples)
-        self._rows.extend((first + d, last + d + KICK_SAMPLES) for first, last in rows)
+        self._rows.extend(
+            (first + d, last + d + (WATCHDOG_SETTLE_SAMPLES if watchdog else KICK_SAMPLES),
+             bool(watchdog)) for first, last, watchdog in rows)
         self.covered = max(self.covered, int(covered) + d)
 
     def step(self, error: np.ndarray, recording: bool, judging: bool,
@@ -68,8 +88,9 @@ class GuardFeed:
         held = self._held
         while held and (held[0][0] <= self.covered or len(held) > MAX_HELD_SAMPLES):
             n, e, rec, judge = held.popleft()
-            stood_in = self._disturbed(n)
+            stood_in, watchdog = self._disturbed(n)
             self.stand_in_samples += stood_in
+            self.watchdog_samples += watchdog
             verdict = self.guard.step(e, rec, judge, index=n, stood_in=stood_in)
             if verdict is not None:
                 verdicts.append((verdict, n))
@@ -80,12 +101,19 @@ class GuardFeed:
         """Samples held for the reports now."""
         return len(self._held)
 
-    def _disturbed(self, n: int) -> bool:
-        """Sample ``n`` is within a reported stand-in's marked samples (oldest rows dropped)."""
+    def _disturbed(self, n: int) -> tuple[bool, bool]:
+        """Sample ``n`` is within a reported stand-in's marked samples; within a watchdog's.
+
+        Rows start in order; a watchdog's long settling may cover later rows (oldest rows
+        that end before ``n`` are dropped).
+        """
         rows = self._rows
         while rows and rows[0][1] < n:
             rows.popleft()
-        return bool(rows) and rows[0][0] <= n
+        if not rows or rows[0][0] > n:
+            return False, False
+        watchdog = any(row[2] for row in rows if row[0] <= n <= row[1])
+        return True, watchdog
 
     def clear(self) -> None:
         """Drop the held samples (the tones, the reference or the run start again)."""

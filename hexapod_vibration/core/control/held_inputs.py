@@ -1,11 +1,13 @@
 """Commands the driver held instead of applying them: the input that really went in.
 
 A realtime driver applies, at each sample, the command that answers the sample due; when it
-is late it keeps the one before in force (and after ``command_timeout_samples`` applies
-zero force). For an identification that is a different input from the one it designed: a
-few held samples in a hundred spoil G(f) (on the coupled test plant 1 % of held inputs put
+is late it keeps the one before in force (and after ``command_timeout_samples`` its
+watchdog ramps the force down to zero, and back up once commands come again). For an
+identification that is a different input from the one it designed: a few held samples in a
+hundred spoil G(f) (on the coupled test plant 1 % of held inputs put
 the uncertainty at 138 %). The driver reports which commands it held (``/pph/notch_held``:
-runs of due samples and the sample whose command stood in, -1 for zero force), and:
+runs of due samples, the sample whose command stood in (-1: none) and the gain it went in
+with), and:
 
 - :class:`HeldCommands` keeps those reports for the running identification: up to which
   due sample they are complete, and the rows;
@@ -28,6 +30,10 @@ HELD_WAIT_SAMPLES = 500
 samples (reports come every 100 samples): then analysed with what came."""
 
 
+HeldRow = tuple[int, int, int, float]
+"""``(first due, last due, applied sample or -1, gain)``: a run of due samples whose force was
+``gain`` times the command of sample ``applied`` (``/pph/notch_held``)."""
+
 KEEP_SAMPLES = 30_000
 """Rows older than this many samples before the newest report are dropped (an identification
 lasts 10 s) once more than ``KEEP_ROWS`` are kept."""
@@ -47,13 +53,13 @@ class HeldCommands:
         """True once a report came: the driver reports (a realtime driver)."""
         self.covered = -1
         """The last due sample the reports are complete up to (-1: none)."""
-        self._rows: list[tuple[int, int, int]] = []
+        self._rows: list[HeldRow] = []
 
-    def add(self, rows: Sequence[tuple[int, int, int]], covered: int) -> None:
-        """A report: rows ``(first due, last due, applied sample or -1)``, to ``covered``."""
+    def add(self, rows: Sequence[HeldRow], covered: int) -> None:
+        """A report: rows ``(first due, last due, applied sample or -1, gain)``, to ``covered``."""
         self.reported = True
         self.covered = max(self.covered, int(covered))
-        self._rows.extend((int(a), int(b), int(c)) for a, b, c in rows)
+        self._rows.extend((int(a), int(b), int(c), float(g)) for a, b, c, g in rows)
         if len(self._rows) > KEEP_ROWS:
             self.forget_before(self.covered - KEEP_SAMPLES)
 
@@ -65,28 +71,28 @@ class HeldCommands:
         """Drop the rows that end before ``sample`` (an identification starting there)."""
         self._rows = [row for row in self._rows if row[1] >= sample]
 
-    def rows(self, first: int, last: int) -> list[tuple[int, int, int]]:
+    def rows(self, first: int, last: int) -> list[HeldRow]:
         """The rows that overlap the due samples ``first..last``."""
         return [row for row in self._rows if row[1] >= first and row[0] <= last]
 
 
-def input_difference(rows: Sequence[tuple[int, int, int]], start: int, table: np.ndarray,
+def input_difference(rows: Sequence[HeldRow], start: int, table: np.ndarray,
                      total: int) -> np.ndarray:
     """Applied minus designed excitation (total, C) (N) of a run that started at ``start``.
 
     The run's command for sample ``start + k`` was ``table[k % P]``; a held row gives the
-    samples whose command was replaced by that of its ``applied`` sample (zero force for
-    -1, and for a sample before the run, whose command held no excitation).
+    samples whose command was replaced by ``gain`` times that of its ``applied`` sample
+    (zero force for -1, and for a sample before the run, whose command held no excitation).
     """
     period = table.shape[0]
     du = np.zeros((total, table.shape[1]))
-    for first, last, applied in rows:
+    for first, last, applied, gain in rows:
         k = np.arange(max(first, start), min(last, start + total - 1) + 1) - start
         if k.size == 0:
             continue
         du[k] = -table[k % period]
         if applied >= start:
-            du[k] += table[(applied - start) % period]
+            du[k] += gain * table[(applied - start) % period]
     return du
 
 

@@ -37,6 +37,8 @@ import numpy as np
 from hexapod_vibration.contract import SAMPLE_RATE_HZ, STRUT_COUNT
 from hexapod_vibration.core.control import mu_policy, sensitivity
 from hexapod_vibration.core.control.filters import DCBlocker
+from hexapod_vibration.core.control.guard_feed import WATCHDOG_SETTLE_SAMPLES
+from hexapod_vibration.core.control.held_inputs import HeldRow
 from hexapod_vibration.core.control.notch import FADE_S, AdaptiveNotchCanceller
 from hexapod_vibration.core.control.notch_weights import validate_mu
 from hexapod_vibration.core.control.plant_identification import (
@@ -227,6 +229,7 @@ class NotchSupervisor:
         due = clock.first + int(round(cfg.identify_delay_s * self.fs))
         if index - gap <= due <= index:          # reached now (a gap may have skipped it)
             self._identify_when_due(index)
+        self.identification.resume_if_due(index)
         error = self.dc_blocker.step(accel_m_s2)
         canceller, identification = self.canceller, self.identification
         clamped = canceller.clamped_samples
@@ -264,17 +267,23 @@ class NotchSupervisor:
             self.safety.step(int(index), clock.first, error, self.identification.running,
                              self.follower.active)
 
-    def note_held(self, rows: Sequence[tuple[int, int, int]], covered: int) -> None:
+    def note_held(self, rows: Sequence[HeldRow], covered: int) -> None:
         """The driver's held commands (``/pph/notch_held``; ``core/control/held_inputs``)."""
         self.identification.held.add(rows, covered)
 
-    def note_stand_ins(self, rows: Sequence[tuple[int, int]], covered: int,
+    def note_stand_ins(self, rows: Sequence[tuple[int, int, int]], covered: int,
                        delay_samples: int) -> None:
         """The driver's stand-ins (``/pph/stand_ins``; ``core/control/guard_feed``).
 
         ``delay_samples``: the driver's command delay (due sample j is applied at j + d).
+        A run of the watchdog's in a running identification's record starts it again once
+        the platform settled (``supervisor/stall_restart``).
         """
         self.safety.feed.note(rows, covered, delay_samples)
+        for first, last, watchdog in rows:
+            if watchdog:
+                self.identification.stalled(first + delay_samples,
+                                            last + delay_samples + WATCHDOG_SETTLE_SAMPLES)
 
     def _missed(self, index: int, gap: int) -> None:
         """``gap`` samples before ``index`` never came: left out, the phases move on.

@@ -23,8 +23,10 @@ command of each stream that is:
   command (:meth:`CommandArbiter.forecast`, :mod:`~hexapod_vibration.core.loop.
   forecast_buffer`), counted as ``<stream>_forecast_applied``; the command is still late;
 - **watchdog**: a stream whose last accepted command is more than ``timeout_samples``
-  samples old, and whose forecast does not cover the sample due, contributes zero force
-  (stale) until it commands again; until then its last command is held (zero-order hold);
+  samples old, and whose forecast does not cover the sample due, is stale: its force falls
+  to zero (over ``fade_samples`` samples, :mod:`~hexapod_vibration.core.loop.stale_fade`,
+  from its last command) and rises back the same way when it commands again; until it is
+  stale its last command is held (zero-order hold);
 - **statistics**: samples, lockstep timeouts and missed samples, realtime late commands,
   offers repeated, the latency from a sample's publication to its notch command and the
   period between publications (wall clock, percentiles over the last minute,
@@ -47,6 +49,7 @@ from hexapod_vibration.contract import STRUT_COUNT
 from hexapod_vibration.core.loop.forecast_buffer import ForecastBuffer
 from hexapod_vibration.core.loop.rolling_percentiles import RollingPercentiles
 from hexapod_vibration.core.loop.signal_ranges import out_of_range
+from hexapod_vibration.core.loop.stale_fade import StaleFade
 
 NO_FORCE_N = np.zeros(STRUT_COUNT)
 """Read-only: what a stale stream contributes (N)."""
@@ -98,9 +101,12 @@ class CommandStream:
     """A publisher on the graph (looked up every few hundred samples) or a command accepted
     recently: from its first accepted command a joining controller is waited for
     (lockstep) and its late answers counted (realtime)."""
+    fade: StaleFade = field(default_factory=StaleFade)
+    """The watchdog's ramp: the gain on the stream's force (falls while stale)."""
     stood_in: bool = False
-    """Realtime: at the sample closed last the stream was connected, its answer to the due
-    sample late and not stale, so a stand-in (forecast row or held command) went in."""
+    """Realtime: at the sample closed last the stream was connected and a force it did not
+    compute for the due sample went in: a stand-in for its late answer (forecast row or
+    held command), the watchdog's ramp or zero force."""
 
     @property
     def invalid(self) -> int:
@@ -281,7 +287,7 @@ class CommandArbiter:
         """Expected streams that did not answer the current sample (the handshake's wait)."""
         return [n for n in self.expected if self.streams[n].sample != self.sample]
 
-    def close_sample(self, lockstep: bool, timeout_samples: int
+    def close_sample(self, lockstep: bool, timeout_samples: int, fade_samples: int = 0
                      ) -> tuple[dict[str, np.ndarray], list[str]]:
         """Count what the current sample lacked; the force of every stream to apply.
 
@@ -289,12 +295,13 @@ class CommandArbiter:
         without one, its forecast's row for that sample; else the one applied before, held.
         Lockstep counts the sample as missed if a connected expected stream did not answer
         the sample due; realtime counts every connected stream that did not as late (a
-        forecast applied or not).
+        forecast applied or not). A stale stream's force falls to zero over
+        ``fade_samples`` samples (0: at once) and rises back as long once it is fresh.
 
         Returns:
             ``(forces, newly_stale)``: the force (N) of each stream (its command, forecast
-            or held one, or zero once stale), and the streams that went stale at this
-            sample.
+            or held one, times the watchdog's gain), and the streams that went stale at
+            this sample.
         """
         due = self.due
         for stream in self.streams.values():
@@ -315,13 +322,15 @@ class CommandArbiter:
                 stream.force_n, stream.applied = forecast, due
                 stream.forecast.applied += 1
             stale = forecast is None and not self.fresh(name, timeout_samples)
-            stream.stood_in = (not lockstep and stream.connected and not answered[name]
-                               and not stale)
+            gain = stream.fade.step(stale, fade_samples)
+            stream.stood_in = (not lockstep and stream.connected
+                               and (not answered[name] or gain < 1.0))
             if stale and not stream.stale and stream.sample >= 0:
                 stream.stale_events += 1
                 newly_stale.append(name)
             stream.stale = stale
-            forces[name] = NO_FORCE_N if stale else stream.force_n
+            forces[name] = (stream.force_n if gain == 1.0 else NO_FORCE_N if gain == 0.0
+                            else gain * stream.force_n)
         return forces, newly_stale
 
     def advance(self) -> None:

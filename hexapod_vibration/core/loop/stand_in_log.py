@@ -15,9 +15,14 @@ every command stream, the due samples where such a stand-in went in:
 - otherwise it *stood in*: a command that came but differs, or none at all (a controller
   that skipped the sample after a stall, or was later than the wait: its size unknown).
 
-The driver publishes the runs of such samples, complete up to ``covered`` (``/pph/stand_ins``),
-so that the notch's guard leaves their blocks out. A stale stream (zero force, the
-watchdog) is not a stand-in: the watchdog reports it. No ROS import.
+The watchdog's samples (a stale stream's ramp to zero force, its zero force, the ramp back
+up: :mod:`~hexapod_vibration.core.loop.stale_fade`) are stand-ins too, marked as such: the
+platform answers the loss of a 35 N pointing force for seconds, not for a few samples.
+
+The driver publishes the runs of such samples, complete up to ``covered``, as rows
+``(first due, last due, watchdog)`` (``/pph/stand_ins``; ``watchdog`` 1 if any sample of
+the run was the watchdog's), so that the notch's guard leaves their blocks out. No ROS
+import.
 """
 
 from __future__ import annotations
@@ -52,15 +57,19 @@ class StandInLog:
         """Every due sample up to this one is settled (-1: none)."""
         self.stood_in = 0
         """Due samples reported as stood in, since the start."""
-        self._pending: deque[tuple[int, str, np.ndarray]] = deque()
+        self._pending: deque[tuple[int, str, np.ndarray, bool]] = deque()
         self._cleared: set[tuple[int, str]] = set()
         self._rows: list[list[int]] = []
         self._due = -1
         self._last_stood_in = -1
 
-    def note(self, due: int, stream: str, force_n: np.ndarray) -> None:
-        """At due sample ``due`` stream ``stream``'s answer was late; ``force_n`` went in."""
-        self._pending.append((int(due), stream, np.array(force_n, dtype=float)))
+    def note(self, due: int, stream: str, force_n: np.ndarray, watchdog: bool = False) -> None:
+        """At due sample ``due`` stream ``stream``'s answer was late; ``force_n`` went in.
+
+        ``watchdog``: the force was the watchdog's (its ramp or zero force).
+        """
+        self._pending.append((int(due), stream, np.array(force_n, dtype=float),
+                              bool(watchdog)))
 
     def answered(self, stream: str, index: int, command_n: np.ndarray) -> None:
         """Stream ``stream``'s command for sample ``index`` was accepted (any time).
@@ -70,7 +79,7 @@ class StandInLog:
         """
         if index > self._due:
             return
-        for due, name, force_n in self._pending:
+        for due, name, force_n, _ in self._pending:
             if due == index and name == stream:
                 if np.max(np.abs(np.asarray(command_n) - force_n)) <= self.tolerance_n:
                     self._cleared.add((due, name))
@@ -85,25 +94,31 @@ class StandInLog:
         settled = self._due - self.wait_samples
         pending = self._pending
         while pending and pending[0][0] <= settled:
-            sample, name, _ = pending.popleft()
+            sample, name, _, watchdog = pending.popleft()
             if (sample, name) in self._cleared:
                 self._cleared.discard((sample, name))
             else:
-                self._add_row(sample)
+                self._add_row(sample, watchdog)
         self.covered = max(self.covered, settled)
 
-    def _add_row(self, sample: int) -> None:
+    def _add_row(self, sample: int, watchdog: bool) -> None:
+        rows = self._rows
         if sample <= self._last_stood_in:           # another stream at the same sample
+            if watchdog and rows and rows[-1][1] == sample:
+                rows[-1][2] = 1
             return
         self._last_stood_in = sample
         self.stood_in += 1
-        rows = self._rows
         if rows and rows[-1][1] == sample - 1:
             rows[-1][1] = sample
+            rows[-1][2] |= int(watchdog)
         else:
-            rows.append([sample, sample])
+            rows.append([sample, sample, int(watchdog)])
 
-    def drain(self) -> list[tuple[int, int]]:
-        """The runs ``(first due, last due)`` settled since the last drain, oldest first."""
+    def drain(self) -> list[tuple[int, int, int]]:
+        """The runs ``(first due, last due, watchdog)`` settled since the last drain.
+
+        Oldest first; ``watchdog`` 1 if any of the run's samples was the watchdog's.
+        """
         rows, self._rows = self._rows, []
-        return [(first, last) for first, last in rows]
+        return [(first, last, watchdog) for first, last, watchdog in rows]

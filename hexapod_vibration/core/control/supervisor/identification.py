@@ -52,6 +52,10 @@ from hexapod_vibration.core.control.supervisor.analysis_jobs import (
 from hexapod_vibration.core.control.supervisor.engagement import ControlEngagement
 from hexapod_vibration.core.control.supervisor.parts import SupervisorParts
 from hexapod_vibration.core.control.supervisor.planning import Plan
+from hexapod_vibration.core.control.supervisor.stall_restart import (
+    MAX_STALL_RESTARTS,
+    StallRestart,
+)
 
 MAX_IDENTIFICATION_UNCERTAINTY = 0.1
 """An identification whose relative uncertainty at a tone exceeds this is refused (10 %:
@@ -131,6 +135,8 @@ class PlantIdentification:
         self._jobs = jobs
         self.held = HeldCommands()
         """The driver's reports of the commands it held (a realtime driver)."""
+        self.stall = StallRestart()
+        """An identification a stall of the loop disturbed, waiting to start again."""
         self._observed: dict[int, np.ndarray] = {}
 
     @property
@@ -140,8 +146,8 @@ class PlantIdentification:
 
     @property
     def busy(self) -> bool:
-        """True while running or analysing (state ``identifying``)."""
-        return self.identifier is not None or self.analysis is not None
+        """True while running, analysing or waiting to start again (``identifying``)."""
+        return self.identifier is not None or self.analysis is not None or self.stall.waiting
 
     def start(self, tones: list[float] | None, first_sample: int) -> str:
         """Start an identification whose first sample is ``first_sample``; freeze the weights.
@@ -161,6 +167,7 @@ class PlantIdentification:
         if not tones:
             raise ValueError("no tones to identify")
         self._abandon_analysis("a new identification starts")
+        self.stall.clear()
         cfg, settings = self._settings.config, self._settings
         if cfg.identification == "broadband":
             self.identifier = BroadbandIdentifier(settings.channels, settings.fs)
@@ -209,6 +216,47 @@ class PlantIdentification:
     def restart(self, first_sample: int) -> None:
         """Start the running identification again from ``first_sample``."""
         self.start(list(self.tones), first_sample)
+
+    def stalled(self, first: int, settled: int) -> None:
+        """The driver's watchdog stood in from applied sample ``first``; settled at ``settled``.
+
+        A record that holds any of ``first..settled-1`` measured the stall: it is dropped
+        (its analysis too) and starts again at ``settled`` (:mod:`.stall_restart`); past
+        ``MAX_STALL_RESTARTS`` in a row it is refused.
+        """
+        identifier = self.identifier
+        if identifier is None:
+            if self.stall.waiting:                   # stalled again while settling
+                self.stall.postpone(settled)
+            return
+        if not self.stall.disturbs(first, settled, self.start_sample,
+                                   identifier.total_samples):
+            return
+        if self.analysis is not None:
+            self.analysis.close()
+            self.analysis = None
+        self.identifier = None
+        self.end_sample = self._clock.last           # its excitation stopped here
+        restarts = self.stall.restarts
+        if not self.stall.schedule(settled):
+            self._plant.put_in_force(None, [])
+            self._gate.refuse(f"identification refused: the loop stalled in its record "
+                              f"{MAX_STALL_RESTARTS + 1} times (the driver's watchdog ramped "
+                              "a controller's force); control stays off (~/identify to "
+                              "measure again)")
+            return
+        self._events.add("warn", f"identification disturbed: the driver's watchdog ramped a "
+                                 f"controller's force at sample {first} (a controller stalled "
+                                 f"or started late); it starts again at sample {settled}, "
+                                 f"once the platform settled (restart {restarts + 1} of at "
+                                 f"most {MAX_STALL_RESTARTS})")
+
+    def resume_if_due(self, index: int) -> None:
+        """Start a stalled identification again at its sample (once per call at most)."""
+        if self.stall.waiting and self.stall.due(index):
+            restarts = self.stall.restarts
+            self.start(list(self.tones), index)
+            self.stall.restarts = restarts
 
     def retarget(self, plan: Plan, mode_changed: bool) -> None:
         """New tones or mode: identify what they need; stop an identification they do not.
@@ -360,7 +408,7 @@ class PlantIdentification:
         rows = self.held.rows(first, last)
         if not rows:
             return
-        held = sum(min(b, last) - max(a, first) + 1 for a, b, _ in rows)
+        held = sum(min(b, last) - max(a, first) + 1 for a, b, _, _ in rows)
         identifier.correct_for_held_inputs(
             input_difference(rows, first, identifier.design.period_table(), total))
         complete = "" if self.held.covers(last) else " (the driver's report on its last " \

@@ -66,6 +66,15 @@ from control-on (Welch 4 s): ``spin_up`` without tracking +2.50 -> +0.44 dB, ``d
 +0.63 -> +0.35 dB (a 1 s fall: +0.41 / +0.29 dB; over 1 s blocks ``drift`` is +5.2 dB in
 44.7-56.2 Hz while mu falls, +4.6 dB in 56-71 Hz before)."""
 
+LINE_GAP_SAMPLES = 20
+"""A gap longer than this (samples neither stepped nor observed: lost on the way) restarts the
+line monitor: its blocks count samples, which a gap stretches in time. The samples marked
+for a run of the driver's watchdog (:data:`~hexapod_vibration.core.control.guard_feed.
+WATCHDOG_SETTLE_SAMPLES`) restart it too: the weights re-converge after the force came back,
+and they turn as they do (``single_tone_harmonic`` in realtime, both controllers stopped
+for 350 ms under control: the 80 Hz weights turned coherently at -0.30 and -0.35 Hz
+0.3-0.44 s later, in two runs of two, and the check faded control out)."""
+
 
 class SafetyLevel(StrEnum):
     """How far the safety monitor backed control off (its values are the guard's states)."""
@@ -109,6 +118,7 @@ class SafetyMonitor:
         self.weight_clamps = 0
         self._last_clamp_event = -10**9
         self._quiet_from_sample = -1
+        self._last_sample = -1
 
     @property
     def given_up(self) -> bool:
@@ -130,9 +140,14 @@ class SafetyMonitor:
                        and not canceller.frozen and not identifying
                        and self._plant.response is not None
                        and self.level is not SafetyLevel.OFF)
-        for verdict, sample in self.feed.step(error, quiet and off, controlling, n):
+        feed, watchdog_samples = self.feed, self.feed.watchdog_samples
+        for verdict, sample in feed.step(error, quiet and off, controlling, n):
             if verdict.action is not None and self.level is not SafetyLevel.OFF:
                 self._act(verdict, sample)
+        gap = self._last_sample >= 0 and n - self._last_sample > LINE_GAP_SAMPLES + 1
+        self._last_sample = n
+        if (gap or feed.watchdog_samples != watchdog_samples) and self.line_monitor.started:
+            self.line_monitor.reset()
         self._check_lines(controlling and not following, n)
 
     def _act(self, verdict: GuardVerdict, n: int) -> None:
