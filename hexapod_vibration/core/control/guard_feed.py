@@ -61,7 +61,8 @@ class GuardFeed:
         """Samples the guard got marked as stand-in disturbed."""
         self.watchdog_samples = 0
         """Of those, the samples marked for a run of the watchdog's (and its settling)."""
-        self._rows: deque[tuple[int, int, bool]] = deque()
+        self._rows: deque[tuple[int, int]] = deque()
+        self._watchdog_rows: deque[tuple[int, int]] = deque()
         self._held: deque[tuple[int, np.ndarray, bool, bool]] = deque()
 
     def note(self, rows: Sequence[tuple[int, int, int]], covered: int,
@@ -72,9 +73,12 @@ class GuardFeed:
         """
         self.reported = True
         d = int(delay_samples)
-        self._rows.extend(
-            (first + d, last + d + (WATCHDOG_SETTLE_SAMPLES if watchdog else KICK_SAMPLES),
-             bool(watchdog)) for first, last, watchdog in rows)
+        for first, last, watchdog in rows:
+            marked = (first + d, last + d + (WATCHDOG_SETTLE_SAMPLES if watchdog
+                                             else KICK_SAMPLES))
+            self._rows.append(marked)
+            if watchdog:
+                self._watchdog_rows.append(marked)
         self.covered = max(self.covered, int(covered) + d)
 
     def step(self, error: np.ndarray, recording: bool, judging: bool,
@@ -102,18 +106,8 @@ class GuardFeed:
         return len(self._held)
 
     def _disturbed(self, n: int) -> tuple[bool, bool]:
-        """Sample ``n`` is within a reported stand-in's marked samples; within a watchdog's.
-
-        Rows start in order; a watchdog's long settling may cover later rows (oldest rows
-        that end before ``n`` are dropped).
-        """
-        rows = self._rows
-        while rows and rows[0][1] < n:
-            rows.popleft()
-        if not rows or rows[0][0] > n:
-            return False, False
-        watchdog = any(row[2] for row in rows if row[0] <= n <= row[1])
-        return True, watchdog
+        """Sample ``n`` is within a reported stand-in's marked samples; within a watchdog's."""
+        return _marks(self._rows, n), _marks(self._watchdog_rows, n)
 
     def clear(self) -> None:
         """Drop the held samples (the tones, the reference or the run start again)."""
@@ -123,4 +117,16 @@ class GuardFeed:
         """A new run of the loop: no report, nothing held, samples straight on again."""
         self.clear()
         self._rows.clear()
+        self._watchdog_rows.clear()
         self.reported, self.covered = False, -1
+
+
+def _marks(rows: deque[tuple[int, int]], n: int) -> bool:
+    """Sample ``n`` is within one of ``rows``; the spans ending before ``n`` are dropped.
+
+    ``rows``: marked spans, starts in order (a watchdog's long settling may cover the rows
+    after it).
+    """
+    while rows and rows[0][1] < n:
+        rows.popleft()
+    return bool(rows) and rows[0][0] <= n
