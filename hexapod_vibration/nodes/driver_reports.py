@@ -42,10 +42,11 @@ class DriverReports:
         def publisher(topic: str):
             return serialized_publish(node.create_publisher(Float64MultiArray, topic,
                                                             HELD_QOS))
-        self._held, self._stand_ins = publisher(NOTCH_HELD_TOPIC), publisher(STAND_INS_TOPIC)
         self.held_log = HeldLog()
         self.stand_in_log = StandInLog()
-        self._held_rows, self._stand_in_rows = RepeatedRows(), RepeatedRows()
+        self._reports = (
+            (self.held_log, RepeatedRows(), publisher(NOTCH_HELD_TOPIC), HELD_ROWS_LABEL),
+            (self.stand_in_log, RepeatedRows(), publisher(STAND_INS_TOPIC), STAND_IN_ROWS_LABEL))
 
     def answered(self, stream: str, index: int, command_n: np.ndarray) -> None:
         """A command of ``stream`` for sample ``index`` was accepted (clears a right stand-in)."""
@@ -65,12 +66,7 @@ class DriverReports:
         stand_ins.settle(due)
         if arbiter.sample % HELD_REPORT_EVERY_SAMPLES:
             return
-        held = self.held_log
-        if held.covered >= 0:
-            flat = [float(v) for row in self._held_rows.rows(held.drain()) for v in row]
-            self._held(encode_vector_cdr(flat, held.covered, run, label=HELD_ROWS_LABEL))
-        if stand_ins.covered >= 0:
-            rows = self._stand_in_rows.rows(stand_ins.drain())
-            flat = [float(v) for row in rows for v in row]
-            self._stand_ins(encode_vector_cdr(flat, stand_ins.covered, run,
-                                              label=STAND_IN_ROWS_LABEL))
+        for log, repeated, publish, label in self._reports:
+            if log.covered >= 0:
+                flat = [float(v) for row in repeated.rows(log.drain()) for v in row]
+                publish(encode_vector_cdr(flat, log.covered, run, label=label))

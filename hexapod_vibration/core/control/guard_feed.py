@@ -66,20 +66,25 @@ class GuardFeed:
         self._held: deque[tuple[int, np.ndarray, bool, bool]] = deque()
 
     def note(self, rows: Sequence[tuple[int, int, int]], covered: int,
-             delay_samples: int) -> None:
+             delay_samples: int) -> list[tuple[int, int]]:
         """A report: stand-ins at due samples ``rows`` (first, last, watchdog), to ``covered``.
 
         ``delay_samples``: the driver's command delay (due sample j is applied at j + d).
+        Returns the samples marked for the watchdog's runs, ``(first, last)`` each (the
+        run applied and the platform's settling).
         """
         self.reported = True
         d = int(delay_samples)
+        watchdog_marks = []
         for first, last, watchdog in rows:
             marked = (first + d, last + d + (WATCHDOG_SETTLE_SAMPLES if watchdog
                                              else KICK_SAMPLES))
             self._rows.append(marked)
             if watchdog:
-                self._watchdog_rows.append(marked)
+                watchdog_marks.append(marked)
+        self._watchdog_rows.extend(watchdog_marks)
         self.covered = max(self.covered, int(covered) + d)
+        return watchdog_marks
 
     def step(self, error: np.ndarray, recording: bool, judging: bool,
              index: int) -> list[tuple[GuardVerdict, int]]:

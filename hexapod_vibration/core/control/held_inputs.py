@@ -21,9 +21,13 @@ No ROS import.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Generator, Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+if TYPE_CHECKING:       # plant_identification imports this module
+    from hexapod_vibration.core.control.plant_identification import BroadbandIdentifier
 
 HELD_WAIT_SAMPLES = 500
 """Longest wait (samples) of a finished identification for the driver's report on its last
@@ -74,6 +78,31 @@ class HeldCommands:
     def rows(self, first: int, last: int) -> list[HeldRow]:
         """The rows that overlap the due samples ``first..last``."""
         return [row for row in self._rows if row[1] >= first and row[0] <= last]
+
+    def correct(self, identifier: BroadbandIdentifier, first: int
+                ) -> Generator[None, None, str | None]:
+        """Wait for the report on the record's last sample; correct ``identifier`` for the rows.
+
+        The record started at sample ``first``. At most ``HELD_WAIT_SAMPLES`` samples, one
+        per ``yield``; without reports (lockstep, a driver that does not report) at once.
+        Returns the one-line account of the correction, None when nothing was held.
+        """
+        total = identifier.total_samples
+        last = first + total - 1
+        for _ in range(HELD_WAIT_SAMPLES):
+            if self.covers(last):
+                break
+            yield
+        rows = self.rows(first, last)
+        if not rows:
+            return None
+        held = sum(min(b, last) - max(a, first) + 1 for a, b, _, _ in rows)
+        identifier.correct_for_held_inputs(
+            input_difference(rows, first, identifier.design.period_table(), total))
+        complete = "" if self.covers(last) else " (the driver's report on its last " \
+            "samples did not come)"
+        return (f"identification: the driver held {held} of its {total} commands; G "
+                f"corrected for them{complete}")
 
 
 def input_difference(rows: Sequence[HeldRow], start: int, table: np.ndarray,

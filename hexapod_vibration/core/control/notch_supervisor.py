@@ -37,7 +37,6 @@ import numpy as np
 from hexapod_vibration.contract import SAMPLE_RATE_HZ, STRUT_COUNT
 from hexapod_vibration.core.control import mu_policy, sensitivity
 from hexapod_vibration.core.control.filters import DCBlocker
-from hexapod_vibration.core.control.guard_feed import WATCHDOG_SETTLE_SAMPLES
 from hexapod_vibration.core.control.held_inputs import HeldRow
 from hexapod_vibration.core.control.notch import FADE_S, AdaptiveNotchCanceller
 from hexapod_vibration.core.control.notch_weights import validate_mu
@@ -225,11 +224,7 @@ class NotchSupervisor:
             return None
         if gap:
             self._missed(index, gap)
-        cfg = self._settings.config
-        due = clock.first + int(round(cfg.identify_delay_s * self.fs))
-        if index - gap <= due <= index:          # reached now (a gap may have skipped it)
-            self._identify_when_due(index)
-        self.identification.resume_if_due(index)
+        self.identification.start_when_due(index, gap)
         error = self.dc_blocker.step(accel_m_s2)
         canceller, identification = self.canceller, self.identification
         clamped = canceller.clamped_samples
@@ -237,7 +232,7 @@ class NotchSupervisor:
         if canceller.clamped_samples != clamped:
             self.safety.weights_clamped(index)
         running = identification.identifier is not None
-        if cfg.divergence_guard:
+        if self._settings.config.divergence_guard:
             self.safety.step(index, clock.first, error, running, self.follower.active)
         if self._fader.falling:
             self._fader.step()
@@ -276,14 +271,11 @@ class NotchSupervisor:
         """The driver's stand-ins (``/pph/stand_ins``; ``core/control/guard_feed``).
 
         ``delay_samples``: the driver's command delay (due sample j is applied at j + d).
-        A run of the watchdog's in a running identification's record starts it again once
-        the platform settled (``supervisor/stall_restart``).
+        A run of the watchdog's (with the platform's settling) in a running identification's
+        record starts it again after them (``supervisor/stall_restart``).
         """
-        self.safety.feed.note(rows, covered, delay_samples)
-        for first, last, watchdog in rows:
-            if watchdog:
-                self.identification.stalled(first + delay_samples,
-                                            last + delay_samples + WATCHDOG_SETTLE_SAMPLES)
+        for first, last in self.safety.feed.note(rows, covered, delay_samples):
+            self.identification.stalled(first, last)
 
     def _missed(self, index: int, gap: int) -> None:
         """``gap`` samples before ``index`` never came: left out, the phases move on.
@@ -295,13 +287,6 @@ class NotchSupervisor:
         self.canceller.advance(gap)
         self.identification.skip(index - gap, gap)
         self._gaps.add(index, gap, self._events)
-
-    def _identify_when_due(self, index: int) -> None:
-        """The start-up identification, unless the plant is known or one runs (or no tones)."""
-        if (self._plant.response is None and not self.identification.running
-                and self._settings.config.auto_identify
-                and self.canceller.tone_frequencies_hz.size):
-            self.identification.start(None, index)
 
     # ------------------------------------------------------------------ moving tones
     @property

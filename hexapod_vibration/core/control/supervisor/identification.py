@@ -32,11 +32,7 @@ from typing import Any
 import numpy as np
 
 from hexapod_vibration.core.control import adaptation
-from hexapod_vibration.core.control.held_inputs import (
-    HELD_WAIT_SAMPLES,
-    HeldCommands,
-    input_difference,
-)
+from hexapod_vibration.core.control.held_inputs import HeldCommands
 from hexapod_vibration.core.control.plant_identification import (
     BroadbandIdentifier,
     DisturbanceSpectrum,
@@ -53,7 +49,7 @@ from hexapod_vibration.core.control.supervisor.engagement import ControlEngageme
 from hexapod_vibration.core.control.supervisor.parts import SupervisorParts
 from hexapod_vibration.core.control.supervisor.planning import Plan
 from hexapod_vibration.core.control.supervisor.stall_restart import (
-    MAX_STALL_RESTARTS,
+    STALL_REFUSAL,
     StallRestart,
 )
 
@@ -237,22 +233,25 @@ class PlantIdentification:
             self.analysis = None
         self.identifier = None
         self.end_sample = self._clock.last           # its excitation stopped here
-        restarts = self.stall.restarts
-        if not self.stall.schedule(settled):
+        if self.stall.schedule(settled):
+            self._events.add("warn", self.stall.warning(first))
+        else:
             self._plant.put_in_force(None, [])
-            self._gate.refuse(f"identification refused: the loop stalled in its record "
-                              f"{MAX_STALL_RESTARTS + 1} times (the driver's watchdog ramped "
-                              "a controller's force); control stays off (~/identify to "
-                              "measure again)")
-            return
-        self._events.add("warn", f"identification disturbed: the driver's watchdog ramped a "
-                                 f"controller's force at sample {first} (a controller stalled "
-                                 f"or started late); it starts again at sample {settled}, "
-                                 f"once the platform settled (restart {restarts + 1} of at "
-                                 f"most {MAX_STALL_RESTARTS})")
+            self._gate.refuse(STALL_REFUSAL)
 
-    def resume_if_due(self, index: int) -> None:
-        """Start a stalled identification again at its sample (once per call at most)."""
+    def start_when_due(self, index: int, gap: int) -> None:
+        """At sample ``index`` (after ``gap`` missing): start the identification that is due.
+
+        The start-up one ``identify_delay_s`` after the first sample, unless the plant is
+        known or one runs (or there are no tones); a stalled one's restart
+        (:mod:`.stall_restart`).
+        """
+        clock, cfg = self._clock, self._settings.config
+        due = clock.first + int(round(cfg.identify_delay_s * self._settings.fs))
+        if (index - gap <= due <= index      # reached now (a gap may have skipped it)
+                and self._plant.response is None and self.identifier is None
+                and cfg.auto_identify and self._canceller.tone_frequencies_hz.size):
+            self.start(None, index)
         if self.stall.waiting and self.stall.due(index):
             restarts = self.stall.restarts
             self.start(list(self.tones), index)
@@ -360,7 +359,9 @@ class PlantIdentification:
         canceller stays frozen and off meanwhile (state ``identifying``).
         """
         if isinstance(self.identifier, BroadbandIdentifier):
-            yield from self._correct_for_held_commands()
+            corrected = yield from self.held.correct(self.identifier, self.start_sample)
+            if corrected:
+                self._events.add("info", corrected)
         missing = self.identifier.missing_refusal()
         if missing:
             self.identifier = None
@@ -391,27 +392,3 @@ class PlantIdentification:
         if broadband and self._follower.acquires:
             self._follower.acquire(lines)
         yield from self._engagement.engage(self.tones, measured.response, broadband)
-
-    def _correct_for_held_commands(self) -> Analysis:
-        """Wait for the driver's report on the run's last sample; tell the identifier.
-
-        At most ``HELD_WAIT_SAMPLES`` samples, one per piece; without reports (lockstep, a
-        driver that does not report) at once.
-        """
-        identifier, first = self.identifier, self.start_sample
-        total = identifier.total_samples
-        last = first + total - 1
-        for _ in range(HELD_WAIT_SAMPLES):
-            if self.held.covers(last):
-                break
-            yield
-        rows = self.held.rows(first, last)
-        if not rows:
-            return
-        held = sum(min(b, last) - max(a, first) + 1 for a, b, _, _ in rows)
-        identifier.correct_for_held_inputs(
-            input_difference(rows, first, identifier.design.period_table(), total))
-        complete = "" if self.held.covers(last) else " (the driver's report on its last " \
-            "samples did not come)"
-        self._events.add("info", f"identification: the driver held {held} of its "
-                                 f"{total} commands; G corrected for them{complete}")

@@ -21,6 +21,10 @@ from __future__ import annotations
 MAX_STALL_RESTARTS = 3
 """Restarts of one identification for stalls of the loop before it is refused."""
 
+STALL_REFUSAL = (f"identification refused: the loop stalled in its record "
+                 f"{MAX_STALL_RESTARTS + 1} times (the driver's watchdog ramped a controller's "
+                 "force); control stays off (~/identify to measure again)")
+
 
 class StallRestart:
     """When a stalled identification starts again, and how many times it did."""
@@ -53,6 +57,13 @@ class StallRestart:
         self.restarts += 1
         self.resume_at = max(self.resume_at, int(settled))
         return True
+
+    def warning(self, first: int) -> str:
+        """What a restart scheduled for a watchdog's run from sample ``first`` says."""
+        return (f"identification disturbed: the driver's watchdog ramped a controller's force "
+                f"at sample {first} (a controller stalled or started late); it starts again "
+                f"at sample {self.resume_at}, once the platform settled (restart "
+                f"{self.restarts} of at most {MAX_STALL_RESTARTS})")
 
     def postpone(self, settled: int) -> None:
         """Disturbed again while waiting: start at ``settled`` if later (no restart counted)."""
