@@ -2,9 +2,10 @@
 
 ``python -m hexapod_vibration.bench.floor_nodes ROLE --mode M --samples N --warmup W
 [--priority P] --result FILE``, one process per role (``driver``, ``notch``, ``pointing``,
-``recorder``), on the same topics, QoS, persistent wait set (``ros/executors.LoopSpinner``),
-serialized take and publish and CDR codec as the real nodes (``make bench``'s message-path
-floor, :mod:`hexapod_vibration.bench.message_floor`):
+``recorder``; or ``composed``: driver and both controllers as three nodes of one process and
+one wait set, as ``pph_graph``), on the same topics, QoS, persistent wait set
+(``ros/executors.LoopSpinner``), serialized take and publish and CDR codec as the real
+nodes (``make bench``'s message-path floor, :mod:`hexapod_vibration.bench.message_floor`):
 
 - ``driver``: each sample publishes what the Table 1 driver publishes every sample
   (``/clock``, ``/pph/accel``, ``/pph/eddy``, ``/pph/actuator_force``,
@@ -52,6 +53,8 @@ from hexapod_vibration.ros.messages import StrutArrayPublisher, create_loop_subs
 from hexapod_vibration.ros.recording_loop import BATCH_PERIOD_S, install_stop_flag
 
 ROLES = ("driver", "notch", "pointing", "recorder")
+COMPOSED = "composed"
+"""The role of the driver and both controllers composed in one process (``pph_graph``)."""
 SAMPLE_TOPICS = ("/pph/accel", "/pph/eddy", "/pph/actuator_force")
 COMMAND_TOPICS = {"notch": "/pph/notch_command", "pointing": "/pph/pointing_command"}
 OBSERVED = {"notch": "/pph/accel", "pointing": "/pph/eddy"}
@@ -251,6 +254,28 @@ def _run_driver(spinner, driver: FloorDriver, args: argparse.Namespace,
     return {**window.result(), **driver.result()}
 
 
+def _build_roles(args: argparse.Namespace, window: CpuWindow, create_node, executor) -> list:
+    """The role objects of this process, each on its own node added to ``executor``.
+
+    ``composed``: both controllers, then the driver (the order of ``run_node``'s
+    subscriptions for ``pph_graph``: the controllers' callbacks run before the driver's).
+    """
+    def node(name: str):
+        made = create_node(f"floor_{name}")
+        executor.add_node(made)
+        return made
+
+    if args.role == COMPOSED:
+        return [FloorController(node("notch"), "notch", window),
+                FloorController(node("pointing"), "pointing", window),
+                FloorDriver(node("driver"), args.mode, args.command_delay)]
+    if args.role == "driver":
+        return [FloorDriver(node("driver"), args.mode, args.command_delay)]
+    if args.role == "recorder":
+        return [FloorRecorder(node("recorder"), window)]
+    return [FloorController(node(args.role), args.role, window)]
+
+
 def run(args: argparse.Namespace) -> int:
     """Run one role until done (driver) or stopped (SIGINT/SIGTERM); write the result."""
     stop = install_stop_flag()
@@ -262,24 +287,19 @@ def run(args: argparse.Namespace) -> int:
     from hexapod_vibration.ros.realtime import apply_scheduling
 
     rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
-    node = rclpy.create_node(f"floor_{args.role}")
     if args.priority and args.role != "recorder":      # as realtime_priority: loop nodes
         apply_scheduling(args.priority, [])
     executor = SingleThreadedExecutor()
-    executor.add_node(node)
     window = CpuWindow(args.warmup)
-    if args.role == "driver":
-        role = FloorDriver(node, args.mode, args.command_delay)
-    elif args.role == "recorder":
-        role = FloorRecorder(node, window)
-    else:
-        role = FloorController(node, args.role, window)
+    roles = _build_roles(args, window, rclpy.create_node, executor)
     gc.freeze()        # as run_node: start-up objects never scanned again
-    spinner = LoopSpinner(executor, role.subscriptions, fast=True,
-                          latest_only=getattr(role, "latest_only", ()),
+    spinner = LoopSpinner(executor, [sub for role in roles for sub in role.subscriptions],
+                          fast=True,
+                          latest_only=[sub for role in roles
+                                       for sub in getattr(role, "latest_only", ())],
                           answered=args.command_delay + 1)
-    if args.role == "driver":
-        result = _run_driver(spinner, role, args, stop)
+    if args.role in ("driver", COMPOSED):
+        result = _run_driver(spinner, roles[-1], args, stop)
     else:
         while not stop.is_set():
             woke = time.monotonic()
@@ -298,7 +318,7 @@ def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(
         prog="floor_nodes", description="One process of the loop's message path, nothing "
         "computed (make bench's message-path floor).")
-    parser.add_argument("role", choices=ROLES)
+    parser.add_argument("role", choices=(*ROLES, COMPOSED))
     parser.add_argument("--mode", choices=("lockstep", "realtime"), default="lockstep")
     parser.add_argument("--samples", type=cli.number(1, 10**8, integer=True), default=20000,
                         help="samples the driver runs (default 20000)")

@@ -2,7 +2,8 @@
 
 Runs :mod:`hexapod_vibration.bench.floor_nodes` (driver, notch, pointing, recorder, each
 its own process; the real nodes' topics, QoS, wait sets and codec, no computation) in
-lockstep and in realtime, and reports per process the CPU per sample (its own
+lockstep and in realtime (and composed: driver and controllers as one process, as
+``pph_graph``), and reports per process the CPU per sample (its own
 ``time.process_time`` over the samples after the warm-up), the lockstep speed and the
 realtime late commands. Against the real graph's budget (``node_budget``) it separates what
 the message path costs on this machine from what the nodes compute: the part no change to
@@ -16,13 +17,14 @@ import time
 from pathlib import Path
 from typing import Any
 
-from hexapod_vibration.bench.floor_nodes import ROLES
+from hexapod_vibration.bench.floor_nodes import COMPOSED, ROLES
 from hexapod_vibration.tools.processes import Child, spawn_module, stop_all
 
-FLOOR_RUNS = (("lockstep", True, 0, 20000), ("realtime", True, 0, 62000),
-              ("realtime", False, 0, 62000), ("realtime", True, 50, 62000))
-"""(mode, recorder, SCHED_FIFO priority, samples) of every floor run (lockstep about 10 s
-here; realtime 62 s: 60 s after the warm-up)."""
+FLOOR_RUNS = (("lockstep", True, 0, 20000, False), ("realtime", True, 0, 62000, False),
+              ("realtime", False, 0, 62000, False), ("realtime", True, 50, 62000, False),
+              ("lockstep", True, 0, 20000, True), ("lockstep", False, 0, 20000, True))
+"""(mode, recorder, SCHED_FIFO priority, samples, composed) of every floor run (lockstep
+about 10 s here; realtime 62 s: 60 s after the warm-up)."""
 FLOOR_WARMUP = 2000
 QUICK_SAMPLES = 4000
 
@@ -30,8 +32,11 @@ QUICK_SAMPLES = 4000
 def run_floor(out: Path, mode: str, samples: int, warmup: int = FLOOR_WARMUP,
               command_delay: int | None = None, timeout_s: float = 600.0,
               env: dict[str, str] | None = None, recorder: bool = True,
-              priority: int = 0) -> dict[str, Any]:
+              priority: int = 0, composed: bool = False) -> dict[str, Any]:
     """One floor run (``mode``: lockstep or realtime; ``recorder``: with one); its measurements.
+
+    ``composed``: the driver and both controllers in one process (its CPU is the
+    ``driver`` entry of the result), as ``pph_graph``.
 
     ``command_delay``: the loop's ``command_delay_samples`` (None: the experiment's, 2 in
     realtime and 0 in lockstep). ``priority``: SCHED_FIFO priority of the driver and
@@ -49,7 +54,9 @@ def run_floor(out: Path, mode: str, samples: int, warmup: int = FLOOR_WARMUP,
         RuntimeError: a process died or the driver did not finish in ``timeout_s``.
     """
     out.mkdir(parents=True, exist_ok=True)
-    roles = [role for role in ROLES if recorder or role != "recorder"]
+    roles = [role for role in ((COMPOSED, "recorder") if composed else ROLES)
+             if recorder or role != "recorder"]
+    loop_role = COMPOSED if composed else "driver"
     results = {role: out / f"floor_{mode}_{role}.json" for role in roles}
     for path in results.values():
         path.unlink(missing_ok=True)
@@ -61,11 +68,12 @@ def run_floor(out: Path, mode: str, samples: int, warmup: int = FLOOR_WARMUP,
                                    env=env)
                 for role in reversed(roles)}
     try:
-        _wait_for_driver(children, timeout_s)
+        _wait_for_driver(children, loop_role, timeout_s)
     finally:
-        stop_all([child for role, child in children.items() if role != "driver"])
-        stop_all([children["driver"]])
-    measured = {role: _read(path, children[role]) for role, path in results.items()}
+        stop_all([child for role, child in children.items() if role != loop_role])
+        stop_all([children[loop_role]])
+    measured = {"driver" if role == COMPOSED else role: _read(path, children[role])
+                for role, path in results.items()}
     return floor_summary(measured, mode)
 
 
@@ -88,14 +96,14 @@ def floor_summary(measured: dict[str, dict[str, float]], mode: str) -> dict[str,
 def measure_floor(out: Path, quick: bool) -> dict[str, Any]:
     """Every run of :data:`FLOOR_RUNS`, for results.json (``--quick``: short ones)."""
     floor = {}
-    for mode, recorder, priority, samples in FLOOR_RUNS:
+    for mode, recorder, priority, samples, composed in FLOOR_RUNS:
         samples = QUICK_SAMPLES if quick else samples
         key = f"{mode}/{'recorder' if recorder else 'no recorder'}" + (
-            f"/fifo{priority}" if priority else "")
+            f"/fifo{priority}" if priority else "") + ("/composed" if composed else "")
         print(f"message-path floor: {key}, {samples} samples ...", flush=True)
         try:
             floor[key] = run_floor(out, mode, samples, min(FLOOR_WARMUP, samples // 4),
-                                   recorder=recorder, priority=priority)
+                                   recorder=recorder, priority=priority, composed=composed)
         except RuntimeError as exc:
             floor[key] = {"failed": str(exc)}
     return floor
@@ -112,6 +120,8 @@ def floor_markdown(floor: dict[str, Any]) -> str:
             continue
         cpu = result["cpu_us_per_sample"]
         cells = " | ".join(f"{cpu[role]:.0f}" if role in cpu else "-" for role in ROLES)
+        if mode.endswith(COMPOSED):
+            cells = cells.replace(" | -", " (one process) | -", 1)
         late = result.get("late_fraction")
         latency = " / ".join(_ms(result.get(k)) for k in ("latency_ms_p50", "latency_ms_p99"))
         rows.append(f"| {mode} | {cells} | {result['total_us']:.0f} | "
@@ -131,12 +141,15 @@ def _ms(value: float | None) -> str:
     return "-" if value is None or value != value else f"{value:.2f}"
 
 
-def _wait_for_driver(children: dict[str, Child], timeout_s: float) -> None:
-    """Until the driver process exits (its samples done); any other exit is an error."""
+def _wait_for_driver(children: dict[str, Child], loop_role: str, timeout_s: float) -> None:
+    """Until the driver's process (``loop_role``) exits (its samples done).
+
+    Any other exit is an error.
+    """
     end = time.monotonic() + timeout_s
-    while children["driver"].alive():
+    while children[loop_role].alive():
         for role, child in children.items():
-            if role != "driver" and not child.alive():
+            if role != loop_role and not child.alive():
                 raise RuntimeError(f"floor {role} exited: {child.tail()}")
         if time.monotonic() > end:
             raise RuntimeError(f"the floor driver did not finish in {timeout_s:.0f} s")

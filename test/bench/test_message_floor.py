@@ -1,7 +1,7 @@
-"""The message-path floor: its processes run the loop's exchange and account for every sample.
+"""The message-path floor: its processes (or the composed one) run the loop's exchange.
 
 The numbers are make bench's; here the floor must run, pair every command with its sample and
-measure a window of samples in each process.
+measure a window of samples in each process (every sample accounted for).
 """
 
 from __future__ import annotations
@@ -34,11 +34,15 @@ def test_summary_divides_each_window_and_formats_the_table():
     assert "failed: no driver" in table
 
 
-def test_the_floor_runs_four_processes_in_lockstep(ros_env, tmp_path):
+@pytest.mark.parametrize("composed", [False, True], ids=["processes", "composed"])
+def test_the_floor_runs_its_processes_in_lockstep(ros_env, tmp_path, composed):
     result = run_floor(tmp_path, "lockstep", samples=1500, warmup=300, env=ros_env,
-                       timeout_s=240.0)
+                       timeout_s=240.0, composed=composed)
     assert result["samples"] == 1500 - 1 - 300       # window: sample 300 to the last, 1499
-    assert set(result["cpu_us_per_sample"]) == set(ROLES)
+    processes = {"driver", "recorder"} if composed else set(ROLES)
+    assert set(result["cpu_us_per_sample"]) == processes
     assert all(us > 0.0 for us in result["cpu_us_per_sample"].values())
     assert result["x_real_time"] > 0.0 and "late_fraction" not in result
     assert 0.0 < result["latency_ms_p50"] <= result["latency_ms_p99"]
+    table = floor_markdown({"lockstep/recorder/composed": result})
+    assert ("(one process) | - | - |" in table) is composed

@@ -15,7 +15,7 @@ from hexapod_vibration.contract import NotchState
 from hexapod_vibration.core.control import adaptation
 from hexapod_vibration.core.control.notch import FADE_S
 from hexapod_vibration.core.control.notch_supervisor import NotchConfig, NotchSupervisor
-from hexapod_vibration.core.control.supervisor import fader
+from hexapod_vibration.core.control.supervisor import fader, gate
 from hexapod_vibration.core.sim.scenario import notch_preset
 
 
@@ -139,12 +139,27 @@ def test_gaps_are_reported_at_most_once_a_second_of_samples():
 
 def test_raw_adapts_from_the_first_sample_and_identifies_only_to_measure():
     sup = NotchSupervisor(config(adaptation="raw", enabled=True, mu=1e-4))
-    assert sup.state == NotchState.ENABLED
+    assert sup.state == NotchState.ADAPTING          # P = I needs nothing identified
     run(sup, coupled_gain(0.0), 100)
     assert not sup.identification.running and np.any(sup.canceller.weights != 0)
     run(sup, coupled_gain(0.0), 3200, 100)
     assert sup.status()["identification_start_sample"] == 100
     assert np.array_equal(sup.canceller.coefficients[0], np.eye(6))     # P = I stays
+
+
+@pytest.mark.parametrize("at_start", [True, False], ids=["at_start_up", "switched_on"])
+def test_control_that_cannot_adapt_without_auto_identify_says_why(at_start):
+    sup = NotchSupervisor(config(auto_identify=False, enabled=at_start))
+    if not at_start:
+        run(sup, coupled_gain(0.0), 200)
+        assert not [e for e in sup.drain_events() if e.level == "warn"]
+        sup.apply({"enabled": True})
+    warnings = [e.message for e in sup.drain_events() if e.level == "warn"]
+    assert warnings == [gate.BLIND_CONTROL] and "~/identify" in warnings[0]
+    run(sup, coupled_gain(0.0), 500, 200)
+    assert sup.state == NotchState.ENABLED and not np.any(sup.canceller.weights)
+    raw = NotchSupervisor(config(auto_identify=False, enabled=True, adaptation="raw"))
+    assert not [e for e in raw.drain_events() if e.level == "warn"]     # P = I adapts
 
 
 def test_new_tones_are_identified_and_known_tones_are_not():

@@ -18,6 +18,7 @@ rises by 1 dB.
   window from 1 s after control-on, the pull-in of a tracker that steps its frequency
   once per 16-sample block.) 39.5 and 40.5 Hz, between the lines kept, were dropped for
   the suite's time (each ~10 s with its twin).
+- The paper as printed (`adaptation: raw`) with `auto_identify: false`: guarded.
 - The defaults alone: a scenario that sets only the notch's tones (the Table 1 shaker,
   and the 40.4 Hz one of ``mismatch``), and one that sets the tones and
   ``frequency_tracking``.
@@ -113,3 +114,18 @@ def test_the_defaults_alone_are_never_worse(name, notch, line_hz, least_db):
                                        if k != "tone_frequencies_hz"}
     status = _never_worse_or_refused(scenario, line_hz, least_db)
     assert status["mu_policy"] == "auto" and status["identification"] == "broadband"
+
+
+def test_the_paper_as_printed_without_identification_is_guarded():
+    """``adaptation: raw`` and ``auto_identify: false``: P = I adapts with nothing known.
+
+    At 40 Hz the plant's phase is beyond +-90 degrees, so P = I diverges (an identification
+    would have refused it: bound 0). Unguarded, the 40 Hz band rose 10.5 dB over the twin
+    by the end (the guard never watched: it took "adapting" to need an identified plant);
+    now the guard watches raw's P = I, lowers mu and fades control out, with the reason.
+    """
+    scenario = _with_notch("single_tone_harmonic", tone_frequencies_hz=[40.0, 80.0],
+                           adaptation="raw", auto_identify=False)
+    status = _never_worse_or_refused(scenario, 40.0, least_db=None)
+    assert status["state"] == NotchState.REFUSED
+    assert status["refusal"].startswith("divergence guard: tone 40 Hz"), status["refusal"]

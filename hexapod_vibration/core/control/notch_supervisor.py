@@ -141,6 +141,7 @@ class NotchSupervisor:
         self.follower.rebuild()
         if config.adaptation == "raw" or not config.auto_identify:
             canceller.set_enabled(config.enabled, ramp_samples=0)
+            self._gate.warn_if_blind()
 
     # ------------------------------------------------------------------ settings
     @property

@@ -16,6 +16,11 @@ from hexapod_vibration.core.control.notch import AdaptiveNotchCanceller
 from hexapod_vibration.core.control.supervisor.config import Settings
 from hexapod_vibration.core.control.supervisor.events import EventLog
 
+BLIND_CONTROL = ("control on but not adapting: the plant at the tones is not identified and "
+                 "auto_identify is false; call the ~/identify service (std_srvs/Trigger) or "
+                 "set auto_identify true")
+"""What a normalised mode switched on without an identified plant says."""
+
 
 class Hold(StrEnum):
     """Why control is held off (``NONE``: it is not)."""
@@ -96,6 +101,18 @@ class ControlGate:
             self._set_output(flag)
         self.enabled_since_sample = next_sample if flag else -1
         self._events.add("info", f"control {'on' if flag else 'off'} from sample {next_sample}")
+        if flag and not identifying:
+            self.warn_if_blind()
+
+    def warn_if_blind(self) -> None:
+        """Control set on that cannot adapt and will not learn how by itself: say so (warn).
+
+        The normalised modes adapt once the plant at their tones is identified; with
+        ``auto_identify`` false no identification starts unless asked for.
+        """
+        config = self._settings.config
+        if config.enabled and not self._canceller.adapts and not config.auto_identify:
+            self._events.add("warn", BLIND_CONTROL)
 
     def started(self, next_sample: int) -> None:
         """An identification put control in force: on from ``next_sample`` if set so."""

@@ -12,10 +12,21 @@ from typing import Any
 
 import numpy as np
 
+from hexapod_vibration.core.control.notch_weights import NotchWeights
 from hexapod_vibration.core.control.plant_identification import (
     DisturbanceSpectrum,
     PlantFrequencyResponse,
 )
+
+
+def coefficients_in_force(plant: PlantKnowledge, canceller: NotchWeights) -> bool:
+    """Whether the canceller adapts with coefficients: the identified plant's, or raw's P = I.
+
+    The one definition of "adapting" (the ``adapting`` state, the guard watching): ``raw``
+    (the paper as printed) adapts without any identification, the normalised modes once
+    the plant at their tones is known.
+    """
+    return plant.response is not None or canceller.adapts
 
 
 def tone_key(frequency_hz: float) -> float:

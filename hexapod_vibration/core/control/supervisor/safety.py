@@ -43,7 +43,10 @@ from hexapod_vibration.core.control.supervisor.config import Settings
 from hexapod_vibration.core.control.supervisor.events import EventLog
 from hexapod_vibration.core.control.supervisor.fader import OutputFader
 from hexapod_vibration.core.control.supervisor.gate import ControlGate
-from hexapod_vibration.core.control.supervisor.plant_knowledge import PlantKnowledge
+from hexapod_vibration.core.control.supervisor.plant_knowledge import (
+    PlantKnowledge,
+    coefficients_in_force,
+)
 from hexapod_vibration.core.control.supervisor.rate_policy import RatePolicy
 
 GUARD_SETTLE_S = 0.5
@@ -138,7 +141,7 @@ class SafetyMonitor:
         off = not canceller.enabled and canceller.output_gain == 0.0
         controlling = (canceller.enabled and canceller.output_gain == 1.0
                        and not canceller.frozen and not identifying
-                       and self._plant.response is not None
+                       and coefficients_in_force(self._plant, canceller)
                        and self.level is not SafetyLevel.OFF)
         feed, watchdog_samples = self.feed, self.feed.watchdog_samples
         for verdict, sample in feed.step(error, quiet and off, controlling, n):
@@ -234,13 +237,14 @@ class SafetyMonitor:
     def retry(self, identifying: bool) -> None:
         """New settings after a fade-out: it no longer holds, control may try again.
 
-        The output comes back (as set) unless an identification runs or no plant is known.
+        The output comes back (as set) unless an identification runs or nothing adapts
+        (:func:`coefficients_in_force`).
         """
         if not self.given_up:
             return
         self.restart()
         self._gate.release()
-        if not identifying and self._plant.response is not None:
+        if not identifying and coefficients_in_force(self._plant, self._canceller):
             self._gate.resume()
 
     def restart(self) -> None:

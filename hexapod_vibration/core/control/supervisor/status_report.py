@@ -12,6 +12,7 @@ from typing import Any
 from hexapod_vibration.contract import NotchState
 from hexapod_vibration.core.control.supervisor.identification import PlantIdentification
 from hexapod_vibration.core.control.supervisor.parts import SupervisorParts
+from hexapod_vibration.core.control.supervisor.plant_knowledge import coefficients_in_force
 
 
 class StatusReport:
@@ -25,7 +26,8 @@ class StatusReport:
     def state(self) -> str:
         """One of :class:`NotchState`'s names."""
         parts = self._parts
-        return parts.gate.state(self._identification.busy, parts.plant.response is not None)
+        return parts.gate.state(self._identification.busy,
+                                coefficients_in_force(parts.plant, parts.canceller))
 
     def guard_state(self) -> str:
         """The guard's state: disabled, referencing, watching, backed_off or off."""
