@@ -146,13 +146,20 @@ def encode_float64_array(values: np.ndarray | Sequence[float],
 
     What rclpy serializes from the same message (tested): for the messages published
     every sample or of many values (the controllers' forecasts, 1 200 values every 10
-    samples: about 59 us through the Python message, a few here).
+    samples: about 59 us through the Python message, a few here). One exception, by the
+    CDR standard (OMG CDR 9.3.2.5; eProsima/Fast-CDR#6): an empty ``data`` has no
+    alignment padding after its length, where Jazzy's Fast CDR writes 4 bytes when the
+    length ends off an 8-byte boundary. rclpy reads both; rosbags refuses the padded one
+    ("CDR message size mismatch"), so a bag of empty reports (``/pph/notch_held``,
+    ``/pph/stand_ins``) would not open in it.
     """
     flat = np.ascontiguousarray(values, dtype="<f8").reshape(-1)
     head = b"".join((CDR_LE, b"\x00\x00", _LE32.pack(len(dims)),
                      *(_label(label.encode()) + struct.pack("<II", size, stride)
                        for label, size, stride in dims),
                      _LE32.pack(0), _LE32.pack(flat.size)))
+    if not flat.size:
+        return head
     return b"".join((head, _ALIGN8[(CDR_HEADER - len(head)) & 7], flat.tobytes()))
 
 
@@ -255,7 +262,8 @@ def decode_float64_array(raw: bytes, max_values: int = MAX_ARRAY_VALUES
     pos, labels = _read_layout(raw, _LE32, _EVERY_LABEL)
     (count,) = _LE32.unpack_from(raw, pos)
     pos += 4
-    pos += -(pos - CDR_HEADER) % 8
+    if count:                       # an empty sequence has no alignment (CDR; Fast CDR pads)
+        pos += -(pos - CDR_HEADER) % 8
     if count > max_values or pos + 8 * count > len(raw):
         raise UnsupportedCdr(f"{count} values in {len(raw)} bytes")
     return np.frombuffer(raw, "<f8", count, pos).astype(np.float64), labels

@@ -22,12 +22,13 @@ from hexapod_vibration.cdr import (
     clock_cdr,
     decode_float64_array,
     decode_strut_cdr,
+    encode_float64_array,
     encode_strut_cdr,
     encode_vector_cdr,
     encode_weights_cdr,
     sample_index_of_cdr,
 )
-from hexapod_vibration.contract import MAX_SAMPLE_INDEX, InvalidStrutMessage
+from hexapod_vibration.contract import MAX_SAMPLE_INDEX, InvalidStrutMessage, sample_label
 from hexapod_vibration.ros.diagnostics import sample_time
 from hexapod_vibration.ros.messages import (
     make_strut_array,
@@ -242,10 +243,13 @@ def _rosbags_array(values, dims, little_endian=True) -> bytes:
 @pytest.mark.parametrize("count", [0, 1, 3, 12, MAX_ARRAY_VALUES])
 def test_a_bag_array_is_read_with_every_label(count):
     values = np.arange(count) * 0.5
-    dims = [("frequency_hz", count), ("sample:12", 1), ("run:3", 1), ("sample:99", 1)]
-    decoded, labels = decode_float64_array(_rosbags_array(values, dims) + b"\x00" * 8)
-    np.testing.assert_array_equal(decoded, values)
-    assert labels == [label for label, _ in dims]
+    for label in ("frequency_hz", "held:first_due,last_due,applied,gain"):     # both alignments
+        dims = [(label, count), ("sample:12", 1), ("run:3", 1), ("sample:99", 1)]
+        raw = _rosbags_array(values, dims)
+        for trailing in (b"", b"\x00" * 8):            # bytes after the data are ignored
+            decoded, labels = decode_float64_array(raw + trailing)
+            np.testing.assert_array_equal(decoded, values)
+            assert labels == [label for label, _ in dims]
 
 
 @pytest.mark.parametrize("name, raw", [
@@ -289,10 +293,34 @@ def test_encode_vector_cdr_is_what_rclpy_serializes(size, index, run, label):
 def _assert_is_rclpy_serialization(raw: bytes, msg: Float64MultiArray) -> None:
     """Rclpy reads ``raw`` as ``msg``, and serializes ``msg`` into as many bytes.
 
-    Not byte for byte: rclpy leaves its buffer's old bytes in the alignment padding.
+    Not byte for byte: rclpy leaves its buffer's old bytes in the alignment padding. An
+    empty ``data`` is the CDR standard's (no padding after its length, where Jazzy's Fast
+    CDR pads): rclpy reads it, and so does rosbags, as a bag's reader.
     """
     assert deserialize_message(raw, Float64MultiArray) == msg
-    assert len(raw) == len(serialize_message(msg))
+    if msg.data:
+        assert len(raw) == len(serialize_message(msg))
+    else:
+        assert _rosbags_reads(raw).layout.dim[0].label == msg.layout.dim[0].label
+
+
+def _rosbags_reads(raw: bytes):
+    """The message rosbags' deserializer makes of ``raw`` (it checks the length)."""
+    from rosbags.typesys import Stores, get_typestore
+
+    return get_typestore(Stores.ROS2_JAZZY).deserialize_cdr(raw, "std_msgs/msg/Float64MultiArray")
+
+
+def test_an_empty_array_is_the_cdr_standard_s_and_every_reader_reads_it():
+    """The serializer of Jazzy's rclpy pads an empty float64 sequence; rosbags refuses that."""
+    for label in ("a", "ab", "abcd", "held:first_due,last_due,applied,gain"):
+        dims = [(label, 0, 0), (sample_label(123), 1, 1)]
+        msg = float64_array([], dims)
+        raw = encode_float64_array([], dims)
+        assert deserialize_message(raw, Float64MultiArray) == msg
+        assert raw == _rosbags_array([], [(label, 0), (sample_label(123), 1)])
+        assert list(_rosbags_reads(raw).data) == []
+        assert decode_float64_array(raw)[1] == [label, sample_label(123)]
 
 
 @pytest.mark.parametrize("tones", [1, 2, 16])

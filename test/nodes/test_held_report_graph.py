@@ -123,10 +123,10 @@ def test_the_recorder_records_the_reports_a_listener_gets(ros_context, node_proc
                                                            tmp_path):
     """``pph_recorder`` records ``/pph/notch_held`` and ``/pph/stand_ins``.
 
-    Read back by the independent mcap reader (what rosbag2 reads), every held report in
-    the bag is the one a listener got for the same coverage, and their rows tile every due
-    sample from the first recorded to the last; the stand-in reports are there (empty: no
-    controller).
+    Read back by the independent mcap reader (what rosbag2 reads) and by rosbags, every
+    held report in the bag is the one a listener got for the same coverage, and their rows
+    tile every due sample from the first recorded to the last; the stand-in reports are
+    there (empty: no controller).
     """
     reports = _listen(ros_context)
     recorder_status = RecorderStatus(ros_context.create_node("recorder_status"))
@@ -155,3 +155,22 @@ def test_the_recorder_records_the_reports_a_listener_gets(ros_context, node_proc
     assert set(covered) & set(heard)
     stand_ins = _recorded(bag, STAND_INS_TOPIC, parse_stand_in_report)
     assert stand_ins and all(rows == [] for rows, _, _ in stand_ins), stand_ins
+    # rosbags (the bag library users read with) deserializes every report too: it refused
+    # an empty one with Fast CDR's padding after the data's length ("CDR message size
+    # mismatch"); the driver now writes the CDR standard's empty sequence.
+    assert _deserialized_by_rosbags(bag, (NOTCH_HELD_TOPIC, STAND_INS_TOPIC)) == {
+        NOTCH_HELD_TOPIC: len(held), STAND_INS_TOPIC: len(stand_ins)}
+
+
+def _deserialized_by_rosbags(bag, topics) -> dict[str, int]:
+    """How many messages of each of ``topics`` rosbags' AnyReader deserializes (it raises)."""
+    from rosbags.highlevel import AnyReader
+    from rosbags.typesys import Stores, get_typestore
+
+    counts = dict.fromkeys(topics, 0)
+    with AnyReader([bag], default_typestore=get_typestore(Stores.ROS2_JAZZY)) as reader:
+        chosen = [c for c in reader.connections if c.topic in counts]
+        for connection, _, raw in reader.messages(connections=chosen):
+            reader.deserialize(raw, connection.msgtype)
+            counts[connection.topic] += 1
+    return counts
