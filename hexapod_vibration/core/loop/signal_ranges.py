@@ -48,9 +48,21 @@ class SignalRanges:
                    command_n=model.strut.force_limit_static_n)
 
 
+PYTHON_CHECK_MAX_VALUES = 16
+"""Up to this many values (a strut message: 6) the check runs on the Python floats: about
+1 us against 4 us for NumPy's reductions on this project's machine (four checks a sample
+in the composed graph)."""
+
+
 def out_of_range(values: np.ndarray, limit: float) -> str:
-    """Why ``values`` are beyond ``+-limit`` ("" if every one is within), for diagnostics."""
-    worst = float(np.max(np.abs(values)))
-    if worst <= limit:
+    """Why ``values`` are beyond ``+-limit`` ("" if every one is within), for diagnostics.
+
+    A NaN is beyond any limit.
+    """
+    if values.size <= PYTHON_CHECK_MAX_VALUES:
+        if all(-limit <= v <= limit for v in values.tolist()):
+            return ""
+    elif np.all(np.abs(values) <= limit):
         return ""
+    worst = float(np.max(np.abs(values)))
     return f"|value| {worst:.6g} beyond the physical range {limit:.6g}"
