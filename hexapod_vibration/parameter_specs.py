@@ -526,7 +526,8 @@ NOTCH_CONTROLLER = NodeSpec("notch_controller", summary="six decentralized Adapt
                   "raw = the paper as printed (P = I, mu unnormalised)",
                   choices=ADAPTATION_MODES),
     ParameterSpec("auto_identify", "bool", True, "identify the plant at start-up and "
-                  "whenever unknown tones appear"),
+                  "whenever unknown tones appear; false: decentralized and centralized "
+                  "adapt only after a ~/identify call (raw adapts without one, guarded)"),
     ParameterSpec("identify_delay_s", "double", 1.0, "wait after the first sample before "
                   "the start-up identification (samples' time)", unit="s", low=0.0,
                   high=60.0),
