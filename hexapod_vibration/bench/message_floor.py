@@ -119,12 +119,12 @@ def floor_markdown(floor: dict[str, Any]) -> str:
             rows.append(f"| {mode} | failed: {result['failed']} | | | | | | | |")
             continue
         cpu = result["cpu_us_per_sample"]
-        cells = " | ".join(f"{cpu[role]:.0f}" if role in cpu else "-" for role in ROLES)
+        cells = [f"{cpu[role]:.0f}" if role in cpu else "-" for role in ROLES]
         if mode.endswith(COMPOSED):
-            cells = cells.replace(" | -", " (one process) | -", 1)
+            cells[0] += " (one process)"            # the driver's cell: the whole process
         late = result.get("late_fraction")
         latency = " / ".join(_ms(result.get(k)) for k in ("latency_ms_p50", "latency_ms_p99"))
-        rows.append(f"| {mode} | {cells} | {result['total_us']:.0f} | "
+        rows.append(f"| {mode} | {' | '.join(cells)} | {result['total_us']:.0f} | "
                     f"{result['x_real_time']:.2f} | "
                     f"{'-' if late is None else f'{100 * late:.3f}'} | {latency} |")
     return "\n".join(rows)

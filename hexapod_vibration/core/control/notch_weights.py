@@ -178,7 +178,6 @@ class NotchWeights:
         self._lp = np.zeros((self._c, t), dtype=complex)    # low-passed update of V
         self._ratio = np.asarray(ratio, dtype=float).copy()
         self._adapting = adapting.astype(bool).copy()
-        self._adapts = bool(self._adapting.any())
         self._set_p(p_full)
 
     def _stop_rates(self) -> None:
@@ -253,7 +252,6 @@ class NotchWeights:
         """
         p_full = validate_coefficients(coefficients, self._v.shape[1], self._c)
         self._adapting[:] = True
-        self._adapts = bool(self._adapting.size)
         self._set_p(p_full)
 
     def set_weights(self, weights: np.ndarray) -> None:
@@ -421,7 +419,7 @@ class NotchWeights:
     @property
     def adapts(self) -> bool:
         """True when some tone adapts (its coefficient P is in force: given, or raw P = I)."""
-        return self._adapts
+        return bool(self._adapting.any())
 
     @property
     def mu(self) -> float:
