@@ -4,8 +4,8 @@ A report states first whether the control the run asked for was in force in its 
 window, and if not, why: refused (the identification was unusable or gave no stable rate),
 faded out (the safety monitor found it making things worse), backed off (the guard lowered
 its rate) or never switched on. No ROS import: the statuses are the key/value texts the bag
-holds (``state``, ``refusal``, ``guard``, ``guard_action``, ``last_sample``,
-``enabled``).
+holds (``state``, ``refusal``, ``not_adapting``, ``guard``, ``guard_action``,
+``last_sample``, ``enabled``).
 
 ``report.json`` gets a ``control`` block::
 
@@ -98,7 +98,8 @@ def control_outcome(statuses: Sequence[dict[str, str]], control_on_sample: int |
     if engaged_at is None:
         last = statuses[-1]
         return ControlOutcome(True, False, None, False, "never_engaged",
-                              f"its last state: {last.get('state', '?')}")
+                              last.get("not_adapting")
+                              or f"its last state: {last.get('state', '?')}")
     if backed is not None:
         return ControlOutcome(True, True, engaged_at, adapting_throughout, "backed_off",
                               backed.get("guard_action", ""), _sample(backed))

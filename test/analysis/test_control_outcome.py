@@ -62,6 +62,17 @@ def test_never_engaged_interrupted_and_not_asked():
     assert control_outcome(twin, None, 14000, True).outcome == "not_asked"
 
 
+def test_never_engaged_quotes_why_the_notch_could_not_adapt():
+    why = "control on but not adapting: the plant at the tones is not identified (...)"
+    statuses = [status(1000, "enabled", not_adapting=why), status(20000, "enabled",
+                                                                   not_adapting=why)]
+    outcome = control_outcome(statuses, 12000, 14000, True)
+    assert (outcome.outcome, outcome.reason) == ("never_engaged", why)
+    assert outcome.headline() == ("CONTROL NEVER ENGAGED: the notch did not adapt after "
+                                  f"control-on ({why}); the reductions below are not those "
+                                  "of control")
+
+
 def test_no_status_in_the_controlled_window_is_unknown_not_a_crash():
     """The notch's last status came before the window (seen in a realtime run's bag)."""
     statuses = [*IDENTIFYING, status(12000, "adapting")]

@@ -158,8 +158,12 @@ def test_control_that_cannot_adapt_without_auto_identify_says_why(at_start):
     assert warnings == [gate.BLIND_CONTROL] and "~/identify" in warnings[0]
     run(sup, coupled_gain(0.0), 500, 200)
     assert sup.state == NotchState.ENABLED and not np.any(sup.canceller.weights)
+    assert sup.status()["not_adapting"] == gate.BLIND_CONTROL           # on /diagnostics
+    sup.start_identification()
+    assert "not_adapting" not in sup.status()                            # asked: learning
     raw = NotchSupervisor(config(auto_identify=False, enabled=True, adaptation="raw"))
     assert not [e for e in raw.drain_events() if e.level == "warn"]     # P = I adapts
+    assert "not_adapting" not in raw.status()
 
 
 def test_new_tones_are_identified_and_known_tones_are_not():

@@ -104,14 +104,18 @@ class ControlGate:
         if flag and not identifying:
             self.warn_if_blind()
 
-    def warn_if_blind(self) -> None:
-        """Control set on that cannot adapt and will not learn how by itself: say so (warn).
+    def blind(self) -> bool:
+        """Control is set on, cannot adapt and will not learn how by itself.
 
         The normalised modes adapt once the plant at their tones is identified; with
         ``auto_identify`` false no identification starts unless asked for.
         """
         config = self._settings.config
-        if config.enabled and not self._canceller.adapts and not config.auto_identify:
+        return config.enabled and not config.auto_identify and not self._canceller.adapts
+
+    def warn_if_blind(self) -> None:
+        """Say so (warn, :data:`BLIND_CONTROL`) if control is :meth:`blind`."""
+        if self.blind():
             self._events.add("warn", BLIND_CONTROL)
 
     def started(self, next_sample: int) -> None:

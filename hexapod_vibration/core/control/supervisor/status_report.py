@@ -10,6 +10,7 @@ from __future__ import annotations
 from typing import Any
 
 from hexapod_vibration.contract import NotchState
+from hexapod_vibration.core.control.supervisor.gate import BLIND_CONTROL
 from hexapod_vibration.core.control.supervisor.identification import PlantIdentification
 from hexapod_vibration.core.control.supervisor.parts import SupervisorParts
 from hexapod_vibration.core.control.supervisor.plant_knowledge import coefficients_in_force
@@ -53,6 +54,8 @@ class StatusReport:
         values.update(parts.follower.status())
         if gate.held:
             values["refusal"] = gate.reason
+        elif gate.blind() and not identification.busy:
+            values["not_adapting"] = BLIND_CONTROL
         values.update({"identification": cfg.identification,
                        "identification_confidence": round(plant.confidence, 4),
                        **parts.rates.status(), **parts.safety.status(self.guard_state())})
