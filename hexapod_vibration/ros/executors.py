@@ -165,9 +165,10 @@ class LoopSpinner:
         """The loop subscriptions with data, waiting up to ``timeout_sec`` for one.
 
         Only a wait that found nothing asks whether the context is shut down (a lock and a
-        call, ~1 us, several times a sample): after one that found data a take or publish
-        on a shut-down context fails (``RCL_ERRORS``, handled as the end), and every loop
-        asks ``rclpy.ok()`` once a sample.
+        call, ~1 us, several times a sample). After one that found data the messages are
+        taken (a take still succeeds on a shut-down context) and their callbacks run: a
+        publish then fails (``RCL_ERRORS``, handled as the end), and every loop asks
+        ``rclpy.ok()`` once a sample.
         """
         try:
             ready = self._wait_set.wait(timeout_sec)
