@@ -5,8 +5,9 @@
    (rclpy's own signal handlers are not installed: they shut the context down from another
    thread, in the middle of whatever the node is doing, which is what made Ctrl-C print
    ``RCLError: context is not valid`` tracebacks).
-2. The node(s) are built, a bad parameter or file ends the process with exit code 2 and
-   the reason in one line, before the loop starts. The first node's ``realtime_priority``
+2. The node(s) are built (a signal meanwhile is raised once each is whole, so that it is
+   destroyed like a running one); a bad parameter or file ends the process with exit
+   code 2 and the reason in one line, before the loop starts. The first node's ``realtime_priority``
    and ``cpu_affinity`` (:mod:`hexapod_vibration.ros.realtime`) then apply to the whole
    process; where the OS refuses them, the process ends the same way.
 3. The loop runs until a signal; then the nodes are destroyed and rclpy is shut down in
@@ -68,8 +69,11 @@ def _run(name: str, factory, loop, args, companions) -> int:
     built: list = []
     code = cli.EXIT_OK
     try:
-        built.append(factory())
-        built.extend(make() for make in companions)
+        # A signal while a node is built is raised once it is in ``built``: a node that
+        # started something (the notch's analysis worker) is then destroyed, which stops it.
+        for make in (factory, *companions):
+            with cli.deferred():
+                built.append(make())
         gc.freeze()        # start-up objects: never scanned again by the collector
         executor_name = built[0].get_parameter("executor").value
         subscriptions = [sub for node in built[1:] + built[:1]

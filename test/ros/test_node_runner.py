@@ -1,0 +1,47 @@
+"""``run_node``: a signal while a node is being built still destroys that node.
+
+The probe is a real rclpy node in its own process (``run_node`` ends the process): its
+constructor signals its own process half-way, as Ctrl-C would while a node is starting (the
+notch controller's analysis worker is then already running: a node left undestroyed left
+the worker's semaphores to multiprocessing's resource tracker, which complained).
+"""
+
+from __future__ import annotations
+
+import signal
+import sys
+import textwrap
+
+import pytest
+
+HANG_GUARD_S = 60.0
+PROBE = textwrap.dedent("""
+    import os, signal, sys
+    from rclpy.node import Node
+    from hexapod_vibration.ros.node_runner import run_node
+
+    class Probe(Node):
+        def __init__(self):
+            super().__init__("probe")
+            os.kill(os.getpid(), signal.{signal})   # delivered before the constructor ends
+            for _ in range(1000):                   # bytecodes in which it is handled
+                pass
+            print("built", flush=True)
+
+        def destroy_node(self):
+            print("destroyed", flush=True)
+            super().destroy_node()
+
+    run_node("probe", Probe, args=[])
+""")
+
+
+@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
+def test_a_node_signalled_while_built_is_destroyed(node_processes, signum):
+    script = PROBE.format(signal=signal.Signals(signum).name)
+    process = node_processes.start("probe", command=[sys.executable, "-c", script])
+    code = process.wait(HANG_GUARD_S)
+    output = process.output()
+    assert code == 128 + signum, output
+    assert "built" in output and "destroyed" in output, output
+    assert "Traceback" not in output, output
