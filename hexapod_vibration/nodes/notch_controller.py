@@ -93,8 +93,12 @@ class NotchControllerNode(Node):
         config = NotchConfig().replaced(self._settings_with_pipeline(values))
         z_row = np.linalg.inv(model.geometry.top_jacobian)[2]       # the z axis, as CoreLoop
         self._worker = self._start_worker(values["identification_analysis"])
-        self.supervisor = NotchSupervisor(config, self.fs, output_weights=z_row,
-                                          analysis_worker=self._worker)
+        try:
+            self.supervisor = NotchSupervisor(config, self.fs, output_weights=z_row,
+                                              analysis_worker=self._worker)
+        except ValueError:             # settings refused as a whole: no worker left behind
+            self._stop_worker()
+            raise
         accel_range = SignalRanges.from_model(model).accel_m_s2      # the accelerometers' +-2 g
         self.readers = MatchedReaders(self.publish_diagnostics)
         arrays = {topic: self.readers.publisher(self, Float64MultiArray, topic, LOOP_PUBLISHER_QOS)
@@ -175,10 +179,14 @@ class NotchControllerNode(Node):
         if self._worker is not None and spinner.fast:
             self.supervisor.serve_while_waiting(lambda: spinner.serve_loop(LOOP_WAIT_S))
 
-    def destroy_node(self) -> None:
-        """Stop the analysis worker (after a job in progress: no resource left), the node."""
+    def _stop_worker(self) -> None:
+        """Stop the analysis worker, if any, after a job in progress: no resource left."""
         if self._worker is not None:
             self._worker.shutdown(wait=True, cancel_futures=True)
+
+    def destroy_node(self) -> None:
+        """Stop the analysis worker, then the node."""
+        self._stop_worker()
         super().destroy_node()
 
     def _check_parameters(self, values: dict, changed: frozenset) -> str:

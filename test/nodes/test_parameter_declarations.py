@@ -9,6 +9,8 @@
 
 from __future__ import annotations
 
+import subprocess
+import sys
 from pathlib import Path
 
 import yaml
@@ -133,3 +135,22 @@ def test_params_file_in_the_package_is_complete():
     params = yaml.safe_load((root / "config" / "pph.yaml").read_text())
     for name in ("pph_driver", "notch_controller", "pointing_controller"):
         assert set(params[name]["ros__parameters"]) == set(NODE_SPECS[name].names)
+
+
+def test_a_refusal_after_the_analysis_worker_started_leaves_one_line(ros_env):
+    """``identification_analysis:=process`` starts the worker before the settings' whole check.
+
+    The refusal still ends the node with its one line: the worker is shut down (left
+    running, its queues' semaphores were reported leaked by multiprocessing's resource
+    tracker, which writes after the node's exit: the output is read to its end, when every
+    process holding it has closed it).
+    """
+    command = [str(Path(sys.executable).parent / "notch_controller"), "--ros-args",
+               "-p", "identification_analysis:=process",
+               "-p", "tone_frequencies_hz:=[400.0]", "-p", "harmonics:=3"]
+    result = subprocess.run(command, env=ros_env, capture_output=True, text=True,
+                            timeout=HANG_GUARD_S, check=False)
+    assert result.returncode == 2, result.stderr
+    assert result.stderr.strip().splitlines() == [
+        "notch_controller: error: tone frequencies must be in (0, 500) Hz (fs/2), "
+        "got [800.0, 1200.0, 1600.0]"], result.stderr
