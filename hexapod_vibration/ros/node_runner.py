@@ -7,9 +7,9 @@
    ``RCLError: context is not valid`` tracebacks).
 2. The node(s) are built (a signal meanwhile is raised once each is whole, so that it is
    destroyed like a running one); a bad parameter or file ends the process with exit
-   code 2 and the reason in one line, before the loop starts. The first node's ``realtime_priority``
-   and ``cpu_affinity`` (:mod:`hexapod_vibration.ros.realtime`) then apply to the whole
-   process; where the OS refuses them, the process ends the same way.
+   code 2 and the reason in one line, before the loop starts. The first node's
+   ``realtime_priority`` and ``cpu_affinity`` (:mod:`hexapod_vibration.ros.realtime`) then
+   apply to the whole process; where the OS refuses them, the process ends the same way.
 3. The loop runs until a signal; then the nodes are destroyed and rclpy is shut down in
    order, and the process ends with ``128 + signal`` (130, 143) at once (``cli.exit_now``:
    no interpreter teardown).
