@@ -1,9 +1,9 @@
 """The loop's message path alone: the graph's processes with nothing computed in them.
 
 ``python -m hexapod_vibration.bench.floor_nodes ROLE --mode M --samples N --warmup W
-[--priority P] --result FILE``, one process per role (``driver``, ``notch``, ``pointing``,
-``recorder``; or ``composed``: driver and both controllers as three nodes of one process and
-one wait set, as ``pph_graph``), on the same topics, QoS, persistent wait set
+[--priority P] [--recorder] --result FILE``, one process per role (``driver``, ``notch``,
+``pointing``, ``recorder``; or ``composed``: driver and both controllers as three nodes of
+one process and one wait set, as ``pph_graph``), on the same topics, QoS, persistent wait set
 (``ros/executors.LoopSpinner``), serialized take and publish and CDR codec as the real
 nodes (``make bench``'s message-path floor, :mod:`hexapod_vibration.bench.message_floor`):
 
@@ -13,7 +13,8 @@ nodes (``make bench``'s message-path floor, :mod:`hexapod_vibration.bench.messag
   two command streams; lockstep: advances once both answered (sample 0 offered again every
   50 ms until they did: the handshake); realtime: 1 kHz on the wall clock from the
   handshake, a command counted late if it is not in when the driver steps its sample + d
-  (``command_delay_samples`` d, as the real driver).
+  (``command_delay_samples`` d, as the real driver). With ``--recorder`` it first holds
+  until the recorder matched every publisher, as the real driver in an experiment.
 - ``notch`` / ``pointing``: take ``/pph/accel`` / ``/pph/eddy`` (the newest d + 1 queued),
   decode them, answer each with a zero command of the same index.
 - ``recorder``: takes every message of the seven topics every 10 ms and keeps none.
@@ -113,11 +114,13 @@ class FloorDriver:
         self.arbiter = CommandArbiter(tuple(COMMAND_TOPICS), tuple(COMMAND_TOPICS), RUN,
                                       limit_n=np.inf, latency_stream="notch",
                                       delay_samples=delay)
-        self._arrays = [StrutArrayPublisher(node.create_publisher(
-            Float64MultiArray, topic, LOOP_PUBLISHER_QOS)) for topic in SAMPLE_TOPICS]
-        self._frequencies = serialized_publish(node.create_publisher(
-            Float64MultiArray, DISTURBANCE_FREQUENCIES_TOPIC, LOOP_PUBLISHER_QOS))
-        self._clock = serialized_publish(node.create_publisher(Clock, "/clock", CLOCK_QOS))
+        publishers = {topic: node.create_publisher(Float64MultiArray, topic, LOOP_PUBLISHER_QOS)
+                      for topic in (*SAMPLE_TOPICS, DISTURBANCE_FREQUENCIES_TOPIC)}
+        publishers["/clock"] = node.create_publisher(Clock, "/clock", CLOCK_QOS)
+        self._publishers = publishers
+        self._arrays = [StrutArrayPublisher(publishers[topic]) for topic in SAMPLE_TOPICS]
+        self._frequencies = serialized_publish(publishers[DISTURBANCE_FREQUENCIES_TOPIC])
+        self._clock = serialized_publish(publishers["/clock"])
         self.subscriptions = [create_loop_subscription(
             node, topic, lambda raw, n=name: self._on_command(n, raw), COMMAND_QOS)
             for name, topic in COMMAND_TOPICS.items()]
@@ -127,6 +130,15 @@ class FloorDriver:
     def sample(self) -> int:
         """The current sample."""
         return self.arbiter.sample
+
+    def recorder_unmatched(self) -> bool:
+        """True while a publisher lacks the recorder's reader (and a controller's, if read).
+
+        As the real driver, which holds sample 0 until the recorder matched every publisher:
+        the recorder's window then sees the samples from the first one.
+        """
+        return any(publisher.get_subscription_count() < 1 + (topic in OBSERVED.values())
+                   for topic, publisher in self._publishers.items())
 
     def publish(self, again: bool = False) -> None:
         """This sample's /clock, sensors, force and tone frequencies (fixed values).
@@ -223,6 +235,8 @@ def _run_driver(spinner, driver: FloorDriver, args: argparse.Namespace,
     """Handshake on sample 0, then ``args.samples`` samples; the window's result."""
     window = CpuWindow(args.warmup)
     period = 1.0 / SAMPLE_RATE_HZ
+    while args.recorder and not stop.is_set() and driver.recorder_unmatched():
+        spinner.spin_once(0.01)
     driver.arbiter.refresh_connections(dict.fromkeys(COMMAND_TOPICS, 1), TIMEOUT_SAMPLES)
     again = False
     while not stop.is_set() and driver.arbiter.unanswered():      # the handshake
@@ -328,6 +342,8 @@ def main(argv: list[str] | None = None) -> None:
                         help="command_delay_samples d (default 2)")
     parser.add_argument("--priority", type=cli.number(0, 98, integer=True), default=0,
                         help="SCHED_FIFO priority of the loop roles (0: normal scheduling)")
+    parser.add_argument("--recorder", action="store_true",
+                        help="driver: hold sample 0 until the recorder matched every publisher")
     parser.add_argument("--result", required=True, help="JSON file written at the end")
     cli.exit_now(run(parser.parse_args(argv)))
 

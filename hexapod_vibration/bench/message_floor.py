@@ -63,9 +63,10 @@ def run_floor(out: Path, mode: str, samples: int, warmup: int = FLOOR_WARMUP,
     common = ["--mode", mode, "--samples", str(samples), "--warmup", str(warmup),
               "--command-delay", str(_delay(mode) if command_delay is None else command_delay),
               "--priority", str(priority)]
+    waits = ["--recorder"] if recorder else []        # the loop role holds sample 0 for it
     children = {role: spawn_module(f"floor_{mode}_{role}", "hexapod_vibration.bench.floor_nodes",
-                                   [role, *common, "--result", str(results[role])], out,
-                                   env=env)
+                                   [role, *common, *(waits if role == loop_role else []),
+                                    "--result", str(results[role])], out, env=env)
                 for role in reversed(roles)}
     try:
         _wait_for_driver(children, loop_role, timeout_s)
