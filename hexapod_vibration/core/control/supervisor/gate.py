@@ -101,21 +101,23 @@ class ControlGate:
             self._set_output(flag)
         self.enabled_since_sample = next_sample if flag else -1
         self._events.add("info", f"control {'on' if flag else 'off'} from sample {next_sample}")
-        if flag and not identifying:
-            self.warn_if_blind()
+        if flag:
+            self.warn_if_blind(identifying)
 
-    def blind(self) -> bool:
+    def blind(self, identifying: bool = False) -> bool:
         """Control is set on, cannot adapt and will not learn how by itself.
 
         The normalised modes adapt once the plant at their tones is identified; with
-        ``auto_identify`` false no identification starts unless asked for.
+        ``auto_identify`` false no identification starts unless asked for (``identifying``:
+        one asked for is under way, so control is not blind).
         """
         config = self._settings.config
-        return config.enabled and not config.auto_identify and not self._canceller.adapts
+        return (config.enabled and not identifying and not config.auto_identify
+                and not self._canceller.adapts)
 
-    def warn_if_blind(self) -> None:
+    def warn_if_blind(self, identifying: bool = False) -> None:
         """Say so (warn, :data:`BLIND_CONTROL`) if control is :meth:`blind`."""
-        if self.blind():
+        if self.blind(identifying):
             self._events.add("warn", BLIND_CONTROL)
 
     def started(self, next_sample: int) -> None:

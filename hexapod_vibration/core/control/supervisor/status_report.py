@@ -54,7 +54,7 @@ class StatusReport:
         values.update(parts.follower.status())
         if gate.held:
             values["refusal"] = gate.reason
-        elif gate.blind() and not identification.busy:
+        elif gate.blind(identification.busy):
             values["not_adapting"] = BLIND_CONTROL
         values.update({"identification": cfg.identification,
                        "identification_confidence": round(plant.confidence, 4),
