@@ -18,6 +18,7 @@ with that step, +2.8..+3.5 dB in 44.7-56.2 Hz); ``single_tone_harmonic`` (paper 
 mu 0.002 with the update low-pass): no band above +1 dB, the 40 Hz band at the floor.
 """
 
+import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -156,3 +157,48 @@ def test_spin_up_on_the_tachometer_meets_every_order_from_the_ramp_start():
     status = loop.notch.status()
     assert status["guard"] == "watching" and status["reference"] == "following"
     assert status["tone_mu"][2] > 0.01 > max(status["tone_mu"][:2]), status["tone_mu"]
+
+
+
+def _limited_twins(weight_limit_n: float):
+    """(loop, rise per band in the last window, worst rise): Table 1 with one limit changed."""
+    scenario = load_scenario(ROOT / "config" / "scenarios" / "single_tone_harmonic.yaml")
+    notch = dataclasses.replace(scenario.notch, settings={**scenario.notch.settings,
+                                                          "weight_limit_n": weight_limit_n})
+    scenario = dataclasses.replace(scenario, notch=notch)
+    loop, z_on, z_off = _run_with_twin(scenario)
+    bands = np.vstack([third_octave_bands_hz(5.0, 450.0)[:, 1:], [[36.0, 44.0], [76.0, 84.0]]])
+    n = int(scenario.window_s * FS)
+    rise = _band_db(z_on[-n:], bands) - _band_db(z_off[-n:], bands)
+    return loop, rise, _worst_window_rise(scenario, z_on, z_off, bands[:-2])
+
+
+def test_a_weight_limit_far_below_the_tones_need_is_refused_saying_so():
+    """Table 1 with ``weight_limit_n`` 0.3 N (the 40 Hz tone needs ~2.5 N per strut).
+
+    The clipped 40 Hz weight lifts the 158 Hz third octave; the guard fades control out and
+    the reason says that the weights were held at the limit. Before the ceiling clamp the
+    run said "ok" (the 63 Hz third octave +1.56 dB, the starved 80 Hz weight turning).
+    """
+    loop, rise, worst = _limited_twins(0.3)
+    status = loop.notch.status()
+    assert status["guard"] == "off" and status["state"] == "refused", status
+    assert "the weights were held at weight_limit_n 0.3 N" in status["refusal"], status
+    assert "raise it" in status["refusal"]
+    assert loop.notch.canceller.output_gain == 0.0
+    assert worst < 1.0, worst
+    assert np.max(np.abs(rise)) < 0.1, rise          # the last window: off, as the twin
+
+
+def test_a_weight_limit_below_the_tones_need_keeps_every_tone_it_can_afford():
+    """``weight_limit_n`` 3 N: 40 Hz clipped at the ceiling, 80 Hz given all it needs.
+
+    The clamp clips the largest tone first: the 80 Hz tone (0.024 N) falls as far as with
+    the default 40 N (>= 40 dB), the 40 Hz tone by what the rest of the limit buys. (With
+    all tones scaled together 80 Hz fell 16 dB here and 0.4 dB at 1 N.)
+    """
+    loop, rise, worst = _limited_twins(3.0)
+    status = loop.notch.status()
+    assert status["guard"] == "watching" and status["weights_held_at_limit"], status
+    assert rise[-2] < -15.0 and rise[-1] < -40.0, rise[-2:]
+    assert worst < 1.0, worst

@@ -231,7 +231,7 @@ class NotchSupervisor:
         clamped = canceller.clamped_samples
         command = canceller.step(error, out=self._command)
         if canceller.clamped_samples != clamped:
-            self.safety.weights_clamped(index)
+            self.safety.clamps.clamped(index)
         running = identification.identifier is not None
         if self._settings.config.divergence_guard:
             self.safety.step(index, clock.first, error, running, self.follower.active)

@@ -12,7 +12,8 @@
   mu falls to 0 over :data:`LINE_OFFSET_MU_RAMP_S`, then the output fades over
   :data:`LINE_OFFSET_FADE_S` (:mod:`.fader`).
 - The canceller clamps its weights to ``weight_limit_n`` after every update (anti-windup);
-  the clamps are counted and reported once a second.
+  the clamps are counted and reported once a second, and a fade-out while they hold the
+  weights at the limit says so (:mod:`.weight_clamps`).
 
 Control faded out stays off (:class:`~.gate.ControlGate` holds it) until the settings
 change or a new identification succeeds (:meth:`SafetyMonitor.restart`).
@@ -48,6 +49,7 @@ from hexapod_vibration.core.control.supervisor.plant_knowledge import (
     coefficients_in_force,
 )
 from hexapod_vibration.core.control.supervisor.rate_policy import RatePolicy
+from hexapod_vibration.core.control.supervisor.weight_clamps import WeightClamps
 
 GUARD_SETTLE_S = 0.5
 """After the first sample (DC blocker) and after an identification (the excitation's
@@ -118,8 +120,8 @@ class SafetyMonitor:
         """The last action and why (``guard_action`` on /diagnostics)."""
         self.line_monitor = LineOffsetMonitor(len(tones), settings.fs)
         self.level = SafetyLevel.WATCHING
-        self.weight_clamps = 0
-        self._last_clamp_event = -10**9
+        self.clamps = WeightClamps(settings, canceller, events)
+        """The weights' clamps (anti-windup): counted, said, held at the limit or not."""
         self._quiet_from_sample = -1
         self._last_sample = -1
 
@@ -145,13 +147,19 @@ class SafetyMonitor:
                        and self.level is not SafetyLevel.OFF)
         feed, watchdog_samples = self.feed, self.feed.watchdog_samples
         for verdict, sample in feed.step(error, quiet and off, controlling, n):
-            if verdict.action is not None and self.level is not SafetyLevel.OFF:
-                self._act(verdict, sample)
+            if self.level is not SafetyLevel.OFF:
+                self._judged(verdict, sample)
         gap = self._last_sample >= 0 and n - self._last_sample > LINE_GAP_SAMPLES + 1
         self._last_sample = n
         if (gap or feed.watchdog_samples != watchdog_samples) and self.line_monitor.started:
             self.line_monitor.reset()
         self._check_lines(controlling and not following, n)
+
+    def _judged(self, verdict: GuardVerdict, n: int) -> None:
+        """A judged block ending at sample ``n``: the clamps' share of it; the guard's action."""
+        self.clamps.judged(n, self.guard.block)
+        if verdict.action is not None:
+            self._act(verdict, n)
 
     def _act(self, verdict: GuardVerdict, n: int) -> None:
         """Lower mu, or fade out; say what and why."""
@@ -218,7 +226,7 @@ class SafetyMonitor:
         """
         self.level = SafetyLevel.OFF
         self._fader.fade_out(fade_s, mu_fall_s)
-        self._gate.faded_out(reason)
+        self._gate.faded_out(reason + self.clamps.note())
 
     def apply(self, changes: Mapping[str, Any], tones: list[float] | None) -> None:
         """New settings: ``weight_limit_n``, ``guard_margin_db``, the oscillators.
@@ -252,19 +260,12 @@ class SafetyMonitor:
         self._fader.end()
         self.feed.clear()
         self.guard.restart()
+        self.clamps.restart()
         self.level = SafetyLevel.WATCHING
 
     def quiet_after(self, sample: int) -> None:
         """An identification ended at ``sample``: its excitation decays before recording."""
         self._quiet_from_sample = sample + int(round(GUARD_SETTLE_S * self._settings.fs))
-
-    def weights_clamped(self, n: int) -> None:
-        """Anti-windup took effect at sample ``n`` (``weight_limit_n``): count, say so."""
-        self.weight_clamps += 1
-        if n - self._last_clamp_event >= self._settings.fs:      # one line a second
-            self._last_clamp_event = n
-            self._events.add("warn", f"weights clamped to the actuator rating "
-                                     f"{self._settings.config.weight_limit_n:g} N (anti-windup)")
 
     def state(self, enabled: bool, adapting: bool) -> str:
         """The guard's state: disabled, referencing, watching, backed_off or off."""
@@ -280,7 +281,8 @@ class SafetyMonitor:
                   "guard_reference_blocks": self.guard.reference_blocks,
                   "guard_blocks_with_gaps": self.guard.blocks_with_gaps,
                   "guard_blocks_with_stand_ins": self.guard.blocks_with_stand_ins,
-                  "weight_clamps": self.weight_clamps}
+                  "weight_clamps": self.clamps.count,
+                  "weights_held_at_limit": self.clamps.held}
         monitor = self.line_monitor
         if monitor.ready:
             values.update({"line_offset_hz": np.round(monitor.offset_hz, 4).tolist(),
