@@ -15,6 +15,7 @@ from typing import Any, Protocol
 import rclpy
 
 from hexapod_vibration.ros.executors import LoopSpinner
+from hexapod_vibration.ros.matching import FLUSH_S
 
 OFFER_AGAIN_S = 0.05
 """Lockstep: wall time (s) after which a sample whose commands are missing is published
@@ -180,14 +181,6 @@ def run_realtime(node: PPHDriver, spinner: LoopSpinner) -> None:
         if node.sample % REFRESH_EVERY_SAMPLES == 0:
             node.refresh_connections()
         node.apply_and_step()
-
-
-FLUSH_S = 5.0
-"""Longest wait (s, wall) at exit for the readers to acknowledge every sample published.
-
-Longer than Fast DDS's heartbeat period (3 s by default): a sample lost on its way to a
-starved reader (a recorder on a loaded machine) is only sent again after the writer's next
-heartbeat, so a shorter wait (it was 2 s) let a realtime run's bag lose its last 185 ms."""
 
 
 def run_driver(node: PPHDriver, spinner: LoopSpinner) -> None:

@@ -25,6 +25,12 @@ from rclpy.node import Node
 from rclpy.publisher import Publisher
 
 READERS_SUFFIX = " readers"
+FLUSH_S = 5.0
+"""Longest wait (s, wall) at exit for the readers to acknowledge every sample published.
+
+Longer than Fast DDS's heartbeat period (3 s by default): a sample lost on its way to a
+starved reader (a recorder on a loaded machine) is only sent again after the writer's next
+heartbeat, so a shorter wait (it was 2 s) let a realtime run's bag lose its last 185 ms."""
 
 
 def readers_key(topic: str) -> str:
@@ -66,15 +72,29 @@ class MatchedReaders:
         them, and a reader that lags (a recorder on a loaded machine) loses the run's tail.
         Returns the topics still unacknowledged.
         """
-        deadline = time.monotonic() + timeout_s
-        return [topic for topic, publisher in self._publishers.items()
-                if not publisher.wait_for_all_acked(
-                    Duration(seconds=max(0.0, deadline - time.monotonic())))]
+        return wait_for_acks(self._publishers.values(), timeout_s)
 
     def values(self) -> dict[str, int]:
         """``{"<topic> readers": matched subscriptions}`` of every watched publisher."""
         return {readers_key(topic): publisher.get_subscription_count()
                 for topic, publisher in self._publishers.items()}
+
+
+def wait_for_acks(publishers: Iterable[Publisher], timeout_s: float) -> list[str]:
+    """Wait (at most ``timeout_s`` in all) until every reader acknowledged what was sent.
+
+    Returns the topics of the publishers still unacknowledged (a RELIABLE writer destroyed
+    with unacknowledged samples drops them).
+    """
+    deadline = time.monotonic() + timeout_s
+    return [publisher.topic_name for publisher in publishers
+            if not publisher.wait_for_all_acked(
+                Duration(seconds=max(0.0, deadline - time.monotonic())))]
+
+
+def topic_publishers(nodes: Iterable[Node], topic: str) -> list[Publisher]:
+    """The publishers the ``nodes`` created on ``topic``."""
+    return [pub for node in nodes for pub in node.publishers if pub.topic_name == topic]
 
 
 def unmatched_topics(statuses: Iterable[Mapping[str, str]], topics: Iterable[str],

@@ -10,9 +10,10 @@
    code 2 and the reason in one line, before the loop starts. The first node's
    ``realtime_priority`` and ``cpu_affinity`` (:mod:`hexapod_vibration.ros.realtime`) then
    apply to the whole process; where the OS refuses them, the process ends the same way.
-3. The loop runs until a signal; then the nodes are destroyed and rclpy is shut down in
-   order, and the process ends with ``128 + signal`` (130, 143) at once (``cli.exit_now``:
-   no interpreter teardown).
+3. The loop runs until a signal; then every reader of the nodes' ``/diagnostics``
+   acknowledges their statuses (at most ``FLUSH_S``), the nodes are destroyed and rclpy is
+   shut down in order, and the process ends with ``128 + signal`` (130, 143) at once
+   (``cli.exit_now``: no interpreter teardown).
 """
 
 from __future__ import annotations
@@ -110,12 +111,39 @@ def _run(name: str, factory, loop, args, companions) -> int:
         code = cli.EXIT_USAGE
     finally:
         with cli.deferred():
+            _flush_diagnostics(name, built, rclpy.ok())
             for node in reversed(built):
                 node.destroy_node()
             rclpy.try_shutdown()
     if code == cli.EXIT_OK and cli.stop_requested() is not None:
         code = cli.interrupted_exit_code()
     return code
+
+
+def _flush_diagnostics(name: str, built: list, context_ok: bool) -> None:
+    """Before the nodes go: every reader acknowledged their ``/diagnostics`` (<= FLUSH_S).
+
+    A recorder behind a loaded machine can lose one status and get the next ones only
+    after the lost one is sent again, at the writer's next heartbeat (3 s): a composed
+    graph that then exited took them with it, and a twin run's bag ended with the notch
+    still identifying (its status from 2.25 s on never reached the bag), so the report
+    left the whole window out. Nothing to wait for when the context is gone.
+    """
+    from rclpy.exceptions import InvalidHandle
+
+    from hexapod_vibration.ros.matching import FLUSH_S, topic_publishers, wait_for_acks
+    from hexapod_vibration.ros.rclpy_internals import RCLError
+
+    if not context_ok:
+        return
+    try:
+        late = wait_for_acks(topic_publishers(built, "/diagnostics"), FLUSH_S)
+    except (RCLError, InvalidHandle):
+        return
+    if late:
+        print(f"{name}: exit: /diagnostics not acknowledged by every reader within "
+              f"{FLUSH_S:.0f} s: a reader may lack the last statuses", file=sys.stderr,
+              flush=True)
 
 
 def _command_delay(node) -> int:
