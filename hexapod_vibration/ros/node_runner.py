@@ -111,7 +111,8 @@ def _run(name: str, factory, loop, args, companions) -> int:
         code = cli.EXIT_USAGE
     finally:
         with cli.deferred():
-            _flush_diagnostics(name, built, rclpy.ok())
+            if rclpy.ok():          # nothing to wait for when the context is gone
+                _flush_diagnostics(name, built)
             for node in reversed(built):
                 node.destroy_node()
             rclpy.try_shutdown()
@@ -120,22 +121,20 @@ def _run(name: str, factory, loop, args, companions) -> int:
     return code
 
 
-def _flush_diagnostics(name: str, built: list, context_ok: bool) -> None:
+def _flush_diagnostics(name: str, built: list) -> None:
     """Before the nodes go: every reader acknowledged their ``/diagnostics`` (<= FLUSH_S).
 
     A recorder behind a loaded machine can lose one status and get the next ones only
     after the lost one is sent again, at the writer's next heartbeat (3 s): a composed
     graph that then exited took them with it, and a twin run's bag ended with the notch
     still identifying (its status from 2.25 s on never reached the bag), so the report
-    left the whole window out. Nothing to wait for when the context is gone.
+    left the whole window out.
     """
     from rclpy.exceptions import InvalidHandle
 
     from hexapod_vibration.ros.matching import FLUSH_S, topic_publishers, wait_for_acks
     from hexapod_vibration.ros.rclpy_internals import RCLError
 
-    if not context_ok:
-        return
     try:
         late = wait_for_acks(topic_publishers(built, "/diagnostics"), FLUSH_S)
     except (RCLError, InvalidHandle):

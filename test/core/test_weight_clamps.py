@@ -8,7 +8,6 @@ import numpy as np
 import pytest
 
 from hexapod_vibration.core.control.notch import AdaptiveNotchCanceller
-from hexapod_vibration.core.control.notch_weights import magnitude_ceiling
 from hexapod_vibration.core.control.supervisor.config import NotchConfig, Settings
 from hexapod_vibration.core.control.supervisor.events import EventLog
 from hexapod_vibration.core.control.supervisor.weight_clamps import (
@@ -16,6 +15,7 @@ from hexapod_vibration.core.control.supervisor.weight_clamps import (
     HELD_CLAMP_FRACTION,
     WeightClamps,
 )
+from hexapod_vibration.core.control.weight_ceiling import magnitude_ceiling
 
 FS = 1000.0
 BLOCK = 250

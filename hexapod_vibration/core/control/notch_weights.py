@@ -46,6 +46,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from hexapod_vibration.core.control.weight_ceiling import WeightCeiling
+
 
 def validate_mu(mu: float) -> float:
     """Return ``mu`` as float or raise ValueError if it is not finite and >= 0."""
@@ -56,22 +58,6 @@ def validate_mu(mu: float) -> float:
     if not np.isfinite(value) or value < 0.0:
         raise ValueError(f"mu must be finite and >= 0, got {value}")
     return value
-
-
-def magnitude_ceiling(magnitudes: np.ndarray, limit: float) -> np.ndarray:
-    """Per row of ``magnitudes`` (K, T), >= 0, summing to more than ``limit``: the ceiling.
-
-    The level ``c`` (same unit) with ``sum_t min(m_t, c) = limit``: clipping every
-    magnitude at ``c`` brings the row's sum to ``limit`` and leaves those below ``c``
-    as they are (water-filling from the top). With one column, ``c = limit``.
-    """
-    s = np.sort(magnitudes, axis=1)                              # ascending, (K, T)
-    t = s.shape[1]
-    below = np.cumsum(s, axis=1) - s                             # sum of the smaller ones
-    total_at = below + (t - np.arange(t)) * s                    # sum if clipped at s_k
-    k = np.argmax(total_at > limit, axis=1)                      # first level over the limit
-    rows = np.arange(s.shape[0])
-    return (limit - below[rows, k]) / (t - k)
 
 
 def validate_coefficients(
@@ -167,7 +153,7 @@ class NotchWeights:
         self._integral_base = 0.0
         self._lowpass_hz = 0.0
         self._lowpass_pole = 0.0
-        self._limit_scratch: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+        self._ceiling = WeightCeiling()
         self._adapted_scratch: np.ndarray | None = None
         self.clamped_samples = 0
 
@@ -285,29 +271,13 @@ class NotchWeights:
     def limit_weights(self, limit_n: float) -> bool:
         """Anti-windup: each channel's weights clipped so that sum_t |W[t, i]| <= limit_n (N).
 
-        The sum is the largest output the channel's tones can add up to, so after the
-        clamp the canceller never asks for more than ``limit_n``. A channel over the limit
-        has its largest magnitudes clipped at a common ceiling (:func:`magnitude_ceiling`;
-        directions kept): the tones that need less than their share keep their weights,
-        and the largest give up the excess. (Scaling all of a channel's tones together
-        squeezed the small ones every sample: at 0.3 N on Table 1 the 80 Hz weight was
-        held at a fifth of its 0.024 N need, never converged and turned, lifting the 63 Hz
-        third octave +1.56 dB.) With one tone, the weight is scaled to ``limit_n``.
-        Returns True if a weight was clipped.
+        The largest magnitudes are clipped at a common ceiling
+        (:class:`~hexapod_vibration.core.control.weight_ceiling.WeightCeiling`), so the
+        canceller never asks for more than ``limit_n``. Returns True if a weight was clipped.
         """
-        v = self._v
-        if self._limit_scratch is None or self._limit_scratch[0].shape != v.shape:
-            self._limit_scratch = (np.empty(v.shape), np.empty(v.shape[0]),
-                                   np.empty(v.shape[0], dtype=bool))
-        magnitude, peak, over = self._limit_scratch          # per-sample path: no allocation
-        np.abs(v, out=magnitude)
-        magnitude.sum(axis=1, out=peak)                      # (C,) largest output (N)
-        np.greater(peak, limit_n, out=over)
-        if not over.any():
+        over = self._ceiling.clip(self._v, limit_n)
+        if over is None:
             return False
-        m = magnitude[over]
-        ceiling = magnitude_ceiling(m, limit_n)
-        self._v[over] *= np.minimum(ceiling[:, None] / np.maximum(m, 1e-300), 1.0)
         if self._integral:
             self._zv[over] = 0.0         # anti-windup of the rate too
         self.clamped_samples += 1

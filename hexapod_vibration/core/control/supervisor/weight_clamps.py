@@ -34,11 +34,11 @@ control-on, faded out by the guard 2.5 s after it."""
 
 
 class WeightClamps:
-    """Counts the weights' clamps, says them, and knows whether they hold control at the limit.
+    """Says the weights' clamps and knows whether they hold control at the limit.
 
     Args:
         settings: the settings in force (``weight_limit_n``, fs).
-        canceller: the canceller whose clamps are counted (``clamped_samples``).
+        canceller: the canceller whose clamps are read (``clamped_samples``).
         events: where a clamp is said (at most once a second).
     """
 
@@ -46,16 +46,18 @@ class WeightClamps:
                  events: EventLog) -> None:
         """No clamp counted, no block judged."""
         self._settings, self._canceller, self._events = settings, canceller, events
-        self.count = 0
-        """Samples on which the clamp acted (``weight_clamps``)."""
         self._last_event = -10**9
         self._held_blocks = 0
         self._fraction = 0.0
         self._last_block: tuple[int, int] | None = None     # (last sample, clamps then)
 
+    @property
+    def count(self) -> int:
+        """Samples on which the clamp acted (``weight_clamps``: the canceller's count)."""
+        return self._canceller.clamped_samples
+
     def clamped(self, n: int) -> None:
-        """The clamp acted at sample ``n``: count it; say so at most once a second."""
-        self.count += 1
+        """The clamp acted at sample ``n``: say so at most once a second."""
         if n - self._last_event >= self._settings.fs:
             self._last_event = n
             self._events.add("warn", f"weights clamped to the actuator rating "
