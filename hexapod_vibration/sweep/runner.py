@@ -27,6 +27,7 @@ from hexapod_vibration.sweep.point import failed_row, run_point
 
 CONNECT_TIMEOUT_S = 10.0
 PROGRESS_LOG_INTERVAL_S = 10.0
+_ENVIRON_BEFORE: dict[int, dict[str, str]] = {}   # os.environ before a local cluster, by id(client)
 
 
 @dataclass
@@ -67,9 +68,25 @@ def local_client(workers: int | None = None) -> Any:
     from dask.distributed import Client, LocalCluster
 
     n = workers or usable_cores()
+    environ = dict(os.environ)
     cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
                            dashboard_address=None, silence_logs=logging.ERROR)
-    return Client(cluster)
+    client = Client(cluster)
+    _ENVIRON_BEFORE[id(client)] = environ
+    _restore_environ(environ)
+    return client
+
+
+def _restore_environ(environ: dict[str, str]) -> None:
+    """Put ``os.environ`` back as it was before a local cluster started.
+
+    Dask's nanny writes its workers' settings (``MALLOC_TRIM_THRESHOLD_``,
+    ``OMP_NUM_THREADS=1``, ``PYTHONHASHSEED``...) into the parent's environment before it
+    spawns a worker; every process started later (a benchmark's ROS nodes) inherits them.
+    """
+    for key in set(os.environ) - set(environ):
+        del os.environ[key]
+    os.environ.update(environ)
 
 
 def remote_client(address: str) -> Any:
@@ -85,6 +102,9 @@ def close_client(client: Any) -> None:
     client.close()
     if cluster is not None:
         cluster.close()
+    environ = _ENVIRON_BEFORE.pop(id(client), None)
+    if environ is not None:
+        _restore_environ(environ)
 
 
 def _serial(points: list[PointSpec]) -> Iterator[tuple[PointSpec, dict[str, Any]]]:

@@ -3,6 +3,7 @@
 import copy
 import dataclasses
 import json
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -85,13 +86,17 @@ def test_serial_run_writes_a_row_per_point_with_the_report_metrics(serial_run):
 
 def test_two_dask_workers_give_the_serial_results(serial_run, tmp_path):
     grid, serial_out, _ = serial_run
+    environ = dict(os.environ)
     client = runner.local_client(2)
     try:
+        assert dict(os.environ) == environ      # Dask's worker settings stay in the workers
         assert len(client.scheduler_info()["workers"]) == 2
+        assert set(client.run(lambda: os.environ.get("OMP_NUM_THREADS")).values()) == {"1"}
         summary = runner.run_sweep(grid, tmp_path / "dask", client, progress=False,
                                    plots=False)
     finally:
         runner.close_client(client)
+    assert dict(os.environ) == environ
     assert summary.computed == 4
     dask_rows = results.read_table(tmp_path / "dask" / results.TABLE_NAME)
     serial_rows = results.read_table(serial_out / results.TABLE_NAME)
