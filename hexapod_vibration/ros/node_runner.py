@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import gc
 import sys
+import traceback
 from collections.abc import Callable, Sequence
 
 from hexapod_vibration import cli
@@ -39,7 +40,8 @@ def run_node(name: str, factory: Callable[[], object],
     chooses how they are served (``ros/executors.py``).
     ``companions`` are more nodes composed into the same process and thread.
     ``nodes``: the node names whose parameters ``--help`` lists (default: ``name``).
-    Never returns: exits 0, 2 (bad parameter, file or argument), or 128 + signal.
+    Never returns: exits 0, 2 (bad parameter, file or argument), 128 + signal, or 1 after
+    the traceback of an exception in a callback (a bug; the nodes were destroyed first).
     """
     cli.install_stop_handlers()
     args = cli.node_command_line(name, nodes or (name,), args)
@@ -48,6 +50,11 @@ def run_node(name: str, factory: Callable[[], object],
         code = _run(name, factory, loop, args, companions)
     except cli.StopSignal as stop:           # during the imports or rclpy.init
         code = stop.exit_code
+    except Exception:                        # noqa: BLE001 - a bug: shown, then exit 1
+        traceback.print_exc()
+        print(f"{name}: internal error: the node stopped (the traceback above)",
+              file=sys.stderr, flush=True)
+        code = cli.EXIT_FAILED
     cli.exit_now(code)
 
 
@@ -69,6 +76,7 @@ def _run(name: str, factory, loop, args, companions) -> int:
         return cli.fail(name, f"bad ROS arguments: {exc}")
     built: list = []
     code = cli.EXIT_OK
+    serving = False          # from here on an exception is a fault of the loop, not a usage error
     try:
         # A signal while a node is built is raised once it is in ``built``: a node that
         # started something (the notch's analysis worker) is then destroyed, which stops it.
@@ -99,6 +107,7 @@ def _run(name: str, factory, loop, args, companions) -> int:
         # spread over the cores the loop runs on; under SCHED_FIFO, OpenBLAS's spinning
         # workers stalled the notch's analysis (and the loop) for minutes.
         threadpool_limits(limits=1)
+        serving = True
         (loop or spin_loop)(built[0], spinner)
     except cli.StopSignal as stop:
         code = stop.exit_code
@@ -107,6 +116,8 @@ def _run(name: str, factory, loop, args, companions) -> int:
             raise                                  # a real error, not a shutdown
         code = cli.interrupted_exit_code()
     except (ValueError, FileNotFoundError, ParameterException) as exc:
+        if serving:
+            raise                    # a bug in a callback: its traceback, exit 1, never exit 2
         print(f"{name}: error: {' '.join(str(exc).split())}", file=sys.stderr, flush=True)
         code = cli.EXIT_USAGE
     finally:

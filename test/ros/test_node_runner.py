@@ -45,3 +45,46 @@ def test_a_node_signalled_while_built_is_destroyed(node_processes, signum):
     assert code == 128 + signum, output
     assert "built" in output and "destroyed" in output, output
     assert "Traceback" not in output, output
+
+
+FAULTY = textwrap.dedent("""
+    from rclpy.node import Node
+    from hexapod_vibration.ros.node_runner import run_node
+
+    class Probe(Node):
+        def __init__(self):
+            super().__init__("probe")
+            self.declare_parameter("executor", "waitset")
+            if {at_start}:
+                raise ValueError("bad start value")
+
+        def destroy_node(self):
+            print("destroyed", flush=True)
+            super().destroy_node()
+
+    def serve(node, spinner):
+        raise ValueError("a fault in the loop")
+
+    run_node("probe", Probe, serve, args=[])
+""")
+
+
+def test_a_value_error_while_serving_is_a_fault_not_a_usage_error(node_processes):
+    """Exit 2 and one line are for refused start-up values; a callback's error is a bug."""
+    process = node_processes.start("probe", command=[sys.executable, "-c",
+                                                     FAULTY.format(at_start=False)])
+    code = process.wait(HANG_GUARD_S)
+    output = process.output()
+    assert code == 1, output
+    assert "Traceback" in output and "ValueError: a fault in the loop" in output, output
+    assert "probe: internal error" in output and "destroyed" in output, output
+    assert "probe: error:" not in output, output
+
+
+def test_a_value_error_while_built_is_one_line_and_exit_2(node_processes):
+    process = node_processes.start("probe", command=[sys.executable, "-c",
+                                                     FAULTY.format(at_start=True)])
+    code = process.wait(HANG_GUARD_S)
+    output = process.output()
+    assert code == 2, output
+    assert "probe: error: bad start value" in output and "Traceback" not in output, output
