@@ -36,12 +36,16 @@ PROBE = textwrap.dedent("""
 """)
 
 
-@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
-def test_a_node_signalled_while_built_is_destroyed(node_processes, signum):
-    script = PROBE.format(signal=signal.Signals(signum).name)
+def _run_probe(node_processes, script: str) -> tuple[int, str]:
+    """Run ``script`` as a node process to its end: (exit code, its output)."""
     process = node_processes.start("probe", command=[sys.executable, "-c", script])
     code = process.wait(HANG_GUARD_S)
-    output = process.output()
+    return code, process.output()
+
+
+@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
+def test_a_node_signalled_while_built_is_destroyed(node_processes, signum):
+    code, output = _run_probe(node_processes, PROBE.format(signal=signal.Signals(signum).name))
     assert code == 128 + signum, output
     assert "built" in output and "destroyed" in output, output
     assert "Traceback" not in output, output
@@ -71,10 +75,7 @@ FAULTY = textwrap.dedent("""
 
 def test_a_value_error_while_serving_is_a_fault_not_a_usage_error(node_processes):
     """Exit 2 and one line are for refused start-up values; a callback's error is a bug."""
-    process = node_processes.start("probe", command=[sys.executable, "-c",
-                                                     FAULTY.format(at_start=False)])
-    code = process.wait(HANG_GUARD_S)
-    output = process.output()
+    code, output = _run_probe(node_processes, FAULTY.format(at_start=False))
     assert code == 1, output
     assert "Traceback" in output and "ValueError: a fault in the loop" in output, output
     assert "probe: internal error" in output and "destroyed" in output, output
@@ -82,9 +83,6 @@ def test_a_value_error_while_serving_is_a_fault_not_a_usage_error(node_processes
 
 
 def test_a_value_error_while_built_is_one_line_and_exit_2(node_processes):
-    process = node_processes.start("probe", command=[sys.executable, "-c",
-                                                     FAULTY.format(at_start=True)])
-    code = process.wait(HANG_GUARD_S)
-    output = process.output()
+    code, output = _run_probe(node_processes, FAULTY.format(at_start=True))
     assert code == 2, output
     assert "probe: error: bad start value" in output and "Traceback" not in output, output
