@@ -180,7 +180,9 @@ def measure(out: Path, params: Path, setup: BudgetSetup, warmup_s: float, measur
                 "stages": stage_costs(statuses),
                 "loop": _loop_stats(watch.driver, setup, late)}
     finally:
-        stop_all(list(children.values()))
+        # The driver first, the recorder last (as the experiment runner): a recorder stopped
+        # while the loop still publishes drains for DRAIN_MAX_S (10 s) before it exits.
+        stop_all(list(children.values())[::-1])
         if load is not None:
             stop_all([load])
 

@@ -49,7 +49,7 @@ from hexapod_vibration.ros.parameters import NodeParameters
 from hexapod_vibration.ros.qos import DIAGNOSTICS_QOS
 from hexapod_vibration.ros.rclpy_internals import parameter_overrides, take_serialized_batch
 from hexapod_vibration.ros.recorded_topics import LOOP_TOPICS, RECORDED_TOPICS, RecordedTopic
-from hexapod_vibration.ros.recording_loop import install_stop_flag, record
+from hexapod_vibration.ros.recording_loop import install_stop_flag, leave_graph, record
 
 NODE_NAME = "pph_recorder"
 MAX_BATCH = 500
@@ -188,8 +188,10 @@ def run(args: list[str] | None = None) -> int:
     except (RecordingError, ValueError) as err:
         print(f"{NODE_NAME}: error: {err}", file=sys.stderr)
         return 2
-    record(recorder, stop)          # the bag closed; main() exits at once, no DDS teardown
-    return 128 + stop.signum if stop.is_set() else 0
+    record(recorder, stop)          # the bag is closed: nothing is lost from here on
+    code = 128 + stop.signum if stop.is_set() else 0
+    leave_graph(recorder, lambda: cli.exit_now(code))
+    return code
 
 
 def main(args: list[str] | None = None) -> None:

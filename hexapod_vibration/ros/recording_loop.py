@@ -3,15 +3,19 @@
 At SIGINT/SIGTERM what is still queued is written before the bag is closed. The signal
 handler only sets a plain attribute (:class:`StopFlag`): a handler that takes a lock (as
 ``threading.Event.set`` does) deadlocks when the signal lands while the main thread holds
-that lock (inside ``Event.wait``), and the recorder then outlives the run.
+that lock (inside ``Event.wait``), and the recorder then outlives the run. Once the bag is
+closed the recorder leaves the graph (:func:`leave_graph`) within ``LEAVE_LIMIT_S``.
 """
 
 from __future__ import annotations
 
 import signal
+import threading
 import time
+from collections.abc import Callable
 from typing import Any
 
+import rclpy
 from rclpy.executors import SingleThreadedExecutor
 
 from hexapod_vibration.ros.executors import LoopSpinner
@@ -22,6 +26,8 @@ DRAIN_SPIN_S = 0.05
 DRAIN_MAX_S = 10.0
 """Upper bound (s) of the drain at shutdown, reached only if publishers keep publishing
 (a recorder behind a fast lockstep loop may have a few seconds of messages queued)."""
+LEAVE_LIMIT_S = 2.0
+"""Longest time (s, wall) the recorder spends leaving the graph once its bag is closed."""
 BATCH_PERIOD_S = 0.01
 """Shortest time (s, wall) between two wake-ups of the recording loop. A wake-up costs the
 thread a context switch and a pass over every subscription, tens of us, while writing a
@@ -70,9 +76,7 @@ def install_stop_flag() -> StopFlag:
 def record(recorder: Any, stop: StopFlag) -> None:
     """Record until ``stop``, then write what is queued and close the bag.
 
-    Nothing is torn down after: the caller exits at once (``cli.exit_now``). Once, the
-    teardown (the node's destruction, rclpy's shutdown) hung for more than 90 s after the
-    bag was closed, and the recorder outlived a SIGKILLed experiment (CI).
+    The caller then leaves the graph (:func:`leave_graph`) and exits.
     """
     executor = SingleThreadedExecutor()
     executor.add_node(recorder)
@@ -91,3 +95,21 @@ def record(recorder: Any, stop: StopFlag) -> None:
         recorder.close_bag()
 
 
+
+
+def leave_graph(recorder: Any, exit_now: Callable[[], None]) -> None:
+    """Destroy the node and shut rclpy down, so the peers unmatch its readers at once.
+
+    Deleting the DDS participant announces the readers' end. A process that exits without
+    it stays matched in every peer until its lease runs out (about 20 s here): a driver or
+    controller stopped with it (Ctrl-C of a launch, a test's teardown) then waited its whole
+    exit flush (``ros.matching.FLUSH_S``, twice) for the acknowledgements of readers that
+    were gone. The bag is closed before this, so nothing is lost if it stalls: once, the
+    teardown hung for more than 90 s (a fresh-clone CI run), so ``exit_now`` ends the
+    process from a timer after ``LEAVE_LIMIT_S`` whatever the teardown is doing.
+    """
+    timer = threading.Timer(LEAVE_LIMIT_S, exit_now)
+    timer.daemon = True
+    timer.start()
+    recorder.destroy_node()
+    rclpy.try_shutdown()
