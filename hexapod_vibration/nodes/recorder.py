@@ -20,7 +20,8 @@ publishers``), on the loop topics the duplicate samples dropped (``<topic> dupli
 the highest sample written (``<topic> last sample``, -1: none), and its CPU budget. A
 runner waits for every publisher it needs to be matched on the recorder's side before
 starting the loop. SIGINT or SIGTERM stops it cleanly: messages already queued are
-written, then the bag is closed and the message counts are logged.
+written, then the bag is closed and the message counts are logged, and it leaves the graph
+(``ros.recording_loop.leave_graph``: the other nodes unmatch it at once).
 """
 
 from __future__ import annotations
