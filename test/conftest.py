@@ -22,6 +22,7 @@ only by the ``ros_context`` fixture (``test/ros_test_context.py``).
 
 from __future__ import annotations
 
+import contextlib
 import itertools
 import os
 import random
@@ -92,7 +93,6 @@ def _whole_suite(config: pytest.Config) -> bool:
     return paths == [TEST_DIR]
 
 
-@pytest.hookimpl(tryfirst=True)     # before -m deselects anything
 def pytest_sessionfinish(session: pytest.Session) -> None:
     """Remove the Fast DDS shared-memory files the run's killed nodes left (``fastdds shm clean``).
 
@@ -108,10 +108,12 @@ def pytest_sessionfinish(session: pytest.Session) -> None:
 
     tool = BIN_DIR / "fastdds" if (BIN_DIR / "fastdds").exists() else shutil.which("fastdds")
     if tool is not None:
-        subprocess.run([str(tool), "shm", "clean"], capture_output=True, timeout=60,
-                       check=False)
+        with contextlib.suppress(OSError, subprocess.SubprocessError):
+            subprocess.run([str(tool), "shm", "clean"], capture_output=True, timeout=60,
+                           check=False)
 
 
+@pytest.hookimpl(tryfirst=True)     # before -m deselects anything
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
     """Give every test its tier marker (and ``ros`` to graph tests); the longest files first."""
     for item in items:

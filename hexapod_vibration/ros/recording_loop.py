@@ -95,8 +95,6 @@ def record(recorder: Any, stop: StopFlag) -> None:
         recorder.close_bag()
 
 
-
-
 def leave_graph(recorder: Any, exit_now: Callable[[], None]) -> None:
     """Destroy the node and shut rclpy down, so the peers unmatch its readers at once.
 
