@@ -17,7 +17,8 @@ nodes (``make bench``'s message-path floor, :mod:`hexapod_vibration.bench.messag
   until the recorder matched every publisher, as the real driver in an experiment.
 - ``notch`` / ``pointing``: take ``/pph/accel`` / ``/pph/eddy`` (the newest d + 1 queued),
   decode them, answer each with a zero command of the same index.
-- ``recorder``: takes every message of the seven topics every 10 ms and keeps none.
+- ``recorder``: takes every message of the seven topics every 10 ms and keeps none; at the
+  stop it takes what is still queued (``recording_loop.drain``), as the real recorder.
 
 Each process measures its own CPU (user + system, all threads: ``time.process_time``)
 from sample ``W`` to the last sample it saw and writes ``{"samples", "cpu_s", "wall_s"}``
@@ -51,7 +52,7 @@ from hexapod_vibration.core.loop.command_arbiter import CommandArbiter
 from hexapod_vibration.nodes.driver_loop import OFFER_AGAIN_S
 from hexapod_vibration.parameter_specs import PPH_DRIVER
 from hexapod_vibration.ros.messages import StrutArrayPublisher, create_loop_subscription
-from hexapod_vibration.ros.recording_loop import BATCH_PERIOD_S, install_stop_flag
+from hexapod_vibration.ros.recording_loop import BATCH_PERIOD_S, drain, install_stop_flag
 
 ROLES = ("driver", "notch", "pointing", "recorder")
 COMPOSED = "composed"
@@ -229,6 +230,11 @@ class FloorRecorder:
         self.subscriptions.append(node.create_subscription(Clock, "/clock", on_other,
                                                            RECORDER_CLOCK_QOS, raw=True))
 
+    @property
+    def total(self) -> int:
+        """Messages taken so far (what ``recording_loop.drain`` watches)."""
+        return self.messages
+
 
 def _run_driver(spinner, driver: FloorDriver, args: argparse.Namespace,
                 stop) -> dict[str, float]:
@@ -322,6 +328,8 @@ def run(args: argparse.Namespace) -> int:
                 rest_s = BATCH_PERIOD_S - (time.monotonic() - woke)
                 if rest_s > 0.0 and not stop.is_set():
                     time.sleep(rest_s)
+        if args.role == "recorder":      # what is queued at the stop, as the real recorder
+            drain(spinner, roles[0])
         result = window.result()
     Path(args.result).write_text(json.dumps(result))
     return cli.EXIT_OK

@@ -36,7 +36,7 @@ was two thirds of the recorder's CPU. Taking what 10 ms brought at once keeps th
 10 ms; the subscriptions' queues (RECORDER_QOS) hold seconds, so nothing waits in vain."""
 
 
-def _drain(spinner: LoopSpinner, recorder: Any) -> None:
+def drain(spinner: LoopSpinner, recorder: Any) -> None:
     """Write the messages still arriving: until DRAIN_IDLE_S without one, at most DRAIN_MAX_S."""
     now = time.monotonic()
     deadline, last_new = now + DRAIN_MAX_S, now
@@ -90,7 +90,7 @@ def record(recorder: Any, stop: StopFlag) -> None:
             rest_s = BATCH_PERIOD_S - (time.monotonic() - woke)
             if rest_s > 0.0 and not stop.is_set():
                 time.sleep(rest_s)       # after a signal, at most BATCH_PERIOD_S more
-        _drain(spinner, recorder)
+        drain(spinner, recorder)
     finally:
         recorder.close_bag()
 
