@@ -213,15 +213,16 @@ class FloorRecorder:
         from hexapod_vibration.cdr import sample_index_of_cdr
         from hexapod_vibration.ros.qos import RECORDER_CLOCK_QOS, RECORDER_QOS
 
-        self.messages = 0
+        self.total = 0
+        """Messages taken so far (what ``recording_loop.drain`` watches)."""
         index_of = sample_index_of_cdr
 
         def on_accel(raw: bytes) -> None:
-            self.messages += 1
+            self.total += 1
             window.saw(index_of(raw) or 0)
 
         def on_other(raw: bytes) -> None:
-            self.messages += 1
+            self.total += 1
 
         topics = [*SAMPLE_TOPICS, DISTURBANCE_FREQUENCIES_TOPIC, *COMMAND_TOPICS.values()]
         self.subscriptions = [node.create_subscription(
@@ -229,11 +230,6 @@ class FloorRecorder:
             RECORDER_QOS, raw=True) for topic in topics]
         self.subscriptions.append(node.create_subscription(Clock, "/clock", on_other,
                                                            RECORDER_CLOCK_QOS, raw=True))
-
-    @property
-    def total(self) -> int:
-        """Messages taken so far (what ``recording_loop.drain`` watches)."""
-        return self.messages
 
 
 def _run_driver(spinner, driver: FloorDriver, args: argparse.Namespace,
