@@ -215,7 +215,7 @@ class PPHDriver(Node):
                                                     self.mode == "lockstep")
         plant = self.actuated.plant
         values.update({"mode": self.mode, "held": held, **self.outputs.readers.values(),
-                       "fallback_samples": plant.fallback_samples,
+                       "fallback_samples": plant.fallback_samples, "plant_kernels": plant.kernels,
                        "accel_clipped_samples": plant.accelerometers.clipped_samples,
                        **self.meter.report()})
         if self.reports is not None:

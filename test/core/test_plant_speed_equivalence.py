@@ -1,15 +1,17 @@
-"""The per-call optimisations of PPHPlant.step change no number.
+"""The per-call optimisations of PPHPlant.step change no number, compiled or in NumPy.
 
 A reference implementation of one sample, written the plain way (``Shaker.force_n``,
 ``np.clip``, the start and regime tests evaluated in full every sample, fresh arrays),
 drives a second plant built with the same seeds; both must give the same samples, the
-same random noise streams and the same counters.
+same random noise streams and the same counters. Each test runs the optimised plant on
+both of its arithmetics (``kernels``: the compiled kernels, the NumPy path).
 """
 
 import numpy as np
 import pytest
 
 from hexapod_vibration.core.model.config import load_model_config
+from hexapod_vibration.core.model.kernel_choice import KERNELS_ENV
 from hexapod_vibration.core.model.plant import N_DOF, N_INPUT, N_STATE, PPHPlant
 from hexapod_vibration.core.model.sensors import AccelerometerBank
 from hexapod_vibration.core.model.shaker import Shaker, tones_from_arrays
@@ -21,6 +23,15 @@ FIELDS = ("accel_m_s2", "eddy_m", "applied_force_n", "top_accel_true", "relative
 TONES = tones_from_arrays([40.0, 80.0, 120.0], [80.0, 16.0, 12.0])     # paper Table 1
 DRIFTING = tones_from_arrays([40.0, 80.0, 120.0], [80.0, 16.0, 12.0], [0.3, 1.0, -2.0],
                              drift_hz=2.0, drift_period_s=7.0)
+
+
+@pytest.fixture(params=["compiled", "numpy"])
+def kernels(request, monkeypatch):
+    """Build the plants of a test on the compiled kernels or on the NumPy path."""
+    if request.param == "compiled":
+        pytest.importorskip("numba")
+    monkeypatch.setenv(KERNELS_ENV, request.param)
+    return request.param
 
 
 def _reference_accelerometer(bank: AccelerometerBank, specific_force: np.ndarray) -> np.ndarray:
@@ -124,8 +135,10 @@ def _run_both(model, tones, noise_rms_n, steps=900):
 @pytest.mark.parametrize(("nonlinear", "tones", "noise_rms_n"),
                          [(True, TONES, 0.5), (False, TONES, 0.5), (True, DRIFTING, 0.5),
                           (False, DRIFTING, 0.0)])
-def test_step_matches_the_plain_reference_implementation(nonlinear, tones, noise_rms_n):
+def test_step_matches_the_plain_reference_implementation(nonlinear, tones, noise_rms_n,
+                                                         kernels):
     got, want, fast, slow = _run_both(CFG if nonlinear else CFG.linear(), tones, noise_rms_n)
+    assert (fast._kernels is not None) == (kernels == "compiled")
     # Bit-identical on the machine this was written on; the tolerance only leaves room
     # for a BLAS that rounds np.dot and @ differently. The accelerometers are quantised
     # (a 1e-16 difference moves no 16-bit step) and carry the noise: compared exactly.
@@ -144,8 +157,9 @@ def test_step_matches_the_plain_reference_implementation(nonlinear, tones, noise
 
 @pytest.mark.parametrize("tones", [TONES, DRIFTING, []])
 @pytest.mark.parametrize(("noise_rms_n", "limit_n"), [(0.0, 100.0), (0.7, 100.0), (3.0, 60.0)])
-def test_shaker_force_into_equals_force_n(tones, noise_rms_n, limit_n):
+def test_shaker_force_into_equals_force_n(tones, noise_rms_n, limit_n, kernels):
     fast, slow = (Shaker(tones, noise_rms_n, limit_n, seed=9) for _ in range(2))
+    assert (fast._kernels is not None) == (kernels == "compiled")
     out = np.empty(10)
     for start_s in [0.0, 0.001, 0.5, 12.345, 3600.0, 86400.017]:   # up to a day: absolute t
         for k in range(3):

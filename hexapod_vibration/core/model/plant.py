@@ -28,6 +28,7 @@ from scipy.linalg import expm
 
 from hexapod_vibration.core.model.config import ModelConfig, RigidBodyConfig, StrutConfig
 from hexapod_vibration.core.model.geometry import point_jacobian, skew
+from hexapod_vibration.core.model.kernel_choice import compiled_kernels, kernels_name
 from hexapod_vibration.core.model.sensors import AccelerometerBank, EddySensorArray
 from hexapod_vibration.core.model.shaker import Shaker
 
@@ -202,6 +203,10 @@ class PPHPlant:
         self._lifted_in[N_STATE + IN_GRAVITY] = 1.0
         self._bind_lifted_buffers()
         self._ratio, self._gain = np.empty(6), np.empty(6)
+        self._kernels = compiled_kernels()
+        self._strut_constants = np.array([st.stroke_limit_m, st.force_constant_linear_per_stroke,
+                                          st.force_constant_quadratic_per_stroke,
+                                          self._half_play])
         self.fallback_samples = 0
         self.reset_to_equilibrium()
 
@@ -219,6 +224,11 @@ class PPHPlant:
         next_state = np.hstack([ad, bd])
         self._nl_out = nl_out
         return np.vstack([next_state, strut_accel, accel[0:6], nl_out @ next_state])
+
+    @property
+    def kernels(self) -> str:
+        """What steps this plant: ``compiled`` (numba kernels) or ``numpy`` (same numbers)."""
+        return kernels_name(self._kernels)
 
     @property
     def state(self) -> np.ndarray:
@@ -294,6 +304,7 @@ class PPHPlant:
         nl_rows = out[n + 6 * ns:n + 24 * ns].reshape(ns, 18)
         self._lifted_out = out
         self._out_state = out[:n]
+        self._state_now = self._xu[:n]
         self._out_specific_force = out[n:n + 6 * ns].reshape(ns, 6)
         self._out_strokes, self._out_joints = nl_rows[:, 0:6], nl_rows[:, 12:18]
         self._out_next_nl = nl_rows[-1]
@@ -306,6 +317,8 @@ class PPHPlant:
 
     def _held_actuator_force(self, command_n: np.ndarray) -> np.ndarray:
         """Voice-coil force (N): command times the force constant at this sample's stroke."""
+        if self._kernels is not None:
+            return self._kernels.held_force(self._nl, command_n, self._strut_constants)
         st, ratio, gain = self._strut, self._ratio, self._gain
         np.divide(self._nl[0:6], st.stroke_limit_m, out=ratio)
         np.multiply(st.force_constant_quadratic_per_stroke, ratio, out=gain)
@@ -365,7 +378,7 @@ class PPHPlant:
         """
         t0 = self.sample_index * self.dt_sample_s
         shaker = self.shaker.force_into(t0, self.dt_internal_s, self._shaker_in)
-        actuator = self._held_actuator_force(np.asarray(force_command_n, float))
+        actuator = self._held_actuator_force(np.ascontiguousarray(force_command_n, float))
         if not self._lifted_step(actuator, shaker):
             self._substep_loop(actuator, shaker)
             self.fallback_samples += 1
@@ -391,21 +404,38 @@ class PPHPlant:
         """
         if not (self._start_in_regime or self._enter_regime()):
             return False
-        v = self._lifted_in
         if shaker is not self._shaker_in:
             self._shaker_in[:] = shaker
-        v[:N_STATE] = self._xu[:N_STATE]
-        v[N_STATE:N_STATE + 6] = actuator
-        np.dot(self._lifted, v, out=self._lifted_out)
-        if not self._rows_in_regime(self.substeps):
+        rows = self._lifted_product(actuator)
+        if rows < self.substeps:
             self._start_in_regime = False
-            if not self._rows_in_regime(self.substeps - 1):
+            if rows < self.substeps - 1:
                 return False
         self._xu[:N_STATE] = self._out_state
         self._specific_force = self._out_specific_force
         self._nl = self._out_next_nl.copy()
         self._top_acc = self._out_top_acc
         return True
+
+    def _lifted_product(self, actuator: np.ndarray) -> int:
+        """The lifted product of this sample; how many leading internal steps stay in the regime.
+
+        The count is exact from the compiled kernel; the NumPy path tells only whether all
+        ``substeps``, all but the last (``substeps - 1``) or fewer (0) do, all that
+        :meth:`_lifted_step` asks.
+        """
+        ns = self.substeps
+        if self._kernels is not None:
+            return self._kernels.lifted_rows(self._lifted, self._lifted_in, self._lifted_out,
+                                             self._state_now, actuator, self._strut_constants,
+                                             self._contact_side, ns)
+        v = self._lifted_in
+        v[:N_STATE] = self._state_now
+        v[N_STATE:N_STATE + 6] = actuator
+        np.dot(self._lifted, v, out=self._lifted_out)
+        if self._rows_in_regime(ns):
+            return ns
+        return ns - 1 if self._rows_in_regime(ns - 1) else 0
 
     def _substep_loop(self, actuator: np.ndarray, shaker: np.ndarray) -> None:
         """Internal steps one by one (free-play crossing or hard-stop contact)."""

@@ -16,6 +16,7 @@ from scipy import signal
 
 from hexapod_vibration.core.model.config import AccelerometerConfig, EddyConfig
 from hexapod_vibration.core.model.geometry import point_jacobian
+from hexapod_vibration.core.model.kernel_choice import compiled_kernels
 
 G0_M_S2 = 9.80665
 
@@ -49,6 +50,7 @@ class AccelerometerBank:
         self._state_terms = (np.empty(self._x.shape), np.empty(self._x.shape))
         self._clipped = np.empty(channels)
         self._was_clipped = np.empty(channels, bool)
+        self._kernels = compiled_kernels()
 
     def _lift_filter(self, a: np.ndarray, b: np.ndarray, c: np.ndarray, d: np.ndarray) -> None:
         """Matrices mapping (state, inputs of one sample) to (next state, last output)."""
@@ -76,6 +78,13 @@ class AccelerometerBank:
 
         Returns the value at the sampling instant (last internal step), in m/s^2.
         """
+        if self._kernels is not None:
+            noise = self._rng.normal(0.0, self.noise_rms_m_s2, self._x.shape[1])
+            reading, clipped = self._kernels.accelerometer_reading(
+                self._out_state, self._out_inputs, self._state_update, self._input_update,
+                self._x, specific_force_m_s2, noise, self.range_m_s2, self.lsb_m_s2)
+            self.clipped_samples += clipped
+            return reading
         filtered = self._filter(specific_force_m_s2)
         value = filtered + self._rng.normal(0.0, self.noise_rms_m_s2, filtered.shape[0])
         clipped = np.maximum(value, -self.range_m_s2, out=self._clipped)

@@ -15,7 +15,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from hexapod_vibration.core.model.kernel_choice import compiled_kernels
 from hexapod_vibration.core.model.rotor import Rotor
+
+_NO_NOISE = np.empty(0)
 
 
 @dataclass(frozen=True)
@@ -56,6 +59,7 @@ class Shaker:
         self.force_limit_n = float(force_limit_n)
         self.noise_rms_n = float(noise_rms_n)
         self.rotor = rotor
+        self._kernels = compiled_kernels()
         self.set_tones(tones)
 
     def set_tones(self, tones: Sequence[ShakerTone]) -> None:
@@ -110,6 +114,11 @@ class Shaker:
         """
         if self._drifts:
             out[:] = self._shaker_force_n(start_s + step_s * np.arange(out.shape[0]))
+        elif self._kernels is not None and self._a.size:
+            noise = (self._rng.normal(0.0, self.noise_rms_n, out.shape[0])
+                     if self.noise_rms_n > 0.0 else _NO_NOISE)
+            self._kernels.shaker_tones_into(*self._grid_for(step_s, out.shape[0]), self._a,
+                                            start_s, noise, self.force_limit_n, out)
         else:
             if self._a.size:
                 self._tone_sum(start_s, step_s, out)
@@ -127,6 +136,20 @@ class Shaker:
         np.maximum(force, -self.force_limit_n, out=force)
         return np.minimum(force, self.force_limit_n, out=force)
 
+    def _grid_for(self, step_s: float, steps: int) -> tuple[np.ndarray, ...]:
+        """Time offsets (s), angular frequencies (rad/s), phases (rad) and scratch per (step, tone).
+
+        Laid out once per step size and count (the first call of a run).
+        """
+        key = (step_s, steps)
+        if self._grid_key != key:
+            offsets_s = step_s * np.arange(steps)
+            self._grid = (np.repeat(offsets_s[:, None], self._a.size, axis=1),
+                          np.tile(self._w, (steps, 1)), np.tile(self._p, (steps, 1)),
+                          np.empty((steps, self._a.size)))
+            self._grid_key = key
+        return self._grid
+
     def _tone_sum(self, start_s: float, step_s: float, out: np.ndarray) -> None:
         """Sum of the drift-free tones (N) at ``start_s + step_s * k`` (s), into ``out``.
 
@@ -134,15 +157,7 @@ class Shaker:
         drift term is then exactly zero), so the result is bit-identical; the time
         offsets, angular frequencies and phases are laid out per (time, tone) once.
         """
-        key = (step_s, out.shape[0])
-        if self._grid_key != key:
-            offsets_s = step_s * np.arange(out.shape[0])
-            self._grid = (np.repeat(offsets_s[:, None], self._a.size, axis=1),
-                          np.tile(self._w, (out.shape[0], 1)),
-                          np.tile(self._p, (out.shape[0], 1)),
-                          np.empty((out.shape[0], self._a.size)))
-            self._grid_key = key
-        offsets_s, w, phase_rad, scratch = self._grid
+        offsets_s, w, phase_rad, scratch = self._grid_for(step_s, out.shape[0])
         np.add(offsets_s, start_s, out=scratch)
         np.multiply(w, scratch, out=scratch)
         np.add(scratch, phase_rad, out=scratch)
