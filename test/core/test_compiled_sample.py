@@ -7,6 +7,9 @@ would then say so.) The plain reference implementation of every sample is
 test_plant_speed_equivalence.py's, run on both paths.
 """
 
+import os
+import sys
+
 import numpy as np
 import pytest
 
@@ -70,3 +73,28 @@ def test_the_environment_chooses_the_numpy_path(monkeypatch):
     plant = PPHPlant(CFG)
     assert plant.kernels == "compiled"
     assert plant.shaker._kernels is kernels and plant.accelerometers._kernels is kernels
+
+
+def test_no_python_runs_inside_a_kernel(monkeypatch):
+    """No Python code runs inside a kernel call, so a Ctrl-C cannot land in one.
+
+    A kernel that returned an array ran numba's ``_numba_unpickle`` (Python) to box it: a
+    Ctrl-C there raised the nodes' StopSignal inside the kernel, which numba turned into a
+    SystemError (a driver exited 1, not 130). The kernels return numbers only.
+    """
+    plant = _plant(monkeypatch, "compiled", CFG)
+    calls: set[str] = set()
+
+    def note(frame, event, _arg):
+        if event == "call":
+            calls.add(frame.f_code.co_filename)
+
+    plant.step(np.ones(6))              # the first sample lays out the shaker's grid
+    previous = sys.getprofile()
+    sys.setprofile(note)
+    try:
+        for command in _commands(600):  # free-play, stops (the NumPy fallback) and NaN
+            plant.step(command)
+    finally:
+        sys.setprofile(previous)
+    assert not [name for name in calls if f"{os.sep}numba{os.sep}" in name]

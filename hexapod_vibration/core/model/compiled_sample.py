@@ -19,6 +19,12 @@ against a plain reference.
 numba is optional: :func:`~hexapod_vibration.core.model.kernel_choice.compiled_kernels`
 imports this module on first use (see there). The kernels are compiled for their one signature
 when it is imported, from numba's on-disk cache after the first time.
+
+No kernel returns an array: a returned array is boxed by Python code (numba's
+``_numba_unpickle``) that runs inside the call, where a signal handler raising an exception
+(the nodes' Ctrl-C, ``cli.StopSignal``) turned into a ``SystemError``. They write into
+the caller's buffers and return numbers; ``test_compiled_sample.py`` checks that a plant
+step runs no Python code inside a kernel.
 """
 
 from __future__ import annotations
@@ -54,21 +60,20 @@ def shaker_tones_into(offsets_s: np.ndarray, w_rad_s: np.ndarray, phase_rad: np.
         out[k] = f
 
 
-@numba.njit((_F1, _F1, _F1), cache=True)
-def held_force(start_nl: np.ndarray, command_n: np.ndarray, strut: np.ndarray) -> np.ndarray:
+@numba.njit((_F1, _F1, _F1, _F1), cache=True)
+def held_force(start_nl: np.ndarray, command_n: np.ndarray, strut: np.ndarray,
+               force: np.ndarray) -> None:
     """``PPHPlant._held_actuator_force``: command times the force constant at the stroke (N).
 
     ``strut`` is ``[stroke_limit_m, force_constant_linear_per_stroke,
     force_constant_quadratic_per_stroke, half_play_m]``; ``start_nl`` starts with the six
-    strokes (m) at the start of the sample.
+    strokes (m) at the start of the sample. Writes the six forces into ``force``.
     """
-    force = np.empty(6)
     for i in range(6):
         ratio = start_nl[i] / strut[0]
         gain = strut[1] - strut[2] * ratio
         gain = ratio * gain
         force[i] = command_n[i] * (1.0 + gain)
-    return force
 
 
 @numba.njit((_F2, _F1, _F1, _F1, _F1, _F1, _F1, numba.int64), cache=True)
@@ -97,19 +102,20 @@ def lifted_rows(lifted: np.ndarray, lifted_in: np.ndarray, lifted_out: np.ndarra
     return substeps
 
 
-@numba.njit((_F2, _F2, _F2, _F2, _F2, _F2, _F1, numba.float64, numba.float64), cache=True)
+@numba.njit((_F2, _F2, _F2, _F2, _F2, _F2, _F1, numba.float64, numba.float64, _F1),
+            cache=True)
 def accelerometer_reading(out_state: np.ndarray, out_inputs: np.ndarray,
                           state_update: np.ndarray, input_update: np.ndarray, x: np.ndarray,
                           specific_force_m_s2: np.ndarray, noise_m_s2: np.ndarray,
-                          range_m_s2: float, lsb_m_s2: float) -> tuple[np.ndarray, bool]:
-    """``AccelerometerBank.sample`` on the filter state ``x`` (updated): reading (m/s^2), clipped.
+                          range_m_s2: float, lsb_m_s2: float, reading: np.ndarray) -> bool:
+    """``AccelerometerBank.sample`` on the filter state ``x`` (updated); True if one clipped.
 
-    ``noise_m_s2`` holds this sample's draws, one per channel.
+    ``noise_m_s2`` holds this sample's draws, one per channel; the reading (m/s^2) is
+    written into ``reading``.
     """
     out_now = np.dot(out_state, x)
     out_in = np.dot(out_inputs, specific_force_m_s2)
     x[:] = np.dot(state_update, x) + np.dot(input_update, specific_force_m_s2)
-    reading = np.empty(x.shape[1])
     clipped = False
     for i in range(reading.size):
         value = (out_now[0, i] + out_in[0, i]) + noise_m_s2[i]
@@ -120,4 +126,4 @@ def accelerometer_reading(out_state: np.ndarray, out_inputs: np.ndarray,
             kept = range_m_s2 - lsb_m_s2
         clipped |= kept != value
         reading[i] = np.rint(kept / lsb_m_s2) * lsb_m_s2
-    return reading, clipped
+    return clipped

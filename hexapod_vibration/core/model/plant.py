@@ -318,7 +318,9 @@ class PPHPlant:
     def _held_actuator_force(self, command_n: np.ndarray) -> np.ndarray:
         """Voice-coil force (N): command times the force constant at this sample's stroke."""
         if self._kernels is not None:
-            return self._kernels.held_force(self._nl, command_n, self._strut_constants)
+            force = np.empty(6)
+            self._kernels.held_force(self._nl, command_n, self._strut_constants, force)
+            return force
         st, ratio, gain = self._strut, self._ratio, self._gain
         np.divide(self._nl[0:6], st.stroke_limit_m, out=ratio)
         np.multiply(st.force_constant_quadratic_per_stroke, ratio, out=gain)

@@ -80,10 +80,10 @@ class AccelerometerBank:
         """
         if self._kernels is not None:
             noise = self._rng.normal(0.0, self.noise_rms_m_s2, self._x.shape[1])
-            reading, clipped = self._kernels.accelerometer_reading(
+            reading = np.empty(self._x.shape[1])
+            self.clipped_samples += self._kernels.accelerometer_reading(
                 self._out_state, self._out_inputs, self._state_update, self._input_update,
-                self._x, specific_force_m_s2, noise, self.range_m_s2, self.lsb_m_s2)
-            self.clipped_samples += clipped
+                self._x, specific_force_m_s2, noise, self.range_m_s2, self.lsb_m_s2, reading)
             return reading
         filtered = self._filter(specific_force_m_s2)
         value = filtered + self._rng.normal(0.0, self.noise_rms_m_s2, filtered.shape[0])
