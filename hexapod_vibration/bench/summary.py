@@ -86,7 +86,7 @@ def _summary_compiled(results: dict[str, Any]) -> list[str]:
         f"**{_fmt(cp['cost_ratio_fxlms_over_notch_6x8'], 1)}x** (fastest rounds "
         f"{_fmt(cp['cost_ratio_fxlms_over_notch_6x8_of_minima'], 1)}x); both with 8 tones: "
         f"{_fmt(cp['cost_ratio_same_tones_6x8'], 1)}x. The kernels are the same algorithms "
-        "(core/compiled_kernels.py) stepping a block of errors per call, so the time is "
+        "(baseline/compiled_kernels.py) stepping a block of errors per call, so the time is "
         "the arithmetic without the interpreter; their commands equal the NumPy "
         f"controllers' over {EQUIVALENCE_SAMPLES} samples within {diff} of the peak "
         f"(relative). Set-up and compilation: {_fmt(cp['setup_and_compile_s'], 1)} s.", ""]
