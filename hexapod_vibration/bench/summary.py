@@ -175,7 +175,8 @@ def summary_markdown(results: dict[str, Any]) -> str:
     lines = ["# hexapod_bench" + (" (quick)" if results.get("quick") else ""), "",
              f"Machine: {m['cpu_model']} ({m['processor']}), {m['cpu_count']} cores "
              f"({m['cpu_usable']} usable), load {m['load_average_1_5_15']}, {m['uname']}, "
-             f"Python {m['python']}, numpy {m['numpy']}.", ""]
+             f"Python {m['python']}, numpy {m['numpy']}"
+             + (f", plant kernels {m['plant_kernels']}." if "plant_kernels" in m else "."), ""]
     lines += _summary_costs(results)
     if "targets" in results:
         lines += _summary_targets(results)
