@@ -64,7 +64,7 @@ def _reference_lifted_step(plant: PPHPlant, actuator: np.ndarray, shaker: np.nda
     v = np.zeros(n + N_INPUT + ns)
     v[n + 13] = 1.0                                   # gravity input
     v[:n], v[n:n + 6], v[n + 6:n + 12], v[n + N_INPUT:] = plant.state, actuator, play, shaker
-    out = plant._lifted @ v
+    out = plant._lifted.matrix @ v
     nl_rows = out[n + 6 * ns:n + 24 * ns]
     if not _reference_regime_holds(plant, nl_rows, plant._nl):
         return False

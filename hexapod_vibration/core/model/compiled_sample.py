@@ -84,7 +84,7 @@ def lifted_rows(lifted: np.ndarray, lifted_in: np.ndarray, lifted_out: np.ndarra
 
     Writes the state and the held force (N) into ``lifted_in``, the product into
     ``lifted_out``; returns the number of leading internal steps that pass
-    ``PPHPlant._rows_in_regime`` (``substeps``: all of them). ``strut`` as for
+    ``LiftedSample._leading_rows_hold`` (``substeps``: all of them). ``strut`` as for
     :func:`held_force`.
     """
     limit, half_play = strut[0], strut[3]

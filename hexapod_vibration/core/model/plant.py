@@ -29,6 +29,7 @@ from scipy.linalg import expm
 from hexapod_vibration.core.model.config import ModelConfig, RigidBodyConfig, StrutConfig
 from hexapod_vibration.core.model.geometry import point_jacobian, skew
 from hexapod_vibration.core.model.kernel_choice import compiled_kernels, kernels_name
+from hexapod_vibration.core.model.lifted_sample import LiftedSample
 from hexapod_vibration.core.model.sensors import AccelerometerBank, EddySensorArray
 from hexapod_vibration.core.model.shaker import Shaker
 
@@ -198,15 +199,17 @@ class PPHPlant:
         self._xu[N_STATE + IN_GRAVITY] = 1.0
         self._acc = np.zeros((self.substeps, 6))
         self._top_acc = np.zeros(6)
-        self._lifted = self._build_lifted_matrix(ad, bd)
-        self._lifted_in = np.zeros(N_STATE + N_INPUT + self.substeps)
-        self._lifted_in[N_STATE + IN_GRAVITY] = 1.0
-        self._bind_lifted_buffers()
         self._ratio, self._gain = np.empty(6), np.empty(6)
         self._kernels = compiled_kernels()
         self._strut_constants = np.array([st.stroke_limit_m, st.force_constant_linear_per_stroke,
                                           st.force_constant_quadratic_per_stroke,
                                           self._half_play])
+        self._lifted = LiftedSample(self._step_matrix, self._nl_out, self.substeps, IN_SHAKER,
+                                    self._strut_constants, self._kernels)
+        self._lifted.inputs[N_STATE + IN_GRAVITY] = 1.0
+        self._state_now = self._xu[:N_STATE]
+        self._specific_force = self._acc
+        self._start_in_regime = False
         self.fallback_samples = 0
         self.reset_to_equilibrium()
 
@@ -245,7 +248,7 @@ class PPHPlant:
 
         ``_nl`` holds the strokes (force constant, hard stops), stroke rates and joint
         deflections at the start of the next sample; ``_start_in_regime`` says whether the
-        start-of-sample regime test (and so ``_contact_side`` and the held free-play
+        start-of-sample regime test (and so the contact sides and the held free-play
         correction) may be skipped. Both describe the state, so they follow it when it is
         overwritten.
         """
@@ -266,54 +269,6 @@ class PPHPlant:
         self._refresh_carried_over()
         g = self.config.simulation.gravity_m_s2
         self.accelerometers.settle(g * self.config.geometry.unit_vectors[:, 2])
-
-    def _build_lifted_matrix(self, ad: np.ndarray, bd: np.ndarray) -> np.ndarray:
-        """Map ``[x0; u_held; shaker(substeps)]`` to a whole sample's outputs at once.
-
-        Rows: final state (36), specific force per substep (substeps x 6), nonlinear
-        outputs at the start of substeps 1..substeps (substeps x 18, the last one is the
-        next sample's start), top-plate acceleration at the end (6).
-        """
-        n, m, ns = N_STATE, N_INPUT, self.substeps
-        width = n + m + ns
-        x = np.zeros((n, width))
-        x[:, :n] = np.eye(n)
-        rows_acc, rows_nl = [], []
-        accel_rows = self._step_matrix[n:n + 12]        # [strut accel; top accel] of [x; u]
-        for k in range(ns):
-            u = np.zeros((m, width))
-            u[:, n:n + m] = np.eye(m)
-            u[IN_SHAKER, n + m + k] = 1.0
-            state_and_input = np.vstack([x, u])
-            x_next = self._step_matrix[:n] @ state_and_input
-            acc = accel_rows @ np.vstack([x_next, u])    # acceleration at the substep's end
-            rows_acc.append(acc[:6])
-            rows_nl.append(self._nl_out @ x_next)
-            x = x_next
-        return np.vstack([x, *rows_acc, *rows_nl, acc[6:12]])
-
-    def _bind_lifted_buffers(self) -> None:
-        """Output buffer of the lifted product and named views of its rows.
-
-        ``_out_strokes`` and ``_out_joints`` (substeps x 6, m) are the strokes and joint
-        deflections at the start of internal steps 1..substeps, the last one being the
-        start of the next sample.
-        """
-        n, ns = N_STATE, self.substeps
-        out = np.zeros(self._lifted.shape[0])
-        nl_rows = out[n + 6 * ns:n + 24 * ns].reshape(ns, 18)
-        self._lifted_out = out
-        self._out_state = out[:n]
-        self._state_now = self._xu[:n]
-        self._out_specific_force = out[n:n + 6 * ns].reshape(ns, 6)
-        self._out_strokes, self._out_joints = nl_rows[:, 0:6], nl_rows[:, 12:18]
-        self._out_next_nl = nl_rows[-1]
-        self._out_top_acc = out[n + 24 * ns:]
-        self._shaker_in = self._lifted_in[n + N_INPUT:]
-        self._specific_force = self._acc
-        self._contact_side = np.zeros(6)
-        self._regime_scratch = np.empty((ns, 6))
-        self._start_in_regime = False
 
     def _held_actuator_force(self, command_n: np.ndarray) -> np.ndarray:
         """Voice-coil force (N): command times the force constant at this sample's stroke."""
@@ -342,8 +297,9 @@ class PPHPlant:
         """Start-of-sample test of the lifted step, and its held free-play correction.
 
         True if no hard-stop force acts and (with free-play) every joint is deflected
-        beyond half the clearance: it is then held against one side (``_contact_side``,
-        +-1) and its correction is the constant ``joint_stiffness * half_play * side`` (N).
+        beyond half the clearance: it is then held against one side
+        (``LiftedSample.contact_side``, +-1) and its correction is the constant
+        ``joint_stiffness * half_play * side`` (N).
         """
         stop, play = self._stop_and_play(self._nl)
         if stop.any():
@@ -353,24 +309,10 @@ class PPHPlant:
             side = np.sign(joint)
             if not (joint * side).min() > self._half_play:
                 return False
-            self._contact_side[:] = side
-        self._lifted_in[N_STATE + 6:N_STATE + 12] = play
+            self._lifted.contact_side[:] = side
+        self._lifted.inputs[N_STATE + 6:N_STATE + 12] = play
         self._start_in_regime = True
         return True
-
-    def _rows_in_regime(self, rows: int) -> bool:
-        """True if the first ``rows`` internal steps of the lifted output stay in the regime.
-
-        In the regime no stroke exceeds ``stroke_limit_m`` (no stop is touched) and no joint
-        deflection comes within half the free-play of its contact side.
-        """
-        scratch = self._regime_scratch[:rows]
-        if np.abs(self._out_strokes[:rows], out=scratch).max() > self._strut.stroke_limit_m:
-            return False
-        if self._half_play == 0.0:
-            return True
-        np.multiply(self._out_joints[:rows], self._contact_side, out=scratch)
-        return bool(scratch.min() > self._half_play)
 
     def step(self, force_command_n: np.ndarray) -> PlantSample:
         """Advance one sample (1 ms) holding ``force_command_n`` (N, already saturated).
@@ -379,7 +321,7 @@ class PPHPlant:
         sample and held for it; free-play and hard stops act at every internal step.
         """
         t0 = self.sample_index * self.dt_sample_s
-        shaker = self.shaker.force_into(t0, self.dt_internal_s, self._shaker_in)
+        shaker = self.shaker.force_into(t0, self.dt_internal_s, self._lifted.shaker_in)
         actuator = self._held_actuator_force(np.ascontiguousarray(force_command_n, float))
         if not self._lifted_step(actuator, shaker):
             self._substep_loop(actuator, shaker)
@@ -400,44 +342,25 @@ class PPHPlant:
         """Whole sample in one product, valid when the contact regime does not change.
 
         ``shaker`` is the force (N) per internal step; :meth:`step` has the shaker write
-        it straight into the product's input (``_shaker_in``). When all internal steps,
+        it straight into the product's input (``LiftedSample.shaker_in``). When all internal steps,
         including the start of the next sample, stay in the regime, the next sample
         skips the start test (its outcome is then known: no stop force, same sides).
         """
         if not (self._start_in_regime or self._enter_regime()):
             return False
-        if shaker is not self._shaker_in:
-            self._shaker_in[:] = shaker
-        rows = self._lifted_product(actuator)
+        lifted = self._lifted
+        if shaker is not lifted.shaker_in:
+            lifted.shaker_in[:] = shaker
+        rows = lifted.rows_in_regime(self._state_now, actuator)
         if rows < self.substeps:
             self._start_in_regime = False
             if rows < self.substeps - 1:
                 return False
-        self._xu[:N_STATE] = self._out_state
-        self._specific_force = self._out_specific_force
-        self._nl = self._out_next_nl.copy()
-        self._top_acc = self._out_top_acc
+        self._xu[:N_STATE] = lifted.out_state
+        self._specific_force = lifted.out_specific_force
+        self._nl = lifted.out_next_nl.copy()
+        self._top_acc = lifted.out_top_acc
         return True
-
-    def _lifted_product(self, actuator: np.ndarray) -> int:
-        """The lifted product of this sample; how many leading internal steps stay in the regime.
-
-        The count is exact from the compiled kernel; the NumPy path tells only whether all
-        ``substeps``, all but the last (``substeps - 1``) or fewer (0) do, all that
-        :meth:`_lifted_step` asks.
-        """
-        ns = self.substeps
-        if self._kernels is not None:
-            return self._kernels.lifted_rows(self._lifted, self._lifted_in, self._lifted_out,
-                                             self._state_now, actuator, self._strut_constants,
-                                             self._contact_side, ns)
-        v = self._lifted_in
-        v[:N_STATE] = self._state_now
-        v[N_STATE:N_STATE + 6] = actuator
-        np.dot(self._lifted, v, out=self._lifted_out)
-        if self._rows_in_regime(ns):
-            return ns
-        return ns - 1 if self._rows_in_regime(ns - 1) else 0
 
     def _substep_loop(self, actuator: np.ndarray, shaker: np.ndarray) -> None:
         """Internal steps one by one (free-play crossing or hard-stop contact)."""
