@@ -160,7 +160,7 @@ class PointingControllerNode(Node):
         values = {"enabled": str(self.enabled).lower(), "last_sample": self.port.last_sample,
                   "run": self.port.sequence.run, **counters, **self.readers.values(),
                   "target_pose_m_rad": np.round(self.law.target, 9).tolist(),
-                  "lost_samples_stood_in": self._bridge.stood_in,
+                  "lost_samples_stood_in": self._bridge.stood_in, "law_kernels": self.law.kernels,
                   **self.meter.report()}
         message = "enabled" if self.enabled else "disabled"
         self._pub_diag.publish(diagnostic_array(POINTING_STATUS, bool(counters["invalid"]),

@@ -39,6 +39,13 @@ def _accel(samples: int = SAMPLES, seed: int = 4) -> np.ndarray:
     return np.round(x / lsb) * lsb
 
 
+def _bank(sos: np.ndarray, kernels: str) -> SosFilterBank:
+    """A bank on the path ``kernels`` names (fixture ``kernels``, test/core/conftest.py)."""
+    bank = SosFilterBank(sos, CHANNELS)
+    assert (bank.kernels is not None) == (kernels == "compiled")
+    return bank
+
+
 def _run(step, x: np.ndarray) -> np.ndarray:
     return np.array([step(row) for row in x])
 
@@ -49,15 +56,15 @@ def _assert_close(actual: np.ndarray, reference: np.ndarray, rtol: float = 1e-12
 
 
 @pytest.mark.parametrize("name", DESIGNS)
-def test_sos_bank_matches_sosfilt_over_a_whole_sequence(name):
+def test_sos_bank_matches_sosfilt_over_a_whole_sequence(name, kernels):
     sos, x = DESIGNS[name], _forces()
-    _assert_close(_run(SosFilterBank(sos, CHANNELS).step, x), signal.sosfilt(sos, x, axis=0))
+    _assert_close(_run(_bank(sos, kernels).step, x), signal.sosfilt(sos, x, axis=0))
 
 
 @pytest.mark.parametrize("name", DESIGNS)
-def test_sos_bank_reset_is_sosfilt_from_the_steady_state(name):
+def test_sos_bank_reset_is_sosfilt_from_the_steady_state(name, kernels):
     sos, x = DESIGNS[name], _forces()
-    bank, half = SosFilterBank(sos, CHANNELS), SAMPLES // 2
+    bank, half = _bank(sos, kernels), SAMPLES // 2
     bank.reset(x[0])
     first = _run(bank.step, x[:half])
     bank.reset(x[half])
@@ -67,9 +74,9 @@ def test_sos_bank_reset_is_sosfilt_from_the_steady_state(name):
     _assert_close(np.vstack([first, second]), reference)
 
 
-def test_sos_bank_scalar_reset_and_returned_arrays_are_its_own():
+def test_sos_bank_scalar_reset_and_returned_arrays_are_its_own(kernels):
     sos, x = DESIGNS["pointing low-pass, 1 section"], _forces(200)
-    bank = SosFilterBank(sos, CHANNELS)
+    bank = _bank(sos, kernels)
     bank.reset(1.5)
     outputs = []
     for row in x:

@@ -11,7 +11,6 @@ import numpy as np
 import pytest
 
 from hexapod_vibration.core.model.config import load_model_config
-from hexapod_vibration.core.model.kernel_choice import KERNELS_ENV
 from hexapod_vibration.core.model.plant import N_DOF, N_INPUT, N_STATE, PPHPlant
 from hexapod_vibration.core.model.sensors import AccelerometerBank
 from hexapod_vibration.core.model.shaker import Shaker, tones_from_arrays
@@ -23,15 +22,6 @@ FIELDS = ("accel_m_s2", "eddy_m", "applied_force_n", "top_accel_true", "relative
 TONES = tones_from_arrays([40.0, 80.0, 120.0], [80.0, 16.0, 12.0])     # paper Table 1
 DRIFTING = tones_from_arrays([40.0, 80.0, 120.0], [80.0, 16.0, 12.0], [0.3, 1.0, -2.0],
                              drift_hz=2.0, drift_period_s=7.0)
-
-
-@pytest.fixture(params=["compiled", "numpy"])
-def kernels(request, monkeypatch):
-    """Build the plants of a test on the compiled kernels or on the NumPy path."""
-    if request.param == "compiled":
-        pytest.importorskip("numba")
-    monkeypatch.setenv(KERNELS_ENV, request.param)
-    return request.param
 
 
 def _reference_accelerometer(bank: AccelerometerBank, specific_force: np.ndarray) -> np.ndarray:

@@ -3,7 +3,12 @@
 The reference follows the module docstring of ``core/pointing.py`` step by step (pose from
 the gaps, PID per axis, anti-windup on the integral's strut forces, statics J^-T, then the
 Butterworth low-pass run by ``scipy.signal.sosfilt``), with none of the controller's code.
+The law runs on both of its arithmetics (fixture ``kernels``: the compiled kernels of
+``core/control/compiled_law.py``, the NumPy path), which must also be equal to each other.
 """
+
+import os
+import sys
 
 import numpy as np
 import pytest
@@ -12,6 +17,7 @@ from scipy import signal
 from hexapod_vibration.core.control.pointing import PointingGains
 from hexapod_vibration.core.loop.signal_ranges import out_of_range
 from hexapod_vibration.core.model.config import load_model_config
+from hexapod_vibration.core.model.kernel_choice import KERNELS_ENV
 from hexapod_vibration.core.model.plant import PPHPlant, rigid_body_mass_matrix, saturate_commands
 from hexapod_vibration.core.model.sensors import EddySensorArray, pose_from_gaps
 from hexapod_vibration.core.sim.closed_loop import make_pointing_controller, strut_stiffness_n_per_m
@@ -51,7 +57,11 @@ def _gaps(wander: float, seed: int = 1) -> np.ndarray:
     return pose @ SENSING.T
 
 
-def _run_controller(gaps: np.ndarray) -> np.ndarray:
+def _run_controller(gaps: np.ndarray, integrals: np.ndarray | None = None) -> np.ndarray:
+    """The law's forces (N) for ``gaps`` with the target, gain and reset changes.
+
+    Its integral after each sample goes into ``integrals`` if given.
+    """
     law = make_pointing_controller(MODEL, SENSING, FS)
     forces = np.empty_like(gaps)
     for n, sample in enumerate(gaps):
@@ -62,6 +72,8 @@ def _run_controller(gaps: np.ndarray) -> np.ndarray:
         if n == RESET_AT:
             law.reset()
         forces[n] = law.step(sample)
+        if integrals is not None:
+            integrals[n] = law._integral
     return forces
 
 
@@ -128,7 +140,7 @@ def _lowpass_segments(raw: np.ndarray, restarts: dict) -> np.ndarray:
 
 
 @pytest.mark.parametrize("wander", [1.0, 30.0])
-def test_step_follows_the_documented_law_with_gain_target_and_reset_changes(wander):
+def test_step_follows_the_documented_law_with_gain_target_and_reset_changes(wander, kernels):
     gaps = _gaps(wander)
     reference, held = _reference(gaps)
     assert 1000 < held < SAMPLES - 5000        # the anti-windup engages and releases
@@ -137,9 +149,10 @@ def test_step_follows_the_documented_law_with_gain_target_and_reset_changes(wand
     assert error <= 1e-12 * np.max(np.abs(reference)), f"max error {error:.3g} N"
 
 
-def test_step_returns_an_array_of_its_own():
+def test_step_returns_an_array_of_its_own(kernels):
     gaps = _gaps(1.0)[:300]
     law = make_pointing_controller(MODEL, SENSING, FS)
+    assert (law._lowpass.kernels is not None) == (kernels == "compiled")
     law.set_target(TARGETS[3000], STROKE_M)
     kept = []
     for sample in gaps:
@@ -149,6 +162,43 @@ def test_step_returns_an_array_of_its_own():
     again = make_pointing_controller(MODEL, SENSING, FS)
     again.set_target(TARGETS[3000], STROKE_M)
     assert np.array_equal(np.array(kept), np.array([again.step(g) for g in gaps]))
+
+
+def test_the_compiled_law_equals_the_numpy_law(monkeypatch):
+    """Bit for bit, through target, gain and reset changes, the anti-windup and NaN gaps."""
+    pytest.importorskip("numba")
+    gaps = _gaps(30.0)
+    gaps[-5:-2] = np.nan                        # NaN passes both paths alike
+    runs = {}
+    for path in ("compiled", "numpy"):
+        monkeypatch.setenv(KERNELS_ENV, path)
+        integrals = np.empty_like(gaps)
+        runs[path] = _run_controller(gaps, integrals), integrals
+    np.testing.assert_array_equal(runs["compiled"][0], runs["numpy"][0])
+    np.testing.assert_array_equal(runs["compiled"][1], runs["numpy"][1])
+    assert np.isnan(runs["numpy"][0][-3]).all() and np.isfinite(runs["numpy"][0][:-5]).all()
+
+
+def test_no_python_runs_inside_the_law_kernel(monkeypatch):
+    """As for the plant (test_compiled_sample.py): a Ctrl-C cannot land inside a kernel."""
+    pytest.importorskip("numba")
+    monkeypatch.setenv(KERNELS_ENV, "compiled")
+    law = make_pointing_controller(MODEL, SENSING, FS)
+    law.step(np.zeros(6))
+    calls: set[str] = set()
+
+    def note(frame, event, _arg):
+        if event == "call":
+            calls.add(frame.f_code.co_filename)
+
+    previous = sys.getprofile()
+    sys.setprofile(note)
+    try:
+        for sample in _gaps(30.0)[:500]:
+            law.step(sample)
+    finally:
+        sys.setprofile(previous)
+    assert not [name for name in calls if f"{os.sep}numba{os.sep}" in name]
 
 
 def test_linear_state_space_is_the_step_law_without_windup():

@@ -9,6 +9,8 @@ from __future__ import annotations
 import numpy as np
 from scipy import signal
 
+from hexapod_vibration.core.model.kernel_choice import compiled_law_kernels
+
 # Bound once: at six channels the per-sample methods cost mostly numpy call overhead, so
 # they use preallocated arrays and ufuncs with positional outputs.
 _add, _multiply, _subtract = np.add, np.multiply, np.subtract
@@ -18,13 +20,19 @@ class SosFilterBank:
     """Second-order sections applied sample by sample to ``channels`` signals.
 
     Transposed direct form II, the same operations in the same order as ``sosfilt``;
-    state (sections, 2, channels), like ``sosfilt``'s ``zi``.
+    state (sections, 2, channels), like ``sosfilt``'s ``zi``. Where the compiled kernels are
+    in use (``kernels``, :func:`~hexapod_vibration.core.model.kernel_choice.
+    compiled_law_kernels`) one call steps every section, with the same numbers.
     """
 
     def __init__(self, sos: np.ndarray, channels: int) -> None:
         """Run the sections ``sos`` (from ``scipy.signal``, output='sos') on each channel."""
-        self.sos = np.asarray(sos, float)
+        self.sos = np.ascontiguousarray(sos, dtype=float)
         self.channels = channels
+        self.kernels = compiled_law_kernels()
+        """The compiled kernels that step the bank, or None (NumPy, per section)."""
+        self.state = np.zeros((self.sos.shape[0], 2, channels))
+        """The sections' z0, z1 (sections, 2, channels) while ``kernels`` step the bank."""
         self._sections = [_Section(coefficients, channels) for coefficients in self.sos]
 
     @classmethod
@@ -39,11 +47,18 @@ class SosFilterBank:
         """Steady state for a constant input ``value`` (per channel)."""
         level = np.broadcast_to(np.asarray(value, float), (self.channels,))
         zi = signal.sosfilt_zi(self.sos)[:, :, None] * level
+        if self.kernels is not None:
+            self.state[...] = zi
+            return
         for section, states in zip(self._sections, zi, strict=True):
             section.states[...] = states
 
     def step(self, x: np.ndarray) -> np.ndarray:
         """Filter one sample (channels,); returns a new array."""
+        if self.kernels is not None:
+            y = np.array(np.broadcast_to(x, (self.channels,)), dtype=float)
+            self.kernels.sos_into(self.sos, self.state, y, y)
+            return y
         y = np.asarray(x, float)
         for section in self._sections:
             y = section.step(y)

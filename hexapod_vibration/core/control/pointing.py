@@ -33,6 +33,7 @@ from scipy import signal
 
 from hexapod_vibration.core.control.filters import SosFilterBank
 from hexapod_vibration.core.model.geometry import CubicHexapodGeometry
+from hexapod_vibration.core.model.kernel_choice import kernels_name
 from hexapod_vibration.core.model.sensors import pose_from_gaps
 
 MAX_TILT_RAD = np.deg2rad(2.5)
@@ -99,6 +100,8 @@ class PointingController:
 
     Per sample the linear part is one product of the law matrix (see :meth:`_law_matrix`)
     with the stacked inputs [gaps, gap change since the last sample, target, integral].
+    Where the output low-pass is stepped by the compiled kernels, so is the whole sample
+    (:func:`~hexapod_vibration.core.control.compiled_law.pointing_step`, the same numbers).
     """
 
     def __init__(self, geometry: CubicHexapodGeometry, sensing_matrix: np.ndarray,
@@ -120,6 +123,7 @@ class PointingController:
         self._terms = np.zeros(4 * 6)
         (self._candidate, self._candidate_force, self._force,
          self._held_force) = np.split(self._terms, 4)
+        self._new_gaps = np.zeros(6)        # the compiled step's input (m)
         self.set_gains(gains or PointingGains())
 
     def set_gains(self, gains: PointingGains) -> None:
@@ -189,6 +193,11 @@ class PointingController:
         c = np.hstack([d_lp @ law_c, c_lp])
         return a, b, c, d_lp @ law_d
 
+    @property
+    def kernels(self) -> str:
+        """What steps this law: ``compiled`` (numba kernels) or ``numpy`` (same numbers)."""
+        return kernels_name(self._lowpass.kernels)
+
     def reset(self) -> None:
         """Zero the integral, the rate estimate and the output filter."""
         self._integral[...] = 0.0
@@ -206,6 +215,9 @@ class PointingController:
 
     def step(self, gaps_m: np.ndarray) -> np.ndarray:
         """One sample: eddy gaps (m) -> strut forces (N) for the same sample (a new array)."""
+        kernels = self._lowpass.kernels
+        if kernels is not None:
+            return self._compiled_step(kernels, gaps_m)
         if self._primed:
             np.subtract(gaps_m, self._gaps, self._gap_step)
         else:
@@ -224,6 +236,17 @@ class PointingController:
         np.minimum(force, limit, out=force)
         self._last_force = np.maximum(force, -limit, out=force)
         return self._last_force
+
+    def _compiled_step(self, kernels, gaps_m: np.ndarray) -> np.ndarray:
+        """:meth:`step` in one call of the compiled kernels (the same numbers)."""
+        self._new_gaps[...] = gaps_m
+        force = np.empty(6)
+        kernels.pointing_step(self._law, self._inputs, self._terms, self._new_gaps,
+                              self.target, self._primed, self.gains.force_limit_n,
+                              self._lowpass.sos, self._lowpass.state, force)
+        self._primed = True
+        self._last_force = force
+        return force
 
 
 def _exceeds(values: np.ndarray, limit: float) -> bool:
