@@ -27,6 +27,7 @@ import numpy as np
 
 from hexapod_vibration.contract import (
     FREQUENCY_LABEL,
+    MAX_SAMPLE_INDEX,
     RUN_LABEL_PREFIX,
     SAMPLE_LABEL_PREFIX,
     SAMPLE_RATE_HZ,
@@ -64,6 +65,13 @@ _LOOP_LABELS = (1, 2)
 """``layout.dim`` entries whose labels a loop message carries: sample, then run."""
 _EVERY_LABEL = range(MAX_LAYOUT_DIMS)
 _SAMPLE_PREFIX = SAMPLE_LABEL_PREFIX.encode()
+_STRUT_DIM0 = _LE32.pack(len(STRUT_LABEL) + 1) + STRUT_LABEL.encode() + b"\x00"
+"""A loop message's first dimension label, at offset 8: its second one is at offset 32."""
+_UNDER_2 = (bytes(4), _LE32.pack(1))
+"""The dimension counts (little-endian uint32) of a layout with no second dimension."""
+_SAMPLE_DIGITS = len(str(MAX_SAMPLE_INDEX))
+_INDEX_LIMIT = min(MAX_SAMPLE_INDEX + 1, MAX_BAG_SAMPLE_INDEX)
+"""Sample indices from here on are refused (a label's range, then a bag's)."""
 
 
 # ---------------------------------------------------------------------------- writing
@@ -301,8 +309,23 @@ def sample_index_of_cdr(data: bytes | memoryview) -> int | None:
 
     Looks at the layout's labels only (any dimension), so it serves the strut topics and
     ``/pph/notch_weights`` alike; None when there is none or the bytes are not that.
+    A loop message (``strut`` then ``sample:<n>``) is read at its fixed offsets, the same
+    answer at a fraction of the walk's cost (the recorder asks for every loop message).
     """
     raw = bytes(data[:512])
+    if (raw[8:18] == _STRUT_DIM0 and raw[32:39] == _SAMPLE_PREFIX
+            and raw[:2] in LITTLE_ENDIAN_CDR and raw[4:8] not in _UNDER_2):
+        (length,) = _LE32.unpack_from(raw, 28)
+        digits = raw[39:31 + length]
+        if not (len(digits) <= _SAMPLE_DIGITS and digits.isdigit()):   # ASCII digits only
+            return None
+        index = int(digits)
+        return index if index < _INDEX_LIMIT else None
+    return _sample_index_by_walk(raw)
+
+
+def _sample_index_by_walk(raw: bytes) -> int | None:
+    """:func:`sample_index_of_cdr` of any layout: every label is looked at in turn."""
     if raw[:2] not in LITTLE_ENDIAN_CDR:
         return None
     try:

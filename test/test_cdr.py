@@ -14,6 +14,7 @@ from rclpy.serialization import deserialize_message, serialize_message
 from rosgraph_msgs.msg import Clock
 from std_msgs.msg import Float64MultiArray
 
+from hexapod_vibration import cdr as cdr_module
 from hexapod_vibration.cdr import (
     MAX_ARRAY_VALUES,
     MAX_BAG_SAMPLE_INDEX,
@@ -276,6 +277,44 @@ def test_the_sample_index_is_found_in_any_dimension():
     assert sample_index_of_cdr(encode_strut_cdr(VALUES, MAX_BAG_SAMPLE_INDEX, RUN)) is None
     assert sample_index_of_cdr(encode_strut_cdr(VALUES, MAX_BAG_SAMPLE_INDEX - 1)) == (
         MAX_BAG_SAMPLE_INDEX - 1)
+
+
+def _label_bytes(label: bytes) -> bytes:
+    """A CDR string at a 4-aligned position: length (NUL included), bytes, NUL, padding."""
+    return struct.pack("<I", len(label) + 1) + label + bytes(1 + (-(len(label) + 1) % 4))
+
+
+def test_a_loop_message_read_at_its_offsets_gives_the_walk_s_answer():
+    """The fixed-offset reading of a loop message answers as the walk over every label.
+
+    Loop-shaped layouts (``strut`` first) with every sort of second label and dimension
+    count, and the same bytes with one byte changed anywhere in their first 48.
+    """
+    seconds = [b"sample:0", b"sample:77", b"sample:" + str(MAX_SAMPLE_INDEX).encode(),
+               b"sample:" + str(MAX_SAMPLE_INDEX + 1).encode(), b"sample:", b"sample:12a",
+               b"sample:+5", b"sample: 5", b"sample:\xd9\xa3", b"sample:0099",
+               b"sample:" + b"9" * 30, b"samples:5", b"run:5", b"sample:5\x00junk"]
+    messages = []
+    for dims in (0, 1, 2, 3, 17):
+        for second in seconds:
+            head = struct.pack("<I", dims) + _label_bytes(b"strut") + struct.pack("<II", 6, 6)
+            messages.append(b"\x00\x01\x00\x00" + head + _label_bytes(second)
+                            + struct.pack("<II", 1, 1) + _label_bytes(b"run:3")
+                            + bytes(8) + struct.pack("<I", 6) + bytes(4) + bytes(48))
+    messages.append(encode_strut_cdr(VALUES, 123456, RUN))
+    rng = np.random.default_rng(5)
+    for message in list(messages):
+        for position in rng.choice(48, 6, replace=False):
+            changed = bytearray(message)
+            changed[position] = int(rng.integers(256))
+            messages.append(bytes(changed))
+    found = 0
+    for message in messages:
+        walked = cdr_module._sample_index_by_walk(message[:512])
+        assert sample_index_of_cdr(message) == walked, message[:48]
+        assert sample_index_of_cdr(memoryview(message)) == walked
+        found += walked is not None
+    assert 20 < found < len(messages) - 20          # both answers were asked for
 
 
 @pytest.mark.parametrize("size", [0, 1, 5, 6, 1200])
