@@ -316,6 +316,8 @@ def sample_index_of_cdr(data: bytes | memoryview) -> int | None:
     if (raw[8:18] == _STRUT_DIM0 and raw[32:39] == _SAMPLE_PREFIX
             and raw[:2] in LITTLE_ENDIAN_CDR and raw[4:8] not in _UNDER_2):
         (length,) = _LE32.unpack_from(raw, 28)
+        if length < len(_SAMPLE_PREFIX) + 1:       # the label ends before its prefix does
+            return _sample_index_by_walk(raw)
         digits = raw[39:31 + length]
         if not (len(digits) <= _SAMPLE_DIGITS and digits.isdigit()):   # ASCII digits only
             return None

@@ -302,6 +302,10 @@ def test_a_loop_message_read_at_its_offsets_gives_the_walk_s_answer():
                             + struct.pack("<II", 1, 1) + _label_bytes(b"run:3")
                             + bytes(8) + struct.pack("<I", 6) + bytes(4) + bytes(48))
     messages.append(encode_strut_cdr(VALUES, 123456, RUN))
+    for length in range(10):          # dim[1] shorter than its bytes: the walk reads on
+        head = struct.pack("<I", 3) + _label_bytes(b"strut") + struct.pack("<II", 6, 6)
+        messages.append(b"\x00\x01\x00\x00" + head + struct.pack("<I", length)
+                        + b"sample:12\x00\x00\x00" + _label_bytes(b"sample:99") + bytes(64))
     rng = np.random.default_rng(5)
     for message in list(messages):
         for position in rng.choice(48, 6, replace=False):

@@ -42,7 +42,7 @@ def _accel(samples: int = SAMPLES, seed: int = 4) -> np.ndarray:
 def _bank(sos: np.ndarray, kernels: str) -> SosFilterBank:
     """A bank on the path ``kernels`` names (fixture ``kernels``, test/core/conftest.py)."""
     bank = SosFilterBank(sos, CHANNELS)
-    assert (bank.kernels is not None) == (kernels == "compiled")
+    assert (bank.compiled is not None) == (kernels == "compiled")
     return bank
 
 

@@ -21,7 +21,7 @@ class SosFilterBank:
 
     Transposed direct form II, the same operations in the same order as ``sosfilt``;
     state (sections, 2, channels), like ``sosfilt``'s ``zi``. Where the compiled kernels are
-    in use (``kernels``, :func:`~hexapod_vibration.core.model.kernel_choice.
+    in use (``compiled``, :func:`~hexapod_vibration.core.model.kernel_choice.
     compiled_law_kernels`) one call steps every section, with the same numbers.
     """
 
@@ -29,10 +29,10 @@ class SosFilterBank:
         """Run the sections ``sos`` (from ``scipy.signal``, output='sos') on each channel."""
         self.sos = np.ascontiguousarray(sos, dtype=float)
         self.channels = channels
-        self.kernels = compiled_law_kernels()
+        self.compiled = compiled_law_kernels()
         """The compiled kernels that step the bank, or None (NumPy, per section)."""
         self.state = np.zeros((self.sos.shape[0], 2, channels))
-        """The sections' z0, z1 (sections, 2, channels) while ``kernels`` step the bank."""
+        """The sections' z0, z1 (sections, 2, channels) while ``compiled`` steps the bank."""
         self._sections = [_Section(coefficients, channels) for coefficients in self.sos]
 
     @classmethod
@@ -47,7 +47,7 @@ class SosFilterBank:
         """Steady state for a constant input ``value`` (per channel)."""
         level = np.broadcast_to(np.asarray(value, float), (self.channels,))
         zi = signal.sosfilt_zi(self.sos)[:, :, None] * level
-        if self.kernels is not None:
+        if self.compiled is not None:
             self.state[...] = zi
             return
         for section, states in zip(self._sections, zi, strict=True):
@@ -55,9 +55,9 @@ class SosFilterBank:
 
     def step(self, x: np.ndarray) -> np.ndarray:
         """Filter one sample (channels,); returns a new array."""
-        if self.kernels is not None:
+        if self.compiled is not None:
             y = np.array(np.broadcast_to(x, (self.channels,)), dtype=float)
-            self.kernels.sos_into(self.sos, self.state, y, y)
+            self.compiled.sos_into(self.sos, self.state, y, y)
             return y
         y = np.asarray(x, float)
         for section in self._sections:

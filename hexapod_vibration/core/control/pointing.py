@@ -196,7 +196,7 @@ class PointingController:
     @property
     def kernels(self) -> str:
         """What steps this law: ``compiled`` (numba kernels) or ``numpy`` (same numbers)."""
-        return kernels_name(self._lowpass.kernels)
+        return kernels_name(self._lowpass.compiled)
 
     def reset(self) -> None:
         """Zero the integral, the rate estimate and the output filter."""
@@ -215,7 +215,7 @@ class PointingController:
 
     def step(self, gaps_m: np.ndarray) -> np.ndarray:
         """One sample: eddy gaps (m) -> strut forces (N) for the same sample (a new array)."""
-        kernels = self._lowpass.kernels
+        kernels = self._lowpass.compiled
         if kernels is not None:
             return self._compiled_step(kernels, gaps_m)
         if self._primed:
