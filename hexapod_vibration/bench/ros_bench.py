@@ -27,6 +27,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from hexapod_vibration.bench.above_floor import above_floor_markdown
 from hexapod_vibration.bench.late_window import LateWindow
 from hexapod_vibration.bench.message_floor import floor_markdown, measure_floor
 from hexapod_vibration.bench.node_budget import (
@@ -280,6 +281,10 @@ def ros_summary_markdown(results: dict[str, Any]) -> str:
         rows += ["", "### The message path alone (bench/floor_nodes.py: the same four "
                  "processes, topics, QoS, wait sets and codec, nothing computed; each "
                  "process's CPU per sample after the warm-up)", "", floor_markdown(floor)]
+        if budget:
+            rows += ["", "### What the nodes add to the message path (bench/above_floor.py: the "
+                     "budget's processes/lockstep/recorder CPU minus the message path's alone, "
+                     "us per sample, this run)", "", above_floor_markdown(budget, floor)]
     wakeups = results.get("wakeups")
     if wakeups:
         rows += ["", "### The machine's 1 kHz wake-ups (bench/wakeup_lateness.py: processes "
