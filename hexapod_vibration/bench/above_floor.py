@@ -13,16 +13,16 @@ from __future__ import annotations
 from typing import Any
 
 from hexapod_vibration.bench.floor_nodes import ROLES
+from hexapod_vibration.bench.node_budget import NODES
 
-BUDGET_KEY = "processes/lockstep/recorder"
-FLOOR_KEY = "lockstep/recorder"
 RATE_PAIRS = (("processes/lockstep/recorder", "lockstep/recorder", "through processes"),
               ("composed/lockstep/recorder", "lockstep/recorder/composed", "composed"))
 """(the budget's set-up, the floor's, what to call it) of the lockstep rates compared: both
 with the recorder (the ROS loop table's runs have none, and the floor through processes
 always has one)."""
-NODES = dict(zip(ROLES, ("pph_driver", "notch_controller", "pointing_controller",
-                         "pph_recorder"), strict=True))
+BUDGET_KEY, FLOOR_KEY = RATE_PAIRS[0][:2]
+"""The set-ups whose CPU per process is compared: lockstep through processes, recorder."""
+NODE_OF_ROLE = dict(zip(ROLES, NODES, strict=True))
 
 
 def cpu_above_floor(budget: dict[str, Any], floor: dict[str, Any]) -> dict[str, dict[str, float]]:
@@ -33,7 +33,7 @@ def cpu_above_floor(budget: dict[str, Any], floor: dict[str, Any]) -> dict[str, 
     graph = budget.get(BUDGET_KEY, {}).get("cpu_us_per_sample", {})
     alone = floor.get(FLOOR_KEY, {}).get("cpu_us_per_sample", {})
     rows = {}
-    for role, node in NODES.items():
+    for role, node in NODE_OF_ROLE.items():
         if node in graph and role in alone:
             used = graph[node]["process"]
             rows[role] = {"graph": used, "floor": alone[role], "above": used - alone[role]}

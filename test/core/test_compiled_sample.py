@@ -7,11 +7,9 @@ would then say so.) The plain reference implementation of every sample is
 test_plant_speed_equivalence.py's, run on both paths.
 """
 
-import os
-import sys
-
 import numpy as np
 import pytest
+from kernel_calls import numba_files_called
 
 from hexapod_vibration.core.model import kernel_choice
 from hexapod_vibration.core.model.config import load_model_config
@@ -85,18 +83,6 @@ def test_no_python_runs_inside_a_kernel(monkeypatch):
     SystemError (a driver exited 1, not 130). The kernels return numbers only.
     """
     plant = _plant(monkeypatch, "compiled", CFG)
-    calls: set[str] = set()
-
-    def note(frame, event, _arg):
-        if event == "call":
-            calls.add(frame.f_code.co_filename)
-
     plant.step(np.ones(6))              # the first sample lays out the shaker's grid
-    previous = sys.getprofile()
-    sys.setprofile(note)
-    try:
-        for command in _commands(600):  # free-play, stops (the NumPy fallback) and NaN
-            plant.step(command)
-    finally:
-        sys.setprofile(previous)
-    assert not [name for name in calls if f"{os.sep}numba{os.sep}" in name]
+    # free-play, stops (the NumPy fallback) and NaN
+    assert not numba_files_called(lambda: [plant.step(c) for c in _commands(600)])

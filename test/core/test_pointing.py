@@ -7,11 +7,9 @@ The law runs on both of its arithmetics (fixture ``kernels``: the compiled kerne
 ``core/control/compiled_law.py``, the NumPy path), which must also be equal to each other.
 """
 
-import os
-import sys
-
 import numpy as np
 import pytest
+from kernel_calls import numba_files_called
 from scipy import signal
 
 from hexapod_vibration.core.control.pointing import PointingGains
@@ -185,20 +183,7 @@ def test_no_python_runs_inside_the_law_kernel(monkeypatch):
     monkeypatch.setenv(KERNELS_ENV, "compiled")
     law = make_pointing_controller(MODEL, SENSING, FS)
     law.step(np.zeros(6))
-    calls: set[str] = set()
-
-    def note(frame, event, _arg):
-        if event == "call":
-            calls.add(frame.f_code.co_filename)
-
-    previous = sys.getprofile()
-    sys.setprofile(note)
-    try:
-        for sample in _gaps(30.0)[:500]:
-            law.step(sample)
-    finally:
-        sys.setprofile(previous)
-    assert not [name for name in calls if f"{os.sep}numba{os.sep}" in name]
+    assert not numba_files_called(lambda: [law.step(sample) for sample in _gaps(30.0)[:500]])
 
 
 def test_linear_state_space_is_the_step_law_without_windup():

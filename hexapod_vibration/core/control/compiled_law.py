@@ -11,8 +11,9 @@ do the same arithmetic in one call.
 Bit for bit, as :mod:`~hexapod_vibration.core.model.compiled_sample`: every element-wise
 operation is NumPy's, in the same order, in IEEE double (no ``fastmath``: no reassociation,
 no fused multiply-add); the law's product goes through ``np.dot`` (BLAS gemv, as NumPy's
-``matmul`` of a matrix and a vector). test/core/test_compiled_law.py checks the compiled
-law's forces, integral and filter states against the NumPy law's for equality.
+``matmul`` of a matrix and a vector). test/core/test_pointing.py checks the compiled law's
+forces and integral against the NumPy law's for equality, and both against the documented
+reference; test_filters.py the filter bank on both paths against ``sosfilt``.
 
 No kernel returns an array (see ``compiled_sample``): they write into the caller's buffers.
 numba is optional: :func:`~hexapod_vibration.core.model.kernel_choice.compiled_law_kernels`
@@ -63,7 +64,7 @@ def sos_into(sos: np.ndarray, state: np.ndarray, x: np.ndarray, y: np.ndarray) -
             cache=True)
 def pointing_step(law: np.ndarray, inputs: np.ndarray, terms: np.ndarray, gaps_m: np.ndarray,
                   target: np.ndarray, primed: bool, limit_n: float, sos: np.ndarray,
-                  state: np.ndarray, force_n: np.ndarray) -> bool:
+                  state: np.ndarray, force_n: np.ndarray) -> None:
     """``PointingController.step``: the strut forces (N) of one sample into ``force_n``.
 
     ``inputs`` (4C,) are the law's stacked inputs [gaps, gap change, target, integral] and
@@ -71,7 +72,7 @@ def pointing_step(law: np.ndarray, inputs: np.ndarray, terms: np.ndarray, gaps_m
     integral held] (``PointingController._law_matrix``); ``primed``: a previous sample's
     gaps are in ``inputs`` (else the gap change is zero). The output low-pass is ``sos`` on
     ``state`` (:func:`sos_into`), then each force is saturated at +-``limit_n`` (NaN passes,
-    as through ``np.minimum``). Returns True if the integral was held (anti-windup).
+    as through ``np.minimum``).
     """
     c = gaps_m.size
     for i in range(c):
@@ -96,4 +97,3 @@ def pointing_step(law: np.ndarray, inputs: np.ndarray, terms: np.ndarray, gaps_m
         if f < -limit_n:
             f = -limit_n
         force_n[i] = f
-    return held
