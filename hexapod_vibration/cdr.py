@@ -27,6 +27,7 @@ import numpy as np
 
 from hexapod_vibration.contract import (
     FREQUENCY_LABEL,
+    MAX_RUN_ID,
     MAX_SAMPLE_INDEX,
     RUN_LABEL_PREFIX,
     SAMPLE_LABEL_PREFIX,
@@ -92,6 +93,12 @@ _PREFIX = {dims: CDR_LE + b"\x00\x00" + _LE32.pack(dims) + _label(STRUT_LABEL.en
 _DATA_HEADER = struct.pack("<II", 0, STRUT_COUNT)   # data_offset, length of data
 _SAMPLE_FORMAT = _SAMPLE_PREFIX + b"%d"
 _RUN_FORMAT = RUN_LABEL_PREFIX.encode() + b"%d"
+_SAMPLE_AT = len(_PREFIX[3]) + 4 + len(_SAMPLE_PREFIX)
+"""Offset of the sample label's first digit in a loop message with a run."""
+_RUN_AT = _SAMPLE_AT + 1 + len(_ONE_ONE) + 4 + len(RUN_LABEL_PREFIX)
+"""Offset of the run label's first digit in a loop message whose sample label has no digit:
+add its digits' count rounded up to 4 (the label's NUL and padding)."""
+_RUN_DIGITS = len(str(MAX_RUN_ID))
 
 
 def encode_strut_cdr(values: np.ndarray | Sequence[float], sample_index: int,
@@ -110,15 +117,19 @@ def encode_strut_cdr(values: np.ndarray | Sequence[float], sample_index: int,
         raise ValueError(f"expected {STRUT_COUNT} strut values, got {flat.size}")
     if sample_index < 0:
         raise ValueError(f"sample index must be >= 0, got {sample_index}")
-    if run is None:
-        head = b"".join((_PREFIX[2], _label(_SAMPLE_FORMAT % sample_index), _ONE_ONE,
-                         _DATA_HEADER))
-    elif run < 1:
+    if run is not None and run < 1:
         raise ValueError(f"run id must be >= 1, got {run}")
-    else:
-        head = b"".join((_PREFIX[3], _label(_SAMPLE_FORMAT % sample_index), _ONE_ONE,
-                         _label(_RUN_FORMAT % run), _ONE_ONE, _DATA_HEADER))
+    head = _loop_head(sample_index, run)
     return b"".join((head, _ALIGN8[(CDR_HEADER - len(head)) & 7], flat.tobytes()))
+
+
+def _loop_head(sample_index: int, run: int | None) -> bytes:
+    """A loop message's bytes up to its data's alignment: layout, data_offset, length 6."""
+    if run is None:
+        return b"".join((_PREFIX[2], _label(_SAMPLE_FORMAT % sample_index), _ONE_ONE,
+                         _DATA_HEADER))
+    return b"".join((_PREFIX[3], _label(_SAMPLE_FORMAT % sample_index), _ONE_ONE,
+                     _label(_RUN_FORMAT % run), _ONE_ONE, _DATA_HEADER))
 
 
 Dimension = tuple[str, int, int]
@@ -214,7 +225,8 @@ def decode_strut_cdr(raw: bytes, count: int = STRUT_COUNT) -> StrutSample:
     ``/pph/reference_frequency``).
 
     Reads plain CDR (XCDR1) in either byte order without building the Python message
-    (a few microseconds against about 19 us for rclpy's conversion), with the rules of
+    (a few microseconds against about 19 us for rclpy's conversion; a loop message as
+    :func:`encode_strut_cdr` writes it is read at its fixed offsets), with the rules of
     ``messages.parse_strut_array``, and refuses anything that is not exactly one
     well-formed ``Float64MultiArray``: every length is checked against the bytes, at most
     :data:`MAX_LAYOUT_DIMS` dims, and the data must end the message.
@@ -225,6 +237,13 @@ def decode_strut_cdr(raw: bytes, count: int = STRUT_COUNT) -> StrutSample:
         InvalidStrutMessage: Not six values, a non-finite value, a bad sample or run label.
     """
     raw = bytes(raw)
+    if count == STRUT_COUNT:
+        return _read_loop_message(raw) or _decode_strut_by_walk(raw, count)
+    return _decode_strut_by_walk(raw, count)
+
+
+def _decode_strut_by_walk(raw: bytes, count: int) -> StrutSample:
+    """:func:`decode_strut_cdr` of any bytes: the layout walked, every rule checked."""
     order = _BYTE_ORDER.get(raw[:2])
     if order is None or len(raw) < CDR_HEADER + 12:
         raise UnsupportedCdr(f"not a plain CDR Float64MultiArray ({len(raw)} bytes, "
@@ -250,6 +269,38 @@ def decode_strut_cdr(raw: bytes, count: int = STRUT_COUNT) -> StrutSample:
     if not all(map(math.isfinite, values.tolist())):
         raise InvalidStrutMessage(f"non-finite strut value in {values.tolist()}")
     index, run = parse_layout_labels(labels)
+    return StrutSample(values, index, run)
+
+
+def _read_loop_message(raw: bytes) -> StrutSample | None:
+    """The sample of exactly the bytes :func:`encode_strut_cdr` writes with a run, else None.
+
+    The driver's and controllers' messages, read at a fraction of the walk's cost: the two
+    labels' digits are read where that layout has them, the head those numbers give
+    (:func:`_loop_head`) must equal the bytes, and six finite values end them. Anything else
+    (another layout or byte order, a label written otherwise, an index or a run out of
+    range, a non-finite value) is None: the walk then reads or refuses it, so every answer
+    is the walk's.
+    """
+    if not raw.startswith(_PREFIX[3]):
+        return None
+    end = raw.find(0, _SAMPLE_AT, _SAMPLE_AT + _SAMPLE_DIGITS + 1)
+    digits = raw[_SAMPLE_AT:end]
+    run_at = _RUN_AT + ((len(digits) + 3) & ~3)
+    run_end = raw.find(0, run_at, run_at + _RUN_DIGITS + 1)
+    run_digits = raw[run_at:run_end]
+    if not (end > 0 < run_end and digits.isdigit() and run_digits.isdigit()):
+        return None
+    index, run = int(digits), int(run_digits)
+    if index > MAX_SAMPLE_INDEX or not 1 <= run <= MAX_RUN_ID:
+        return None
+    head = _loop_head(index, run)
+    data_at = len(head) + ((CDR_HEADER - len(head)) & 7)
+    if len(raw) != data_at + 8 * STRUT_COUNT or not raw.startswith(head):
+        return None
+    values = np.frombuffer(raw, "<f8", STRUT_COUNT, data_at)
+    if not all(map(math.isfinite, values.tolist())):
+        return None
     return StrutSample(values, index, run)
 
 

@@ -29,7 +29,12 @@ from hexapod_vibration.cdr import (
     encode_weights_cdr,
     sample_index_of_cdr,
 )
-from hexapod_vibration.contract import MAX_SAMPLE_INDEX, InvalidStrutMessage, sample_label
+from hexapod_vibration.contract import (
+    MAX_RUN_ID,
+    MAX_SAMPLE_INDEX,
+    InvalidStrutMessage,
+    sample_label,
+)
 from hexapod_vibration.ros.diagnostics import sample_time
 from hexapod_vibration.ros.messages import (
     make_strut_array,
@@ -320,6 +325,49 @@ def test_a_loop_message_read_at_its_offsets_gives_the_walk_s_answer():
         found += walked is not None
     assert 20 < found < len(messages) - 20          # both answers were asked for
 
+
+
+def _decoded(raw: bytes, read) -> tuple:
+    """What a strut decoder answers for ``raw``: the sample's parts, or the refusal."""
+    try:
+        sample = read(raw)
+    except InvalidStrutMessage as exc:
+        return type(exc), str(exc)
+    return (sample.values.tobytes(), sample.values.dtype.str, sample.values.flags.writeable,
+            sample.index, sample.run)
+
+
+def test_a_loop_message_decoded_at_its_offsets_gives_the_walk_s_answer():
+    """The fixed-offset read of a loop message (with a run) answers as the full walk.
+
+    Every digit count of index and run, both ranges' edges and beyond, non-finite values,
+    bytes added or cut at the end, and each message with one byte changed anywhere.
+    """
+    messages = []
+    for index in (0, 7, 10, 999, 1000, 123456, 10**12, MAX_SAMPLE_INDEX, MAX_SAMPLE_INDEX + 1):
+        for run in (1, 9, 10, 1234, RUN, MAX_RUN_ID, MAX_RUN_ID + 1):
+            messages.append(encode_strut_cdr(VALUES, index, run))
+    for bad in (math.nan, math.inf, -math.inf):
+        messages.append(encode_strut_cdr(np.r_[VALUES[:5], bad], 42, 3))
+    canonical = encode_strut_cdr(VALUES, 42, 3)
+    messages += [canonical + bytes(k) for k in (1, 3, 4, 8)] + [canonical[:-1],
+                                                                 canonical[:-8]]
+    messages.append(canonical.replace(b"sample:42", b"sample:+4"))
+    messages.append(canonical.replace(b"run:3", b"run:0"))
+    rng = np.random.default_rng(11)
+    for message in list(messages[::5]):
+        for position in range(len(message)):
+            changed = bytearray(message)
+            changed[position] = int(rng.integers(256))
+            messages.append(bytes(changed))
+    fast = 0
+    for message in messages:
+        walked = _decoded(message, lambda raw: cdr_module._decode_strut_by_walk(raw, 6))
+        assert _decoded(message, decode_strut_cdr) == walked, message
+        fast += cdr_module._read_loop_message(message) is not None
+    assert 50 < fast < len(messages) - 50          # both ways were taken
+    with pytest.raises(InvalidStrutMessage, match="expected 1 value"):
+        decode_strut_cdr(canonical, count=1)     # a one-value topic: six are refused
 
 @pytest.mark.parametrize("size", [0, 1, 5, 6, 1200])
 @pytest.mark.parametrize("index, run, label", [(None, None, "frequency_hz"),

@@ -28,9 +28,8 @@ import math
 import struct
 from collections import Counter
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
 from types import SimpleNamespace
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 from rclpy.node import Node
@@ -274,9 +273,8 @@ def receive_strut_array(msg: Float64MultiArray | bytes, logger: Any, topic: str
     return None if sample is None else (sample.values, sample.index)
 
 
-@dataclass(frozen=True)
-class LoopSample:
-    """A received sample a controller acts on."""
+class LoopSample(NamedTuple):
+    """A received sample a controller acts on (a named tuple: one a sample, made cheaply)."""
 
     values: np.ndarray
     """Six values (SI units of the topic), read-only."""
