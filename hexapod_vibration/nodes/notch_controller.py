@@ -32,6 +32,7 @@ from hexapod_vibration.cdr import (
 from hexapod_vibration.contract import (
     DIAGNOSTICS_EVERY_SAMPLES,
     DIAGNOSTICS_PHASE_SAMPLES,
+    FORECAST_PHASE_SAMPLES,
     FREQUENCIES_EVERY_SAMPLES,
     NOTCH_FORECAST_TOPIC,
     NOTCH_FREQUENCIES_TOPIC,
@@ -110,7 +111,8 @@ class NotchControllerNode(Node):
         self._pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", DIAGNOSTICS_QOS)
         publish_status_periodically(self, self.publish_diagnostics)
         self._pub_frequencies = serialized_publish(arrays[NOTCH_FREQUENCIES_TOPIC])
-        self._forecasts = ForecastPublisher(self, NOTCH_FORECAST_TOPIC)  # for late samples
+        self._forecasts = ForecastPublisher(            # for late samples
+            self, NOTCH_FORECAST_TOPIC, FORECAST_PHASE_SAMPLES["notch_controller"])
         self._forecast_rows = notch_rows(self.supervisor)
         self._pub_sensitivity = self.create_publisher(
             Float64MultiArray, NOTCH_SENSITIVITY_TOPIC, LATCHED_QOS)

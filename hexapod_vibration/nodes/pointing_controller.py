@@ -27,6 +27,7 @@ from std_msgs.msg import Float64MultiArray
 from hexapod_vibration.contract import (
     DIAGNOSTICS_EVERY_SAMPLES,
     DIAGNOSTICS_PHASE_SAMPLES,
+    FORECAST_PHASE_SAMPLES,
     POINTING_FORECAST_TOPIC,
     POINTING_STATUS,
     STRUT_COUNT,
@@ -83,7 +84,8 @@ class PointingControllerNode(Node):
             StrutArrayPublisher(self.readers.publisher(
                 self, Float64MultiArray, "/pph/pointing_command", LOOP_PUBLISHER_QOS)),
             self.get_logger())
-        self._forecasts = ForecastPublisher(self, POINTING_FORECAST_TOPIC)  # for late samples
+        self._forecasts = ForecastPublisher(            # for late samples
+            self, POINTING_FORECAST_TOPIC, FORECAST_PHASE_SAMPLES["pointing_controller"])
         self._continuation = ToneContinuation(STRUT_COUNT)
         self._bridge = GapBridge(STRUT_COUNT)         # the law's input across skipped samples
         self._pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", DIAGNOSTICS_QOS)

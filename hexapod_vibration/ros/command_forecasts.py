@@ -1,7 +1,8 @@
 """``/pph/*_forecast``: a controller publishes its next commands, a realtime driver takes them.
 
 The controller's end (:class:`ForecastPublisher`) publishes, every
-``FORECAST_EVERY_SAMPLES`` and only while a subscriber listens (a realtime driver), the
+``FORECAST_EVERY_SAMPLES`` (each controller at its own phase, ``FORECAST_PHASE_SAMPLES``)
+and only while a subscriber listens (a realtime driver), the
 commands of its next ``FORECAST_SAMPLES`` samples: the notch controller's sinusoids
 (:mod:`hexapod_vibration.core.control.command_forecast`), the pointing controller's last
 commands continued (:mod:`hexapod_vibration.core.control.tone_continuation`: they oscillate
@@ -42,14 +43,21 @@ from hexapod_vibration.ros.rclpy_internals import serialized_publish
 class ForecastPublisher:
     """A controller's forecasts on ``topic``, published while someone listens."""
 
-    def __init__(self, node: Node, topic: str) -> None:
-        """Create the publisher (:data:`~hexapod_vibration.ros.qos.LOOP_QOS`)."""
+    def __init__(self, node: Node, topic: str, phase_samples: int = 0) -> None:
+        """Create the publisher (:data:`~hexapod_vibration.ros.qos.LOOP_QOS`).
+
+        ``phase_samples``: forecast after the samples ``n`` with ``n %
+        FORECAST_EVERY_SAMPLES == phase_samples`` (:data:`~hexapod_vibration.contract.
+        FORECAST_PHASE_SAMPLES`: the two controllers on different samples).
+        """
         self._publisher = node.create_publisher(Float64MultiArray, topic, LOOP_QOS)
         self._publish = serialized_publish(self._publisher)       # CDR bytes
+        self._phase = phase_samples % FORECAST_EVERY_SAMPLES
 
     def after(self, index: int, run: int | None, rows: Callable[[int], np.ndarray]) -> None:
         """Sample ``index`` was answered: every 10th, ``rows(FORECAST_SAMPLES)`` (N) after it."""
-        if index % FORECAST_EVERY_SAMPLES or not self._publisher.get_subscription_count():
+        if ((index - self._phase) % FORECAST_EVERY_SAMPLES
+                or not self._publisher.get_subscription_count()):
             return
         self._publish(encode_vector_cdr(rows(FORECAST_SAMPLES).reshape(-1), index + 1, run,
                                         label=FORECAST_ROWS_LABEL))

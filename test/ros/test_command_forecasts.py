@@ -11,6 +11,7 @@ import pytest
 
 from hexapod_vibration.contract import (
     FORECAST_EVERY_SAMPLES,
+    FORECAST_PHASE_SAMPLES,
     FORECAST_ROWS_LABEL,
     FORECAST_SAMPLES,
     InvalidStrutMessage,
@@ -48,17 +49,28 @@ def test_a_bad_forecast_is_refused(message):
         parse_forecast(message)
 
 
-def test_the_publisher_sends_a_forecast_every_tenth_sample(ros_context):
+@pytest.mark.parametrize("phase", [0, 5])
+def test_the_publisher_sends_a_forecast_every_tenth_sample(ros_context, phase):
+    """At its phase: the two controllers' forecasts fall on different samples."""
     controller = ros_context.create_node("forecaster")
     driver = ros_context.create_node("forecast_reader")
     got: list[tuple[int, int]] = []
     subscribe_forecasts(driver, "/pph/test_forecast",
                         lambda rows, first, _run: got.append((first, rows.shape[0])))
-    publisher = ForecastPublisher(controller, "/pph/test_forecast")
+    publisher = ForecastPublisher(controller, "/pph/test_forecast", phase)
     assert ros_context.wait_for(lambda: publisher._publisher.get_subscription_count() > 0,
                                 HANG_GUARD_S)
     for index in range(5, 26):
         publisher.after(index, RUN, lambda k: np.full((k, 6), float(k)))
-    expected = [(n + 1, FORECAST_SAMPLES) for n in range(5, 26) if n % FORECAST_EVERY_SAMPLES == 0]
+    expected = [(n + 1, FORECAST_SAMPLES) for n in range(5, 26)
+                if n % FORECAST_EVERY_SAMPLES == phase]
     assert ros_context.wait_for(lambda: len(got) >= len(expected), HANG_GUARD_S)
     assert got == expected
+
+
+@pytest.mark.unit
+def test_the_controllers_forecast_on_different_samples():
+    """One sample carrying both forecasts made its commands late (FORECAST_PHASE_SAMPLES)."""
+    phases = [p % FORECAST_EVERY_SAMPLES for p in FORECAST_PHASE_SAMPLES.values()]
+    assert sorted(FORECAST_PHASE_SAMPLES) == ["notch_controller", "pointing_controller"]
+    assert len(set(phases)) == len(phases)
