@@ -5,6 +5,7 @@ import pytest
 
 from hexapod_vibration.core.control.tone_continuation import (
     HISTORY_SAMPLES,
+    MAX_POLE_RADIUS,
     ToneContinuation,
 )
 
@@ -56,3 +57,40 @@ def test_a_growing_oscillation_is_not_continued_growing():
     assert np.all(np.isfinite(forecast))
     swing = np.ptp(forecast[:25], axis=0)                     # one 40 Hz period each
     assert np.all(np.ptp(forecast[-25:], axis=0) <= swing)    # the pole pulled inside
+
+
+def _reference_forecast(history: np.ndarray, samples: int) -> np.ndarray:
+    """A second method: per strut least squares, then the recurrence sample by sample.
+
+    ``np.linalg.lstsq`` of y[k] = a1 y[k-1] + a2 y[k-2] about the mean, then the recurrence
+    of the pole pulled to MAX_POLE_RADIUS.
+    """
+    rows = np.empty((samples, history.shape[1]))
+    for c, x in enumerate(history.T):
+        mean = x.mean()
+        y = x - mean
+        (a1, a2), *_ = np.linalg.lstsq(np.column_stack((y[1:-1], y[:-2])), y[2:], rcond=None)
+        assert a1 * a1 + 4.0 * a2 < 0.0                        # an oscillation (the signals)
+        radius = min(np.sqrt(-a2), MAX_POLE_RADIUS)
+        angle = np.arccos(a1 / (2.0 * np.sqrt(-a2)))
+        previous, last = y[-2], y[-1]
+        for k in range(samples):
+            previous, last = last, 2.0 * radius * np.cos(angle) * last - radius**2 * previous
+            rows[k, c] = mean + last
+    return rows
+
+
+def test_the_forecast_is_the_fitted_oscillation_continued():
+    """Against a second method: per-strut least squares and the recurrence, step by step."""
+    rng = np.random.default_rng(4)
+    n = np.arange(HISTORY_SAMPLES + 57)[:, None]
+    for frequency_hz, damping in ((40.0, 0.0), (25.0, 0.004), (110.0, -0.001)):
+        phases, gains = rng.uniform(0, 2 * np.pi, 6), rng.uniform(0.2, 3.0, 6)
+        commands = (45.0 + gains * np.exp(-damping * n)
+                    * np.sin(2 * np.pi * frequency_hz * n / FS + phases)
+                    + 0.005 * rng.normal(size=(n.size, 6)))
+        continuation = ToneContinuation(6)
+        for row in commands:
+            continuation.add(row)
+        expected = _reference_forecast(commands[-HISTORY_SAMPLES:], 200)
+        np.testing.assert_allclose(continuation.forecast(200), expected, rtol=0, atol=1e-9)

@@ -15,7 +15,9 @@ sinusoid) and continues it from the last two commands, around the mean. A strut 
 not an oscillation, or before the history is full, holds its last command; the pole radius
 is kept below ``MAX_POLE_RADIUS``, so a forecast never grows. A fourth-order model through
 ``scipy.signal.lfilter`` predicted better (a third of the hold's error against about half)
-but cost 0.35 ms per forecast against 0.17 ms. On the pointing commands of a realtime run
+but cost 0.35 ms per forecast against 0.17 ms (measured then; the second-order forecast of
+200 samples now takes 73 us warm against 113 before: the normal equations from one batched
+product, the pole's powers by a running product). On the pointing commands of a realtime run
 (every 10th sample, 50 ahead): rms error 0.03 / 0.14 / 0.49 N at 1 / 5 / 20 samples ahead
 against 0.17 / 0.53 / 1.08 N for the hold.
 """
@@ -52,29 +54,42 @@ class ToneContinuation:
     def forecast(self, samples: int) -> np.ndarray:
         """The next ``samples`` commands (N, (samples, C)) after the last one added."""
         last = self._ring[self._next - 1]
-        rows = np.tile(last, (int(samples), 1))
+        rows = np.empty((int(samples), last.size))
+        rows[:] = last
         if self._filled < HISTORY_SAMPLES:
             return rows
-        history = np.roll(self._ring, -self._next, axis=0)
-        mean = history.mean(axis=0)
-        y = history - mean
-        past1, past2, now = y[1:-1], y[:-2], y[2:]
-        g11, g12, g22 = (past1 * past1).sum(0), (past1 * past2).sum(0), (past2 * past2).sum(0)
-        b1, b2 = (past1 * now).sum(0), (past2 * now).sum(0)
+        a1, a2, mean, y = self._fit()
+        discriminant = a1 * a1 + 4.0 * a2             # z^2 - a1 z - a2: complex poles if < 0
+        oscillates = np.isfinite(discriminant) & (discriminant < 0.0)
+        if not oscillates.any():
+            return rows
+        a1, a2 = a1[oscillates], np.abs(a2[oscillates])
+        radius = np.minimum(np.sqrt(a2), MAX_POLE_RADIUS)
+        pole = radius * np.exp(1j * np.arccos(np.clip(a1 / (2.0 * np.sqrt(a2)), -1.0, 1.0)))
+        y0, y_1 = y[oscillates, -1], y[oscillates, -2]
+        # y[k] = Re(c p^k): Re(c) = y0, Re(c / p) = y_1
+        imag = (y_1 * radius**2 - y0 * pole.real) / pole.imag
+        powers = np.cumprod(np.broadcast_to(pole, (int(samples), pole.size)), axis=0)  # p^k
+        rows[:, oscillates] = mean[oscillates] + ((y0 + 1j * imag) * powers).real
+        return rows
+
+    def _fit(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Per strut a1, a2 of y[k] = a1 y[k-1] + a2 y[k-2] (NaN: no fit), mean, y (C, T).
+
+        The normal equations of every strut from one batched product of its lagged series.
+        """
+        nxt = self._next
+        history = np.concatenate((self._ring[nxt:], self._ring[:nxt]))     # oldest first
+        mean = history.sum(0) * (1.0 / HISTORY_SAMPLES)
+        y = np.ascontiguousarray((history - mean).T)
+        lags = np.stack((y[:, 1:-1], y[:, :-2], y[:, 2:]), axis=1)   # past1, past2, now
+        gram = lags @ lags.transpose(0, 2, 1)                         # (C, 3, 3)
+        g11, g12, g22 = gram[:, 0, 0], gram[:, 0, 1], gram[:, 1, 1]
+        b1, b2 = gram[:, 0, 2], gram[:, 1, 2]
         det = g11 * g22 - g12 * g12
         with np.errstate(divide="ignore", invalid="ignore"):
             a1 = (b1 * g22 - b2 * g12) / det
             a2 = (g11 * b2 - g12 * b1) / det
-        discriminant = a1 * a1 + 4.0 * a2             # z^2 - a1 z - a2: complex poles if < 0
-        oscillates = np.isfinite(discriminant) & (discriminant < 0.0) & (det > 0.0)
-        if not oscillates.any():
-            return rows
-        radius = np.minimum(np.sqrt(np.abs(a2[oscillates])), MAX_POLE_RADIUS)
-        pole = radius * np.exp(1j * np.arccos(np.clip(
-            a1[oscillates] / (2.0 * np.sqrt(np.abs(a2[oscillates]))), -1.0, 1.0)))
-        y0, y_1 = y[-1, oscillates], y[-2, oscillates]
-        # y[k] = Re(c p^k): Re(c) = y0, Re(c / p) = y_1
-        imag = (y_1 * radius**2 - y0 * pole.real) / pole.imag
-        powers = np.exp(np.outer(np.arange(1, int(samples) + 1), np.log(pole)))   # p^k
-        rows[:, oscillates] = mean[oscillates] + ((y0 + 1j * imag)[None, :] * powers).real
-        return rows
+        singular = ~(det > 0.0)
+        a1[singular] = np.nan
+        return a1, a2, mean, y
