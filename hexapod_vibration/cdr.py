@@ -99,6 +99,7 @@ _RUN_AT = _SAMPLE_AT + 1 + len(_ONE_ONE) + 4 + len(RUN_LABEL_PREFIX)
 """Offset of the run label's first digit in a loop message whose sample label has no digit:
 add its digits' count rounded up to 4 (the label's NUL and padding)."""
 _RUN_DIGITS = len(str(MAX_RUN_ID))
+"""Most digits a run label may carry."""
 
 
 def encode_strut_cdr(values: np.ndarray | Sequence[float], sample_index: int,
