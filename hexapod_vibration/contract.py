@@ -116,7 +116,7 @@ FORECAST_PHASE_SAMPLES = {"notch_controller": 0, "pointing_controller": 5}
 """Sample within each ``FORECAST_EVERY_SAMPLES`` after whose answer each controller forecasts.
 Both on the same sample, about 0.6 ms of work ran between that sample's answers and a
 composed driver's take of them (the two forecasts, 135 and 273 us, their publication and
-the driver's two parses, 70 us each): 73-93 % of those samples took over 1 ms, 81-90 % of
+the driver's two parses, 70 us each): 73-97 % of those samples took over 1 ms, 81-90 % of
 all the samples over 1 ms (p99 1.7-2.1 ms; docs/performance.md)."""
 
 FREQUENCY_LABEL = "frequency_hz"
