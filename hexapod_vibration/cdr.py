@@ -67,7 +67,9 @@ _LOOP_LABELS = (1, 2)
 _EVERY_LABEL = range(MAX_LAYOUT_DIMS)
 _SAMPLE_PREFIX = SAMPLE_LABEL_PREFIX.encode()
 _STRUT_DIM0 = _LE32.pack(len(STRUT_LABEL) + 1) + STRUT_LABEL.encode() + b"\x00"
-"""A loop message's first dimension label, at offset 8: its second one is at offset 32."""
+"""A loop message's first dimension label, at :data:`_DIM0_AT`."""
+_DIM0_AT = CDR_HEADER + 4
+"""Offset of the first dimension's label (after the encapsulation and the dims count)."""
 _UNDER_2 = (bytes(4), _LE32.pack(1))
 """The dimension counts (little-endian uint32) of a layout with no second dimension."""
 _SAMPLE_DIGITS = len(str(MAX_SAMPLE_INDEX))
@@ -93,8 +95,14 @@ _PREFIX = {dims: CDR_LE + b"\x00\x00" + _LE32.pack(dims) + _label(STRUT_LABEL.en
 _DATA_HEADER = struct.pack("<II", 0, STRUT_COUNT)   # data_offset, length of data
 _SAMPLE_FORMAT = _SAMPLE_PREFIX + b"%d"
 _RUN_FORMAT = RUN_LABEL_PREFIX.encode() + b"%d"
-_SAMPLE_AT = len(_PREFIX[3]) + 4 + len(_SAMPLE_PREFIX)
-"""Offset of the sample label's first digit in a loop message with a run."""
+_SAMPLE_LENGTH_AT = len(_PREFIX[3])
+"""Offset of a loop message's second label (``sample:<n>``): its length, then its text."""
+_SAMPLE_AT = _SAMPLE_LENGTH_AT + 4 + len(_SAMPLE_PREFIX)
+"""Offset of the sample label's first digit in a loop message."""
+_DIMS, _DIM0, _SAMPLE_PREFIX_BYTES = (slice(CDR_HEADER, _DIM0_AT),
+                                      slice(_DIM0_AT, _DIM0_AT + len(_STRUT_DIM0)),
+                                      slice(_SAMPLE_AT - len(_SAMPLE_PREFIX), _SAMPLE_AT))
+"""Where a loop message has its dims count, first label and second label's prefix."""
 _RUN_AT = _SAMPLE_AT + 1 + len(_ONE_ONE) + 4 + len(RUN_LABEL_PREFIX)
 """Offset of the run label's first digit in a loop message whose sample label has no digit:
 add its digits' count rounded up to 4 (the label's NUL and padding)."""
@@ -365,12 +373,12 @@ def sample_index_of_cdr(data: bytes | memoryview) -> int | None:
     answer at a fraction of the walk's cost (the recorder asks for every loop message).
     """
     raw = bytes(data[:512])
-    if (raw[8:18] == _STRUT_DIM0 and raw[32:39] == _SAMPLE_PREFIX
-            and raw[:2] in LITTLE_ENDIAN_CDR and raw[4:8] not in _UNDER_2):
-        (length,) = _LE32.unpack_from(raw, 28)
+    if (raw[_DIM0] == _STRUT_DIM0 and raw[_SAMPLE_PREFIX_BYTES] == _SAMPLE_PREFIX
+            and raw[:2] in LITTLE_ENDIAN_CDR and raw[_DIMS] not in _UNDER_2):
+        (length,) = _LE32.unpack_from(raw, _SAMPLE_LENGTH_AT)
         if length < len(_SAMPLE_PREFIX) + 1:       # the label ends before its prefix does
             return _sample_index_by_walk(raw)
-        digits = raw[39:31 + length]
+        digits = raw[_SAMPLE_AT:_SAMPLE_LENGTH_AT + 3 + length]     # its NUL left out
         if not (len(digits) <= _SAMPLE_DIGITS and digits.isdigit()):   # ASCII digits only
             return None
         index = int(digits)

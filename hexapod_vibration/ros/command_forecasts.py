@@ -52,7 +52,7 @@ class ForecastPublisher:
         """
         self._publisher = node.create_publisher(Float64MultiArray, topic, LOOP_QOS)
         self._publish = serialized_publish(self._publisher)       # CDR bytes
-        self._phase = phase_samples % FORECAST_EVERY_SAMPLES
+        self._phase = phase_samples
 
     def after(self, index: int, run: int | None, rows: Callable[[int], np.ndarray]) -> None:
         """Sample ``index`` was answered: every 10th, ``rows(FORECAST_SAMPLES)`` (N) after it."""
