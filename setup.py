@@ -14,7 +14,7 @@ setup(
     data_files=[
         ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
         (SHARE, ["package.xml"]),
-        (f"{SHARE}/config", sorted(glob("config/*.yaml"))),
+        (f"{SHARE}/config", sorted(glob("config/*.yaml") + glob("config/*.xml"))),
         (f"{SHARE}/config/scenarios", sorted(glob("config/scenarios/*.yaml"))),
         (f"{SHARE}/config/presets", sorted(glob("config/presets/*.yaml"))),
         (f"{SHARE}/config/sweeps", sorted(glob("config/sweeps/*.yaml"))),

@@ -85,7 +85,8 @@ def test_the_install_is_the_colcon_layout(install):
         assert (install / "lib" / PACKAGE / name).is_file(), name
     share = install / "share" / PACKAGE
     for path in ("package.xml", "config/pph.yaml", "config/pph_model.yaml",
-                 "config/scenarios/single_tone_harmonic.yaml", "launch/pph.launch.py"):
+                 "config/fastdds_profiles.xml", "config/scenarios/single_tone_harmonic.yaml",
+                 "launch/pph.launch.py"):
         assert (share / path).is_file(), path
     assert (install / "share" / "ament_index" / "resource_index" / "packages" / PACKAGE).is_file()
 

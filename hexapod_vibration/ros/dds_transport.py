@@ -34,6 +34,11 @@ USER_CHOICES = (TRANSPORT_VARIABLE, "FASTRTPS_DEFAULT_PROFILES_FILE",
 """Variables by which a user chose the transports already: left as they are."""
 
 
+def uses_fastrtps(env: Mapping[str, str]) -> bool:
+    """True when the nodes' RMW is rmw_fastrtps (``RMW_IMPLEMENTATION``; Jazzy's default)."""
+    return env.get("RMW_IMPLEMENTATION", "rmw_fastrtps_cpp").startswith("rmw_fastrtps")
+
+
 def localhost_only(env: Mapping[str, str]) -> bool:
     """True when rmw_fastrtps limits discovery to this host (it then sets the transports)."""
     return (env.get("ROS_AUTOMATIC_DISCOVERY_RANGE", "").strip().upper() == "LOCALHOST"
@@ -47,7 +52,7 @@ def realtime_transport_variables(env: Mapping[str, str]) -> tuple[dict[str, str]
     transports (:data:`USER_CHOICES`), or discovery is localhost-only (then none, and the
     note says why the stalls may come).
     """
-    if not env.get("RMW_IMPLEMENTATION", "rmw_fastrtps_cpp").startswith("rmw_fastrtps"):
+    if not uses_fastrtps(env):
         return {}, ""
     if any(env.get(name) for name in USER_CHOICES):
         return {}, ""

@@ -4,7 +4,9 @@
    arguments, ``--params-file``), and SIGINT/SIGTERM raise ``cli.StopSignal`` from then on
    (rclpy's own signal handlers are not installed: they shut the context down from another
    thread, in the middle of whatever the node is doing, which is what made Ctrl-C print
-   ``RCLError: context is not valid`` tracebacks).
+   ``RCLError: context is not valid`` tracebacks). The package's Fast DDS profile is then
+   put in the environment before ``rclpy.init`` (:mod:`hexapod_vibration.ros.fastdds_profile`:
+   a short heartbeat, so that the exit's acknowledgements below come within ~0.1 s).
 2. The node(s) are built (a signal meanwhile is raised once each is whole, so that it is
    destroyed like a running one); a bad parameter or file ends the process with exit
    code 2 and the reason in one line, before the loop starts. The first node's
@@ -66,10 +68,12 @@ def _run(name: str, factory, loop, args, companions) -> int:
     from threadpoolctl import threadpool_limits
 
     from hexapod_vibration.ros.executors import LoopSpinner, make_executor, spin_loop
+    from hexapod_vibration.ros.fastdds_profile import use_package_profile
     from hexapod_vibration.ros.rclpy_internals import RCLError
     from hexapod_vibration.ros.realtime import apply_scheduling
 
     cli.exit_if_stopped()
+    use_package_profile()
     try:
         rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     except RCLError as exc:
