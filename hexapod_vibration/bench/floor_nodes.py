@@ -300,8 +300,10 @@ def run(args: argparse.Namespace) -> int:
     from rclpy.signals import SignalHandlerOptions
 
     from hexapod_vibration.ros.executors import LoopSpinner
+    from hexapod_vibration.ros.fastdds_profile import use_package_profile
     from hexapod_vibration.ros.realtime import apply_scheduling
 
+    use_package_profile()          # as run_node: the same DDS settings as the nodes
     rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
     if args.priority and args.role != "recorder":      # as realtime_priority: loop nodes
         apply_scheduling(args.priority, [])
