@@ -38,7 +38,8 @@ def test_the_package_file_by_default_a_users_file_or_another_rmw_left_alone():
 
 def test_a_node_process_gets_the_package_file_unless_the_user_has_one(monkeypatch):
     for name in (*PROFILES_VARIABLES, "RMW_IMPLEMENTATION"):
-        monkeypatch.delenv(name, raising=False)
+        monkeypatch.setenv(name, "")      # recorded, so the teardown restores this worker's
+        monkeypatch.delenv(name)          # environment whatever use_package_profile sets
     use_package_profile()
     assert os.environ[PROFILES_VARIABLES[0]] == str(config_path(PROFILES_FILE))
     monkeypatch.setenv(PROFILES_VARIABLES[0], "/mine.xml")
