@@ -43,7 +43,7 @@ from hexapod_vibration.ros.rclpy_internals import serialized_publish
 class ForecastPublisher:
     """A controller's forecasts on ``topic``, published while someone listens."""
 
-    def __init__(self, node: Node, topic: str, phase_samples: int = 0) -> None:
+    def __init__(self, node: Node, topic: str, phase_samples: int) -> None:
         """Create the publisher (:data:`~hexapod_vibration.ros.qos.LOOP_QOS`).
 
         ``phase_samples``: forecast after the samples ``n`` with ``n %

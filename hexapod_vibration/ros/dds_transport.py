@@ -29,8 +29,9 @@ from collections.abc import Mapping
 TRANSPORT_VARIABLE = "FASTDDS_BUILTIN_TRANSPORTS"
 REALTIME_TRANSPORTS = "UDPv4"
 """Fast DDS's built-in transports for a realtime graph (see the module)."""
-USER_CHOICES = (TRANSPORT_VARIABLE, "FASTRTPS_DEFAULT_PROFILES_FILE",
-                "FASTDDS_DEFAULT_PROFILES_FILE")
+PROFILES_VARIABLES = ("FASTRTPS_DEFAULT_PROFILES_FILE", "FASTDDS_DEFAULT_PROFILES_FILE")
+"""Fast DDS's profiles-file variables (Jazzy's Fast DDS 2 reads the first)."""
+USER_CHOICES = (TRANSPORT_VARIABLE, *PROFILES_VARIABLES)
 """Variables by which a user chose the transports already: left as they are."""
 
 

@@ -8,12 +8,13 @@ its 1 kHz topics and ``/clock`` (``ros.matching.FLUSH_S``: a recorder must not l
 run's tail), and so waited 0-3 s for the next heartbeat each time: measured (2026-12-07,
 this 2-core machine, the graph tier of the tests) 128 node exits waited 70.8 s for their
 ``/diagnostics``, 51 driver exits 60.5 s for their loop topics; a lockstep experiment's
-four nodes took 0.2-2.9 s each to stop after its last sample.
+four nodes took 0.16-2.9 s each to stop after its last sample.
 
 ``config/fastdds_profiles.xml`` gives those writers (by topic name, as rmw_fastrtps looks
 profiles up) a 100 ms heartbeat period and nothing else: the QoS policies stay the nodes'
 own. A node loads it (:func:`use_package_profile`, before ``rclpy.init``) unless another
-RMW is chosen or the user has a profiles file of their own (:data:`PROFILES_VARIABLES`).
+RMW is chosen or the user has a profiles file of their own (in either of
+:data:`~hexapod_vibration.ros.dds_transport.PROFILES_VARIABLES`: it is left in charge).
 """
 
 from __future__ import annotations
@@ -23,11 +24,8 @@ from collections.abc import Mapping
 from pathlib import Path
 
 from hexapod_vibration.paths import config_path
-from hexapod_vibration.ros.dds_transport import uses_fastrtps
+from hexapod_vibration.ros.dds_transport import PROFILES_VARIABLES, uses_fastrtps
 
-PROFILES_VARIABLES = ("FASTRTPS_DEFAULT_PROFILES_FILE", "FASTDDS_DEFAULT_PROFILES_FILE")
-"""Fast DDS's profiles-file variables (Jazzy's Fast DDS 2 reads the first): a user's own
-file in either is left in charge."""
 PROFILES_FILE = "fastdds_profiles.xml"
 """The package's profiles file, in ``config/``."""
 

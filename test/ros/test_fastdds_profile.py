@@ -9,9 +9,9 @@ from pathlib import Path
 import pytest
 
 from hexapod_vibration.paths import config_path
+from hexapod_vibration.ros.dds_transport import PROFILES_VARIABLES
 from hexapod_vibration.ros.fastdds_profile import (
     PROFILES_FILE,
-    PROFILES_VARIABLES,
     profile_variables,
     use_package_profile,
 )
