@@ -37,6 +37,7 @@ import argparse
 import gc
 import json
 import time
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -248,21 +249,22 @@ def _run_driver(spinner, driver: FloorDriver, args: argparse.Namespace,
         while driver.arbiter.unanswered() and time.perf_counter() < deadline:
             spinner.spin_once(0.005)
     start = time.perf_counter()
+    answered = partial(driver.arbiter.answered, TIMEOUT_SAMPLES)
     while not stop.is_set() and driver.sample < args.samples:
         if driver.sample:
             driver.publish()
         if args.mode == "lockstep":
             offer_at = time.perf_counter() + OFFER_AGAIN_S
             while not driver.ready() and not stop.is_set():
-                spinner.spin_once(max(offer_at - time.perf_counter(), 0.0))
+                spinner.spin_once(max(offer_at - time.perf_counter(), 0.0), idle=False)
                 if time.perf_counter() >= offer_at:
                     driver.publish(again=True)
                     offer_at = time.perf_counter() + OFFER_AGAIN_S
         else:
             deadline = start + (driver.sample + 1) * period
-            spinner.spin_once(0.0)
+            spinner.spin_once(0.0, idle=answered)             # as the driver's loop
             while (remaining := deadline - time.perf_counter()) > 0.0:
-                spinner.spin_once(remaining)
+                spinner.spin_once(remaining, idle=answered)
         window.saw(driver.sample)
         if driver.sample == args.warmup:
             driver.arbiter.restart_stats(time.perf_counter())

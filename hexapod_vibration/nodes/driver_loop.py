@@ -43,6 +43,7 @@ class PPHDriver(Protocol):
     def held(self) -> bool: ...                                 # noqa: D102
     def paused(self, held: bool) -> None: ...                   # noqa: D102
     def commands_ready(self) -> bool: ...                       # noqa: D102
+    def answered(self) -> bool: ...                             # noqa: D102
     def unanswered(self) -> list[str]: ...                      # noqa: D102
     def publish_sample(self) -> None: ...                       # noqa: D102
     def offer_again(self) -> None: ...                          # noqa: D102
@@ -128,7 +129,7 @@ def wait_for_commands(node: PPHDriver, spinner: LoopSpinner) -> None:
             offers += 1
             offer_at = now + OFFER_AGAIN_S
         until = offer_at if now >= deadline else min(deadline, offer_at)
-        spinner.spin_once(timeout_sec=max(until - now, 0.0))
+        spinner.spin_once(timeout_sec=max(until - now, 0.0), idle=False)
         spun = True
     if not spun:    # nothing to wait for: still serve parameters and other streams
         spinner.spin_once(timeout_sec=0.0)
@@ -175,9 +176,11 @@ def run_realtime(node: PPHDriver, spinner: LoopSpinner) -> None:
             start = time.perf_counter() - node.sample * period
         node.publish_sample()
         deadline = start + (node.sample + 1) * period
-        spinner.spin_once(timeout_sec=0.0)   # after an overrun: what is here is not late
+        # After an overrun: what is here is not late. Idle (deferred work, the services)
+        # once the sample's commands are in.
+        spinner.spin_once(timeout_sec=0.0, idle=node.answered)
         while (remaining := deadline - time.perf_counter()) > 0.0:
-            spinner.spin_once(timeout_sec=remaining)
+            spinner.spin_once(timeout_sec=remaining, idle=node.answered)
         if node.sample % REFRESH_EVERY_SAMPLES == 0:
             node.refresh_connections()
         node.apply_and_step()

@@ -43,6 +43,7 @@ from hexapod_vibration.contract import (
     InvalidStrutMessage,
 )
 from hexapod_vibration.core.control.notch_supervisor import NotchConfig, NotchSupervisor
+from hexapod_vibration.core.loop.idle_work import IdleWork
 from hexapod_vibration.core.loop.signal_ranges import SignalRanges
 from hexapod_vibration.core.model.config import load_model_config
 from hexapod_vibration.parameter_specs import NOTCH_CONTROLLER
@@ -111,9 +112,10 @@ class NotchControllerNode(Node):
         self._pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", DIAGNOSTICS_QOS)
         publish_status_periodically(self, self.publish_diagnostics)
         self._pub_frequencies = serialized_publish(arrays[NOTCH_FREQUENCIES_TOPIC])
+        self.idle_work = IdleWork()                   # run by the loop's spinner when idle
         self._forecasts = ForecastPublisher(            # for late samples
-            self, NOTCH_FORECAST_TOPIC, FORECAST_PHASE_SAMPLES["notch_controller"])
-        self._forecast_rows = notch_rows(self.supervisor)
+            self, NOTCH_FORECAST_TOPIC, FORECAST_PHASE_SAMPLES["notch_controller"],
+            notch_rows(self.supervisor), self.idle_work)
         self._pub_sensitivity = self.create_publisher(
             Float64MultiArray, NOTCH_SENSITIVITY_TOPIC, LATCHED_QOS)
         self._published_sensitivity: object | None = None
@@ -229,7 +231,7 @@ class NotchControllerNode(Node):
         if command is None:
             return
         self.port.answer(command, sample)
-        self._forecasts.after(sample.index, sample.run, self._forecast_rows)
+        self._forecasts.after(sample.index, sample.run)
         meter.lap(stage["publish"])
         self._count()
         index = sample.index

@@ -36,6 +36,7 @@ from hexapod_vibration.core.control.gap_bridge import GapBridge
 from hexapod_vibration.core.control.pointing import PointingGains, validate_target_pose
 from hexapod_vibration.core.control.tone_continuation import ToneContinuation
 from hexapod_vibration.core.loop.command_arbiter import NO_FORCE_N  # zero force, read-only
+from hexapod_vibration.core.loop.idle_work import IdleWork
 from hexapod_vibration.core.loop.signal_ranges import SignalRanges
 from hexapod_vibration.core.model.config import load_model_config
 from hexapod_vibration.core.model.sensors import EddySensorArray
@@ -84,9 +85,11 @@ class PointingControllerNode(Node):
             StrutArrayPublisher(self.readers.publisher(
                 self, Float64MultiArray, "/pph/pointing_command", LOOP_PUBLISHER_QOS)),
             self.get_logger())
-        self._forecasts = ForecastPublisher(            # for late samples
-            self, POINTING_FORECAST_TOPIC, FORECAST_PHASE_SAMPLES["pointing_controller"])
         self._continuation = ToneContinuation(STRUT_COUNT)
+        self.idle_work = IdleWork()                   # run by the loop's spinner when idle
+        self._forecasts = ForecastPublisher(            # for late samples
+            self, POINTING_FORECAST_TOPIC, FORECAST_PHASE_SAMPLES["pointing_controller"],
+            self._continuation.forecast, self.idle_work)
         self._bridge = GapBridge(STRUT_COUNT)         # the law's input across skipped samples
         self._pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", DIAGNOSTICS_QOS)
         publish_status_periodically(self, self.publish_diagnostics)
@@ -149,7 +152,7 @@ class PointingControllerNode(Node):
             self._continuation.add(force)
         meter.lap(stage["law"])
         self.port.answer(force, sample)
-        self._forecasts.after(sample.index, sample.run, self._continuation.forecast)
+        self._forecasts.after(sample.index, sample.run)
         meter.lap(stage["publish"])
         self._count()
         if sample.index % DIAGNOSTICS_EVERY_SAMPLES == DIAGNOSTICS_PHASE:

@@ -131,6 +131,10 @@ class PPHDriver(Node):
         """Lockstep: every waited controller answered the current sample."""
         return self.arbiter.ready(self.settings.timeout_samples)
 
+    def answered(self) -> bool:
+        """Realtime: every waited controller answered the newest sample (nothing expected)."""
+        return self.arbiter.answered(self.settings.timeout_samples)
+
     def unanswered(self) -> list[str]:
         """Expected controllers that did not answer the current sample (handshake)."""
         return self.arbiter.unanswered()

@@ -2,7 +2,8 @@
 
 The controller's end (:class:`ForecastPublisher`) publishes, every
 ``FORECAST_EVERY_SAMPLES`` (each controller at its own phase, ``FORECAST_PHASE_SAMPLES``)
-and only while a subscriber listens (a realtime driver), the
+and only while a subscriber listens (a realtime driver), once its loop is idle after the
+sample's answer (:mod:`~hexapod_vibration.core.loop.idle_work`), the
 commands of its next ``FORECAST_SAMPLES`` samples: the notch controller's sinusoids
 (:mod:`hexapod_vibration.core.control.command_forecast`), the pointing controller's last
 commands continued (:mod:`hexapod_vibration.core.control.tone_continuation`: they oscillate
@@ -32,6 +33,7 @@ from hexapod_vibration.contract import (
 )
 from hexapod_vibration.core.control.command_forecast import WeightTrend, notch_forecast
 from hexapod_vibration.core.control.notch_supervisor import NotchSupervisor
+from hexapod_vibration.core.loop.idle_work import IdleWork
 from hexapod_vibration.ros.messages import (
     create_parsed_subscription,
     parse_labelled_sample,
@@ -43,24 +45,41 @@ from hexapod_vibration.ros.rclpy_internals import serialized_publish
 class ForecastPublisher:
     """A controller's forecasts on ``topic``, published while someone listens."""
 
-    def __init__(self, node: Node, topic: str, phase_samples: int) -> None:
+    def __init__(self, node: Node, topic: str, phase_samples: int,
+                 rows: Callable[[int], np.ndarray], idle_work: IdleWork) -> None:
         """Create the publisher (:data:`~hexapod_vibration.ros.qos.LOOP_QOS`).
 
         ``phase_samples``: forecast after the samples ``n`` with ``n %
         FORECAST_EVERY_SAMPLES == phase_samples`` (:data:`~hexapod_vibration.contract.
-        FORECAST_PHASE_SAMPLES`: the two controllers on different samples).
+        FORECAST_PHASE_SAMPLES`: the two controllers on different samples). ``rows(k)``: the
+        controller's next ``k`` commands (N, (k, 6)) after the last sample it took.
+        ``idle_work``: the node's deferred work, where the forecast waits for an idle loop.
         """
         self._publisher = node.create_publisher(Float64MultiArray, topic, LOOP_QOS)
         self._publish = serialized_publish(self._publisher)       # CDR bytes
         self._phase = phase_samples
+        self._rows = rows
+        self._idle_work = idle_work
+        self._answered: tuple[int, int | None] = (-1, None)
 
-    def after(self, index: int, run: int | None, rows: Callable[[int], np.ndarray]) -> None:
-        """Sample ``index`` was answered: every 10th, ``rows(FORECAST_SAMPLES)`` (N) after it."""
+    def after(self, index: int, run: int | None) -> None:
+        """Sample ``index`` of ``run`` was answered: every 10th, a forecast when idle."""
+        self._answered = (index, run)
         if ((index - self._phase) % FORECAST_EVERY_SAMPLES
                 or not self._publisher.get_subscription_count()):
             return
-        self._publish(encode_vector_cdr(rows(FORECAST_SAMPLES).reshape(-1), index + 1, run,
-                                        label=FORECAST_ROWS_LABEL))
+        self._idle_work.defer(self.publish)
+
+    def publish(self) -> None:
+        """``rows(FORECAST_SAMPLES)`` after the last sample answered, published now.
+
+        Computed from the controller's state when it runs: samples answered since the
+        forecast was asked for are in that state, and the first row is the sample after
+        them.
+        """
+        index, run = self._answered
+        self._publish(encode_vector_cdr(self._rows(FORECAST_SAMPLES).reshape(-1), index + 1,
+                                        run, label=FORECAST_ROWS_LABEL))
 
 
 def notch_rows(supervisor: NotchSupervisor) -> Callable[[int], np.ndarray]:

@@ -7,12 +7,15 @@ Each node has a read-only ``executor`` parameter:
   conversion to a Python message, which costs about 19 us per message here), every queued
   message at each wake-up; their callbacks get the CDR bytes (loop subscriptions are raw:
   ``messages.create_loop_subscription``); everything else (parameter services,
-  ``~/identify``, graph events) is served by a SingleThreadedExecutor at least every
-  ``SERVICE_PERIOD_S``, running or idle. rclpy's executors rebuild a wait set from every
-  entity of the node and go through a task per callback on every spin. Measured on the
-  project's 2-core machine: a ping-pong between two processes takes 388 us per round trip
-  with the executor and 222 us with a wait set; the notch controller's CPU per 1 kHz
-  sample fell from 656 to 288 us (docs/performance.md has the loop as a whole).
+  ``~/identify``, graph events) is served by a SingleThreadedExecutor every
+  ``SERVICE_PERIOD_S``, when the loop is idle (within ``IDLE_OVERDUE_S`` after, whatever it
+  does), as is the work the nodes' callbacks deferred (:mod:`~hexapod_vibration.core.loop.
+  idle_work`: the forecasts), so neither delays a sample's commands. rclpy's executors
+  rebuild a wait set from every entity of the node and go through a task per callback on
+  every spin. Measured on the project's 2-core machine: a ping-pong between two processes
+  takes 388 us per round trip with the executor and 222 us with a wait set; the notch
+  controller's CPU per 1 kHz sample fell from 656 to 288 us (docs/performance.md has the
+  loop as a whole).
 - ``single_threaded``: rclpy's SingleThreadedExecutor for everything.
 - ``events``: rclpy's experimental EventsExecutor (Jazzy), for comparison only: on this
   machine it misses more samples than ``waitset`` in realtime and does not stop on SIGINT
@@ -36,6 +39,7 @@ from rclpy.node import Node
 from rclpy.subscription import Subscription
 
 from hexapod_vibration.core.loop.cost_meter import LoopCostMeter
+from hexapod_vibration.core.loop.idle_work import IDLE_OVERDUE_S, IdleWork
 from hexapod_vibration.parameter_specs import EXECUTOR, EXECUTORS
 from hexapod_vibration.ros.parameters import declare_string
 from hexapod_vibration.ros.rclpy_internals import (
@@ -47,7 +51,8 @@ from hexapod_vibration.ros.rclpy_internals import (
 
 DEFAULT_EXECUTOR = EXECUTOR.default
 SERVICE_PERIOD_S = 0.05
-"""Longest time (s, wall) between two services of the non-loop callbacks by ``waitset``.
+"""Time (s, wall) between two services of the non-loop callbacks by ``waitset`` (the next
+idle moment after it, at most ``IDLE_OVERDUE_S`` later).
 
 One service (an executor ``spin_once`` over every entity of the process's nodes) costs
 0.2-0.4 ms here; every 50 ms that is under 1 % of the loop, and ``ros2 param set`` is
@@ -102,7 +107,7 @@ class LoopSpinner:
                  fast: bool, service_period_s: float = SERVICE_PERIOD_S,
                  latest_only: Sequence[Subscription] = (),
                  skipped: Mapping[Subscription, Callable[[bytes], None]] | None = None,
-                 answered: int = 1) -> None:
+                 answered: int = 1, idle_work: Sequence[IdleWork] = ()) -> None:
         """Bind to ``executor`` (which holds the node) and its loop ``subscriptions``.
 
         ``latest_only``: subscriptions (among ``subscriptions``) whose callback gets only the
@@ -117,6 +122,8 @@ class LoopSpinner:
         ``skipped``: for some of those, a callable that gets each skipped (older) message,
         oldest first, before the callback gets the newest (e.g. to record a sample it will
         not answer).
+        ``idle_work``: the nodes' deferred work (:mod:`~hexapod_vibration.core.loop.
+        idle_work`), run when the loop is idle (:meth:`spin_once`).
         """
         self.executor = executor
         self.subscriptions = list(subscriptions)
@@ -130,36 +137,81 @@ class LoopSpinner:
         self._wait_stage = self.meter.stage("wait")
         self._take_stage = self.meter.stage("take")
         self._service_stage = self.meter.stage("service")
+        self._idle_stage = self.meter.stage("idle work")
+        self._idle_work = list(idle_work)
         self._served_s = 0.0
         self._wait_set = None
         if self.fast:
             self._wait_set = LoopWaitSet(executor.context, self.subscriptions)
 
-    def spin_once(self, timeout_sec: float) -> None:
-        """Dispatch ready callbacks, waiting up to ``timeout_sec`` (s) for a loop message."""
+    def spin_once(self, timeout_sec: float, idle: bool | Callable[[], bool] = True) -> None:
+        """Dispatch ready callbacks, waiting up to ``timeout_sec`` (s) for a loop message.
+
+        Work that no sample waits for runs when the loop is idle: the executor's service of
+        the non-loop callbacks (every ``service_period_s``) and the nodes' deferred work.
+        Idle is ``idle`` (or what it returns: the loop's owner expects no message now; asked
+        only when such work is due) and a wait without timeout finding no message; the
+        call then returns without waiting. Work overdue by ``IDLE_OVERDUE_S`` runs whatever
+        the loop is doing.
+        """
         if not self.fast:
             self.executor.spin_once(timeout_sec=timeout_sec)
             self.meter.lap(self._service_stage)
+            if self._work_pending() and (self._work_overdue(time.perf_counter())
+                                         or _asked(idle)):
+                self._run_idle_work()
             return
         now = time.perf_counter()
-        if now - self._served_s >= self.service_period_s:
-            # The executor may take a loop message too (its callback runs): return so the
-            # caller sees it rather than waiting for the next one.
-            self._served_s = now
-            self.executor.spin_once(timeout_sec=0.0)
-            self.meter.lap(self._service_stage)
+        since_service_s = now - self._served_s
+        service = since_service_s >= self.service_period_s
+        if service or self._work_pending():
+            overdue = (since_service_s >= self.service_period_s + IDLE_OVERDUE_S
+                       or self._work_overdue(now))
+            if not overdue:
+                if not _asked(idle):
+                    self._serve_ready(timeout_sec)
+                    return
+                if self._serve_ready(0.0):
+                    return                 # messages first: the caller looks at them
+            if service:
+                self._served_s = now
+                self.executor.spin_once(timeout_sec=0.0)
+                self.meter.lap(self._service_stage)
+            self._run_idle_work()
+            # The executor may have taken a loop message (its callback ran): no wait, so
+            # the caller sees it rather than waiting for the next one.
             timeout_sec = 0.0
-        self.serve_loop(timeout_sec)
+        self._serve_ready(timeout_sec)
+
+    def _work_pending(self) -> bool:
+        return any(work.pending for work in self._idle_work)
+
+    def _work_overdue(self, now: float) -> bool:
+        return any(work.overdue(now) for work in self._idle_work)
+
+    def _run_idle_work(self) -> None:
+        for work in self._idle_work:
+            work.run()
+        self.meter.lap(self._idle_stage)
 
     def serve_loop(self, timeout_sec: float) -> None:
-        """Only the loop subscriptions' callbacks, waiting up to ``timeout_sec`` (s) for one.
+        """The loop subscriptions' callbacks, waiting up to ``timeout_sec`` (s) for one.
 
-        Not the executor: this is for a callback of it that waits (a parameter change's
-        computation on a worker) while the loop keeps its deadline; the executor's other
-        work waits with it. Fast path only (``fast``).
+        Then the nodes' deferred work if no message came (or it is overdue). Not the
+        executor: this is for a callback of it that waits (a parameter change's computation
+        on a worker) while the loop keeps its deadline; the executor's other work waits
+        with it. Fast path only (``fast``).
         """
-        for sub in self._wait(max(timeout_sec, 0.0)):
+        served = self._serve_ready(timeout_sec)
+        if self._work_pending() and (not served or self._work_overdue(time.perf_counter())):
+            self._run_idle_work()
+
+    def _serve_ready(self, timeout_sec: float) -> bool:
+        """Serve the loop subscriptions ready within ``timeout_sec`` (s); whether any was."""
+        ready = self._wait(max(timeout_sec, 0.0))
+        for sub in ready:
             self._take_all_of(sub)
+        return bool(ready)
 
     def _wait(self, timeout_sec: float) -> list[Subscription]:
         """The loop subscriptions with data, waiting up to ``timeout_sec`` for one.
@@ -212,6 +264,10 @@ class LoopSpinner:
     def _raise_if_shut_down(self) -> None:
         if not self.executor.context.ok():
             raise ExternalShutdownException()
+
+
+def _asked(idle: bool | Callable[[], bool]) -> bool:
+    return idle() if callable(idle) else idle
 
 
 def spin_loop(node: Node, spinner: LoopSpinner) -> None:

@@ -94,6 +94,7 @@ def _run(name: str, factory, loop, args, companions) -> int:
         latest = [sub for node in built for sub in getattr(node, "latest_only_subscriptions", ())]
         skipped = {sub: call for node in built
                    for sub, call in getattr(node, "skipped_message_callbacks", {}).items()}
+        idle_work = [node.idle_work for node in built if hasattr(node, "idle_work")]
         # A signal in the middle of an rclpy constructor leaves a half-built object whose
         # __del__ prints a traceback: the stop is raised once they are whole.
         with cli.deferred():
@@ -102,7 +103,8 @@ def _run(name: str, factory, loop, args, companions) -> int:
                 executor.add_node(node)
             spinner = LoopSpinner(executor, subscriptions, fast=executor_name == "waitset",
                                   latest_only=latest, skipped=skipped,
-                                  answered=_command_delay(built[0]) + 1)
+                                  answered=_command_delay(built[0]) + 1,
+                                  idle_work=idle_work)
         for node in built:      # a node whose callbacks may wait serves the loop meanwhile
             if hasattr(node, "serve_loop_with"):
                 node.serve_loop_with(spinner)

@@ -265,6 +265,20 @@ def test_lockstep_with_a_command_delay_waits_for_the_sample_due():
     assert not arbiter.ready(TIMEOUT)                         # answer 1 is due: missing
 
 
+def test_the_loop_is_idle_once_every_waited_stream_answered_the_newest_sample():
+    """Realtime with a delay: the sample due is in long before; idle waits for the newest."""
+    arbiter = _delayed(1)
+    _step(arbiter, lockstep=False)                            # now at sample 1
+    arbiter.offer("notch", _force(1.0), 0, RUN, 0.0)
+    assert arbiter.ready(TIMEOUT) and not arbiter.answered(TIMEOUT)
+    arbiter.offer("pointing", _force(2.0), 1, RUN, 0.0)       # not expected: not waited
+    assert not arbiter.answered(TIMEOUT)
+    arbiter.offer("notch", _force(3.0), 1, RUN, 0.0)
+    assert arbiter.answered(TIMEOUT)
+    _step(arbiter, lockstep=False)
+    assert arbiter.ready(TIMEOUT) and not arbiter.answered(TIMEOUT)
+
+
 @pytest.mark.parametrize("delay", [-1, 1.5])
 def test_a_command_delay_is_a_whole_number_of_samples(delay):
     with pytest.raises(ValueError, match="delay_samples"):

@@ -1,7 +1,7 @@
 """``/pph/*_forecast`` messages: what a controller writes reads back, a bad one is refused.
 
-The publisher sends a forecast every ``FORECAST_EVERY_SAMPLES`` samples while someone listens
-(in-process nodes on the test's domain).
+The publisher sends a forecast every ``FORECAST_EVERY_SAMPLES`` samples while someone listens,
+when its loop is idle (in-process nodes on the test's domain).
 """
 
 from __future__ import annotations
@@ -16,6 +16,7 @@ from hexapod_vibration.contract import (
     FORECAST_SAMPLES,
     InvalidStrutMessage,
 )
+from hexapod_vibration.core.loop.idle_work import IdleWork
 from hexapod_vibration.ros.command_forecasts import (
     ForecastPublisher,
     parse_forecast,
@@ -57,15 +58,43 @@ def test_the_publisher_sends_a_forecast_every_tenth_sample(ros_context, phase):
     got: list[tuple[int, int]] = []
     subscribe_forecasts(driver, "/pph/test_forecast",
                         lambda rows, first, _run: got.append((first, rows.shape[0])))
-    publisher = ForecastPublisher(controller, "/pph/test_forecast", phase)
+    idle_work = IdleWork()
+    publisher = ForecastPublisher(controller, "/pph/test_forecast", phase,
+                                  lambda k: np.full((k, 6), float(k)), idle_work)
     assert ros_context.wait_for(lambda: publisher._publisher.get_subscription_count() > 0,
                                 HANG_GUARD_S)
     for index in range(5, 26):
-        publisher.after(index, RUN, lambda k: np.full((k, 6), float(k)))
+        publisher.after(index, RUN)
+        idle_work.run()                   # the loop idle after every sample
     expected = [(n + 1, FORECAST_SAMPLES) for n in range(5, 26)
                 if n % FORECAST_EVERY_SAMPLES == phase]
     assert ros_context.wait_for(lambda: len(got) >= len(expected), HANG_GUARD_S)
     assert got == expected
+
+
+def test_a_deferred_forecast_starts_after_the_last_sample_answered(ros_context):
+    """Run late (the loop busy meanwhile), a forecast is of the state then.
+
+    Its first row is the sample after the last one answered; once, however often asked for.
+    """
+    controller = ros_context.create_node("late_forecaster")
+    driver = ros_context.create_node("late_forecast_reader")
+    got: list[tuple[int, int | None, float]] = []
+    subscribe_forecasts(driver, "/pph/test_forecast",
+                        lambda rows, first, run: got.append((first, run, rows[0, 0])))
+    idle_work = IdleWork()
+    answered = [0.0]                      # the controller's state: its last sample's index
+    publisher = ForecastPublisher(controller, "/pph/test_forecast", 0,
+                                  lambda k: np.full((k, 6), answered[0] + 1.0), idle_work)
+    assert ros_context.wait_for(lambda: publisher._publisher.get_subscription_count() > 0,
+                                HANG_GUARD_S)
+    for index in range(10, 33):           # asked for after 10, 20 and 30
+        answered[0] = float(index)
+        publisher.after(index, RUN + index // 30)
+    assert idle_work.pending and got == []
+    assert idle_work.run() == 1
+    assert ros_context.wait_for(lambda: got, HANG_GUARD_S)
+    assert got == [(33, RUN + 1, 33.0)]
 
 
 @pytest.mark.unit

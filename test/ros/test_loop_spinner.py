@@ -14,6 +14,7 @@ from rclpy.parameter import Parameter
 from rclpy.serialization import deserialize_message
 from std_msgs.msg import Float64MultiArray, String
 
+from hexapod_vibration.core.loop.idle_work import IdleWork
 from hexapod_vibration.ros.executors import LoopSpinner
 from hexapod_vibration.ros.messages import (
     StrutArrayPublisher,
@@ -50,8 +51,10 @@ class Graph:
         values, index = receive_strut_array(msg, self.listener.get_logger(), "/spin/loop")
         self.loop_msgs.append((values.copy(), index))
 
-    def spinner(self, fast: bool = True, service_period_s: float = 0.01) -> LoopSpinner:
-        return LoopSpinner(self.ctx.executor, [self.loop_sub], fast, service_period_s)
+    def spinner(self, fast: bool = True, service_period_s: float = 0.01,
+                idle_work: IdleWork | None = None) -> LoopSpinner:
+        return LoopSpinner(self.ctx.executor, [self.loop_sub], fast, service_period_s,
+                           idle_work=[] if idle_work is None else [idle_work])
 
     def spin_until(self, spinner: LoopSpinner, predicate, step=None) -> bool:
         return self.ctx.wait_for(predicate, HANG_GUARD_S, step,
@@ -170,3 +173,45 @@ def test_the_samples_a_latest_only_subscription_skips_go_to_its_skipped_callback
     assert graph.spin_until(spinner, lambda: graph.loop_msgs and graph.loop_msgs[-1][1] == 5)
     assert [index for _, index in graph.loop_msgs] == [4, 5]
     assert skipped == [1, 2, 3]               # oldest first, before the newest
+
+
+def test_deferred_work_waits_until_the_loop_is_idle(ros_context):
+    """Not while its owner expects a message; then when a wait finds nothing, messages first."""
+    graph = Graph(ros_context)
+    work = IdleWork(overdue_s=3600.0)
+    spinner = graph.spinner(fast=True, service_period_s=3600.0, idle_work=work)
+    graph.connect(spinner)
+    seen: list[int] = []
+    work.defer(lambda: seen.append(len(graph.loop_msgs)))
+    graph.loop_pub.publish(np.full(6, 1.0), 1)
+    assert graph.ctx.wait_for(lambda: graph.loop_msgs, HANG_GUARD_S,
+                              spin=lambda: spinner.spin_once(0.02, idle=False))
+    asked: list[bool] = []
+    for _ in range(3):                                 # the owner still expects one
+        spinner.spin_once(0.0, idle=lambda: asked.append(False) or False)
+    assert seen == [] and work.pending and asked == [False] * 3
+    spinner.spin_once(0.02, idle=True)                 # nothing queued: the loop is idle
+    assert seen == [1] and not work.pending
+
+
+@pytest.mark.parametrize("fast", [True, False])
+def test_overdue_work_runs_whatever_the_loop_does(ros_context, fast):
+    graph = Graph(ros_context)
+    work = IdleWork(overdue_s=0.0)
+    spinner = graph.spinner(fast=fast, service_period_s=3600.0, idle_work=work)
+    ran: list[int] = []
+    work.defer(lambda: ran.append(1))
+    spinner.spin_once(0.0, idle=False)
+    assert ran == [1] and not work.pending
+
+
+def test_the_slow_path_runs_deferred_work_after_its_callbacks_when_idle(ros_context):
+    graph = Graph(ros_context)
+    work = IdleWork(overdue_s=3600.0)
+    spinner = graph.spinner(fast=False, idle_work=work)
+    ran: list[int] = []
+    work.defer(lambda: ran.append(1))
+    spinner.spin_once(0.0, idle=False)
+    assert ran == [] and work.pending
+    spinner.spin_once(0.0)
+    assert ran == [1]

@@ -280,8 +280,14 @@ class CommandArbiter:
 
     def ready(self, timeout_samples: int) -> bool:
         """Lockstep: every waited stream answered the sample due now (:attr:`due`)."""
-        due = self.due
-        return all(self.streams[n].sample >= due for n in self.waited(timeout_samples))
+        return self._answered_since(self.due, timeout_samples)
+
+    def answered(self, timeout_samples: int) -> bool:
+        """Every waited stream answered the current sample (no command due: the loop idles)."""
+        return self._answered_since(self.sample, timeout_samples)
+
+    def _answered_since(self, sample: int, timeout_samples: int) -> bool:
+        return all(self.streams[n].sample >= sample for n in self.waited(timeout_samples))
 
     def unanswered(self) -> list[str]:
         """Expected streams that did not answer the current sample (the handshake's wait)."""
