@@ -56,7 +56,7 @@ idle moment after it, at most ``IDLE_OVERDUE_S`` later).
 
 One service (an executor ``spin_once`` over every entity of the process's nodes) costs
 0.2-0.4 ms here; every 50 ms that is under 1 % of the loop, and ``ros2 param set`` is
-answered within 50 ms."""
+answered within 55 ms."""
 IDLE_SPIN_S = 0.01
 """Longest single wait (s) of a node's main loop, so shutdown is noticed promptly."""
 
