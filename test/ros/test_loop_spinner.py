@@ -181,17 +181,20 @@ def test_deferred_work_waits_until_the_loop_is_idle(ros_context):
     work = IdleWork(overdue_s=3600.0)
     spinner = graph.spinner(fast=True, service_period_s=3600.0, idle_work=work)
     graph.connect(spinner)
-    seen: list[int] = []
-    work.defer(lambda: seen.append(len(graph.loop_msgs)))
+    def has_sample_1() -> bool:
+        return any(index == 1 for _, index in graph.loop_msgs)
+
+    seen: list[bool] = []
+    work.defer(lambda: seen.append(has_sample_1()))
     graph.loop_pub.publish(np.full(6, 1.0), 1)
-    assert graph.ctx.wait_for(lambda: graph.loop_msgs, HANG_GUARD_S,
+    assert graph.ctx.wait_for(has_sample_1, HANG_GUARD_S,
                               spin=lambda: spinner.spin_once(0.02, idle=False))
     asked: list[bool] = []
     for _ in range(3):                                 # the owner still expects one
         spinner.spin_once(0.0, idle=lambda: asked.append(False) or False)
     assert seen == [] and work.pending and asked == [False] * 3
     spinner.spin_once(0.02, idle=True)                 # nothing queued: the loop is idle
-    assert seen == [1] and not work.pending
+    assert seen == [True] and not work.pending
 
 
 @pytest.mark.parametrize("fast", [True, False])
@@ -215,3 +218,14 @@ def test_the_slow_path_runs_deferred_work_after_its_callbacks_when_idle(ros_cont
     assert ran == [] and work.pending
     spinner.spin_once(0.0)
     assert ran == [1]
+
+
+def test_serving_the_loop_alone_runs_deferred_work_when_no_message_came(ros_context):
+    """A callback that waits (the notch's setting change) serves the loop and the forecasts."""
+    graph = Graph(ros_context)
+    work = IdleWork(overdue_s=3600.0)
+    spinner = graph.spinner(fast=True, service_period_s=3600.0, idle_work=work)
+    ran: list[int] = []
+    work.defer(lambda: ran.append(1))
+    spinner.serve_loop(0.0)
+    assert ran == [1] and not work.pending

@@ -21,7 +21,7 @@ state when it runs supersedes the ones asked for before). No ROS import.
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Hashable
+from collections.abc import Callable
 
 IDLE_OVERDUE_S = 0.005
 """Longest time (s, wall) deferred work waits for an idle loop before it runs anyway (five
@@ -45,7 +45,7 @@ class IdleWork:
             raise ValueError(f"overdue_s must be >= 0, got {overdue_s}")
         self._clock = clock
         self._overdue_s = overdue_s
-        self._tasks: dict[Hashable, float] = {}     # task -> when first deferred (s)
+        self._tasks: dict[Task, float] = {}     # task -> when first deferred (s)
 
     @property
     def pending(self) -> bool:
