@@ -164,7 +164,7 @@ def run_realtime(node: PPHDriver, spinner: LoopSpinner) -> None:
     pause of the loop, not samples missed. The experiment runner ends a realtime run at a
     breakpoint, so the recorder can catch up with every sample before the driver exits.
     """
-    period = 1.0 / node.fs
+    period, answered = 1.0 / node.fs, node.answered
     wait_while_held(node, spinner)             # the start breakpoint (hold_at_time_s 0)
     wait_for_controllers(node, spinner, REALTIME_HANDSHAKE_S)
     start = time.perf_counter() - period      # sample 0's period was the handshake's
@@ -178,9 +178,9 @@ def run_realtime(node: PPHDriver, spinner: LoopSpinner) -> None:
         deadline = start + (node.sample + 1) * period
         # After an overrun: what is here is not late. Idle (deferred work, the services)
         # once the sample's commands are in.
-        spinner.spin_once(timeout_sec=0.0, idle=node.answered)
+        spinner.spin_once(timeout_sec=0.0, idle=answered)
         while (remaining := deadline - time.perf_counter()) > 0.0:
-            spinner.spin_once(timeout_sec=remaining, idle=node.answered)
+            spinner.spin_once(timeout_sec=remaining, idle=answered)
         if node.sample % REFRESH_EVERY_SAMPLES == 0:
             node.refresh_connections()
         node.apply_and_step()

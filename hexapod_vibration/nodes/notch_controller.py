@@ -115,7 +115,7 @@ class NotchControllerNode(Node):
         self.idle_work = IdleWork()                   # run by the loop's spinner when idle
         self._forecasts = ForecastPublisher(            # for late samples
             self, NOTCH_FORECAST_TOPIC, FORECAST_PHASE_SAMPLES["notch_controller"],
-            notch_rows(self.supervisor), self.idle_work)
+            notch_rows(self.supervisor), self.idle_work, self.port.last_acted)
         self._pub_sensitivity = self.create_publisher(
             Float64MultiArray, NOTCH_SENSITIVITY_TOPIC, LATCHED_QOS)
         self._published_sensitivity: object | None = None
@@ -231,7 +231,7 @@ class NotchControllerNode(Node):
         if command is None:
             return
         self.port.answer(command, sample)
-        self._forecasts.after(sample.index, sample.run)
+        self._forecasts.after(sample.index)
         meter.lap(stage["publish"])
         self._count()
         index = sample.index

@@ -89,7 +89,7 @@ class PointingControllerNode(Node):
         self.idle_work = IdleWork()                   # run by the loop's spinner when idle
         self._forecasts = ForecastPublisher(            # for late samples
             self, POINTING_FORECAST_TOPIC, FORECAST_PHASE_SAMPLES["pointing_controller"],
-            self._continuation.forecast, self.idle_work)
+            self._continuation.forecast, self.idle_work, self.port.last_acted)
         self._bridge = GapBridge(STRUT_COUNT)         # the law's input across skipped samples
         self._pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", DIAGNOSTICS_QOS)
         publish_status_periodically(self, self.publish_diagnostics)
@@ -152,7 +152,7 @@ class PointingControllerNode(Node):
             self._continuation.add(force)
         meter.lap(stage["law"])
         self.port.answer(force, sample)
-        self._forecasts.after(sample.index, sample.run)
+        self._forecasts.after(sample.index)
         meter.lap(stage["publish"])
         self._count()
         if sample.index % DIAGNOSTICS_EVERY_SAMPLES == DIAGNOSTICS_PHASE:

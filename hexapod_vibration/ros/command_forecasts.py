@@ -46,7 +46,8 @@ class ForecastPublisher:
     """A controller's forecasts on ``topic``, published while someone listens."""
 
     def __init__(self, node: Node, topic: str, phase_samples: int,
-                 rows: Callable[[int], np.ndarray], idle_work: IdleWork) -> None:
+                 rows: Callable[[int], np.ndarray], idle_work: IdleWork,
+                 last_acted: Callable[[], tuple[int, int | None]]) -> None:
         """Create the publisher (:data:`~hexapod_vibration.ros.qos.LOOP_QOS`).
 
         ``phase_samples``: forecast after the samples ``n`` with ``n %
@@ -54,30 +55,31 @@ class ForecastPublisher:
         FORECAST_PHASE_SAMPLES`: the two controllers on different samples). ``rows(k)``: the
         controller's next ``k`` commands (N, (k, 6)) after the last sample it took.
         ``idle_work``: the node's deferred work, where the forecast waits for an idle loop.
+        ``last_acted()``: ``(index, run)`` of that last sample (the controller's
+        :meth:`~hexapod_vibration.ros.messages.ControllerLoopPort.last_acted`).
         """
         self._publisher = node.create_publisher(Float64MultiArray, topic, LOOP_QOS)
         self._publish = serialized_publish(self._publisher)       # CDR bytes
         self._phase = phase_samples
         self._rows = rows
         self._idle_work = idle_work
-        self._answered: tuple[int, int | None] = (-1, None)
+        self._last_acted = last_acted
 
-    def after(self, index: int, run: int | None) -> None:
-        """Sample ``index`` of ``run`` was answered: every 10th, a forecast when idle."""
-        self._answered = (index, run)
+    def after(self, index: int) -> None:
+        """Sample ``index`` was answered: every 10th, a forecast when the loop is idle."""
         if ((index - self._phase) % FORECAST_EVERY_SAMPLES
                 or not self._publisher.get_subscription_count()):
             return
         self._idle_work.defer(self.publish)
 
     def publish(self) -> None:
-        """``rows(FORECAST_SAMPLES)`` after the last sample answered, published now.
+        """``rows(FORECAST_SAMPLES)`` after the last sample taken, published now.
 
         Computed from the controller's state when it runs: samples answered since the
         forecast was asked for are in that state, and the first row is the sample after
         them.
         """
-        index, run = self._answered
+        index, run = self._last_acted()
         self._publish(encode_vector_cdr(self._rows(FORECAST_SAMPLES).reshape(-1), index + 1,
                                         run, label=FORECAST_ROWS_LABEL))
 

@@ -327,6 +327,10 @@ class ControllerLoopPort:
         """Index of the last sample acted on (-1 before any)."""
         return self.sequence.last
 
+    def last_acted(self) -> tuple[int, int | None]:
+        """``(index, run)`` of the last sample acted on (``(-1, None)`` before any)."""
+        return self.sequence.last, self.sequence.run
+
     @property
     def invalid(self) -> int:
         """Messages refused as malformed or out of range."""

@@ -58,13 +58,15 @@ def test_the_publisher_sends_a_forecast_every_tenth_sample(ros_context, phase):
     got: list[tuple[int, int]] = []
     subscribe_forecasts(driver, "/pph/test_forecast",
                         lambda rows, first, _run: got.append((first, rows.shape[0])))
-    idle_work = IdleWork()
+    idle_work, last = IdleWork(), [-1]
     publisher = ForecastPublisher(controller, "/pph/test_forecast", phase,
-                                  lambda k: np.full((k, 6), float(k)), idle_work)
+                                  lambda k: np.full((k, 6), float(k)), idle_work,
+                                  lambda: (last[0], RUN))
     assert ros_context.wait_for(lambda: publisher._publisher.get_subscription_count() > 0,
                                 HANG_GUARD_S)
     for index in range(5, 26):
-        publisher.after(index, RUN)
+        last[0] = index                   # the controller acted on it
+        publisher.after(index)
         idle_work.run()                   # the loop idle after every sample
     expected = [(n + 1, FORECAST_SAMPLES) for n in range(5, 26)
                 if n % FORECAST_EVERY_SAMPLES == phase]
@@ -83,14 +85,15 @@ def test_a_deferred_forecast_starts_after_the_last_sample_answered(ros_context):
     subscribe_forecasts(driver, "/pph/test_forecast",
                         lambda rows, first, run: got.append((first, run, rows[0, 0])))
     idle_work = IdleWork()
-    answered = [0.0]                      # the controller's state: its last sample's index
+    last = [0, RUN]                       # the controller's last sample: index, run
     publisher = ForecastPublisher(controller, "/pph/test_forecast", 0,
-                                  lambda k: np.full((k, 6), answered[0] + 1.0), idle_work)
+                                  lambda k: np.full((k, 6), last[0] + 1.0), idle_work,
+                                  lambda: (last[0], last[1]))
     assert ros_context.wait_for(lambda: publisher._publisher.get_subscription_count() > 0,
                                 HANG_GUARD_S)
     for index in range(10, 33):           # asked for after 10, 20 and 30
-        answered[0] = float(index)
-        publisher.after(index, RUN + index // 30)
+        last[:] = [index, RUN + index // 30]
+        publisher.after(index)
     assert idle_work.pending and got == []
     assert idle_work.run() == 1
     assert ros_context.wait_for(lambda: got, HANG_GUARD_S)
