@@ -30,7 +30,11 @@ import signal
 import sys
 from importlib.metadata import entry_points
 
-from hexapod_vibration.core.model.kernel_choice import compiled_kernels, compiled_law_kernels
+from hexapod_vibration.core.model.kernel_choice import (
+    compiled_continuation_kernels,
+    compiled_kernels,
+    compiled_law_kernels,
+)
 from hexapod_vibration.tools.processes import die_with_parent
 
 PRELOADED = (
@@ -119,6 +123,7 @@ def main() -> None:
         importlib.import_module(module)
     compiled_kernels()          # numba and the plant's kernels, where installed (~0.4 s)
     compiled_law_kernels()      # the pointing law's
+    compiled_continuation_kernels()     # its forecast's
     scripts = _scripts()
     wake_r, wake_w = os.pipe()
     os.set_blocking(wake_w, False)

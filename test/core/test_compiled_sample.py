@@ -65,11 +65,13 @@ def test_the_environment_chooses_the_numpy_path(monkeypatch):
     monkeypatch.setenv(kernel_choice.KERNELS_ENV, " NumPy ")
     assert kernel_choice.compiled_kernels() is None
     assert kernel_choice.compiled_law_kernels() is None
+    assert kernel_choice.compiled_continuation_kernels() is None
     assert kernel_choice.kernels_name(None) == "numpy"
     monkeypatch.delenv(kernel_choice.KERNELS_ENV)
     kernels = kernel_choice.compiled_kernels()
     assert kernels is not None and kernel_choice.kernels_name(kernels) == "compiled"
     assert kernel_choice.compiled_law_kernels() is not None
+    assert kernel_choice.compiled_continuation_kernels() is not None
     plant = PPHPlant(CFG)
     assert plant.kernels == "compiled"
     assert plant.shaker._kernels is kernels and plant.accelerometers._kernels is kernels

@@ -16,15 +16,18 @@ not an oscillation, or before the history is full, holds its last command; the p
 is kept below ``MAX_POLE_RADIUS``, so a forecast never grows. A fourth-order model through
 ``scipy.signal.lfilter`` predicted better (a third of the hold's error against about half)
 but cost 0.35 ms per forecast against 0.17 ms (measured then; the second-order forecast of
-200 samples now takes 73 us warm against 113 before: the normal equations from one batched
-product, the pole's powers by a running product). On the pointing commands of a realtime run
-(every 10th sample, 50 ahead): rms error 0.03 / 0.14 / 0.49 N at 1 / 5 / 20 samples ahead
-against 0.17 / 0.53 / 1.08 N for the hold.
+200 samples now takes 71 us warm against 113 before: the normal equations from one batched
+product, the pole's powers by a running product; where numba is installed one compiled call,
+:mod:`~hexapod_vibration.core.control.compiled_continuation`, 7 us warm, 14 us cold). On the
+pointing commands of a realtime run (every 10th sample, 50 ahead): rms error 0.03 / 0.14 /
+0.49 N at 1 / 5 / 20 samples ahead against 0.17 / 0.53 / 1.08 N for the hold.
 """
 
 from __future__ import annotations
 
 import numpy as np
+
+from hexapod_vibration.core.model.kernel_choice import compiled_continuation_kernels
 
 HISTORY_SAMPLES = 200
 """Commands the model is fitted to (0.2 s at 1 kHz: eight periods of 40 Hz)."""
@@ -44,6 +47,8 @@ class ToneContinuation:
         self._ring = np.zeros((HISTORY_SAMPLES, int(channels)))
         self._next = 0
         self._filled = 0
+        self.compiled = compiled_continuation_kernels()
+        """The compiled kernel that forecasts, or None (NumPy, the same numbers to 1e-9 N)."""
 
     def add(self, command: np.ndarray) -> None:
         """The controller's command (N, (C,)) of its latest sample."""
@@ -55,6 +60,9 @@ class ToneContinuation:
         """The next ``samples`` commands (N, (samples, C)) after the last one added."""
         last = self._ring[self._next - 1]
         rows = np.empty((int(samples), last.size))
+        if self._filled == HISTORY_SAMPLES and self.compiled is not None:
+            self.compiled.continue_tone(self._ring, self._next, MAX_POLE_RADIUS, rows)
+            return rows
         rows[:] = last
         if self._filled < HISTORY_SAMPLES:
             return rows
