@@ -1,10 +1,10 @@
 """Compiled (numba) :meth:`ToneContinuation.forecast`: the fit and the continuation in one call.
 
 :class:`~hexapod_vibration.core.control.tone_continuation.ToneContinuation`'s NumPy forecast
-is ~20 array operations on (200, 6) and (200, 6) complex arrays: 70 us warm, 130 us with cold
-caches, and 268 us (median) in the pointing controller's process of a realtime graph, every
-10 samples (``docs/performance.md``). This kernel does the same arithmetic strut by strut
-in plain loops, without a temporary array.
+is ~20 array operations on (200, 6) real and complex arrays: 71 us warm, 145 us with the
+caches evicted, and 268 us (median) in the pointing controller's process of a realtime
+graph, every 10 samples (``docs/performance.md``). This kernel does the same arithmetic
+strut by strut in plain loops, without a temporary array: 7.3 us warm, 13.8 us cold.
 
 Not bit for bit: the NumPy fit sums its normal equations in a BLAS product and its mean
 pairwise; here the sums run in order. test/core/test_tone_continuation.py checks both paths
