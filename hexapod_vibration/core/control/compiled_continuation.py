@@ -23,8 +23,8 @@ import numpy as np
 
 @numba.njit(cache=True)
 def _continue_strut(ring: np.ndarray, next_row: int, c: int, max_radius: float,
-                    rows: np.ndarray) -> None:
-    """Strut ``c`` of :func:`continue_tone`, where its fit oscillates (else unchanged)."""
+                    rows: np.ndarray) -> bool:
+    """Strut ``c`` of :func:`continue_tone` if its fit oscillates; False (rows untouched) if not."""
     history = ring.shape[0]
     total = 0.0
     for k in range(history):
@@ -43,12 +43,12 @@ def _continue_strut(ring: np.ndarray, next_row: int, c: int, max_radius: float,
         before2, before1 = before1, now
     det = g11 * g22 - g12 * g12
     if not det > 0.0:
-        return
+        return False
     a1 = (b1 * g22 - b2 * g12) / det
     a2 = (g11 * b2 - g12 * b1) / det
     discriminant = a1 * a1 + 4.0 * a2                       # z^2 - a1 z - a2: complex if < 0
     if not (math.isfinite(discriminant) and discriminant < 0.0):
-        return
+        return False
     a2 = abs(a2)
     radius = min(math.sqrt(a2), max_radius)
     angle = math.acos(min(max(a1 / (2.0 * math.sqrt(a2)), -1.0), 1.0))
@@ -60,6 +60,7 @@ def _continue_strut(ring: np.ndarray, next_row: int, c: int, max_radius: float,
     for k in range(rows.shape[0]):
         rows[k, c] = mean + (amplitude * power).real
         power *= pole
+    return True
 
 
 @numba.njit((numba.float64[:, ::1], numba.int64, numba.float64, numba.float64[:, ::1]),
@@ -75,8 +76,8 @@ def continue_tone(ring: np.ndarray, next_row: int, max_radius: float,
     """
     history, strut_count = ring.shape
     for c in range(strut_count):
-        last = ring[(next_row - 1) % history, c]
-        for k in range(rows.shape[0]):
-            rows[k, c] = last
-        _continue_strut(ring, next_row, c, max_radius, rows)
+        if not _continue_strut(ring, next_row, c, max_radius, rows):
+            last = ring[(next_row - 1) % history, c]
+            for k in range(rows.shape[0]):
+                rows[k, c] = last
 

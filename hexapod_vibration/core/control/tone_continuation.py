@@ -58,12 +58,11 @@ class ToneContinuation:
 
     def forecast(self, samples: int) -> np.ndarray:
         """The next ``samples`` commands (N, (samples, C)) after the last one added."""
-        last = self._ring[self._next - 1]
-        rows = np.empty((int(samples), last.size))
+        rows = np.empty((int(samples), self._ring.shape[1]))
         if self._filled == HISTORY_SAMPLES and self.compiled is not None:
             self.compiled.continue_tone(self._ring, self._next, MAX_POLE_RADIUS, rows)
             return rows
-        rows[:] = last
+        rows[:] = self._ring[self._next - 1]                         # held
         if self._filled < HISTORY_SAMPLES:
             return rows
         a1, a2, mean, y = self._fit()
