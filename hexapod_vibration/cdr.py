@@ -84,12 +84,12 @@ _ALIGN8 = tuple(bytes(k) for k in range(8))
 _ONE_ONE = struct.pack("<II", 1, 1)            # size and stride of dim[1] and dim[2]
 
 
-def _label(text: bytes) -> bytes:
+def cdr_string(text: bytes) -> bytes:
     """CDR string at a 4-aligned position: length (NUL included), bytes, NUL, padding."""
     return _LE32.pack(len(text) + 1) + text + _NUL_PADDING[len(text) & 3]
 
 
-_PREFIX = {dims: CDR_LE + b"\x00\x00" + _LE32.pack(dims) + _label(STRUT_LABEL.encode())
+_PREFIX = {dims: CDR_LE + b"\x00\x00" + _LE32.pack(dims) + cdr_string(STRUT_LABEL.encode())
            + _LE32.pack(STRUT_COUNT) + _LE32.pack(STRUT_COUNT) for dims in (2, 3)}
 """Encapsulation, dims count, dim[0] = ("strut", 6, 6): the same for every loop message."""
 _DATA_HEADER = struct.pack("<II", 0, STRUT_COUNT)   # data_offset, length of data
@@ -135,10 +135,10 @@ def encode_strut_cdr(values: np.ndarray | Sequence[float], sample_index: int,
 def _loop_head(sample_index: int, run: int | None) -> bytes:
     """A loop message's bytes up to its data's alignment: layout, data_offset, length 6."""
     if run is None:
-        return b"".join((_PREFIX[2], _label(_SAMPLE_FORMAT % sample_index), _ONE_ONE,
+        return b"".join((_PREFIX[2], cdr_string(_SAMPLE_FORMAT % sample_index), _ONE_ONE,
                          _DATA_HEADER))
-    return b"".join((_PREFIX[3], _label(_SAMPLE_FORMAT % sample_index), _ONE_ONE,
-                     _label(_RUN_FORMAT % run), _ONE_ONE, _DATA_HEADER))
+    return b"".join((_PREFIX[3], cdr_string(_SAMPLE_FORMAT % sample_index), _ONE_ONE,
+                     cdr_string(_RUN_FORMAT % run), _ONE_ONE, _DATA_HEADER))
 
 
 Dimension = tuple[str, int, int]
@@ -183,7 +183,7 @@ def encode_float64_array(values: np.ndarray | Sequence[float],
     """
     flat = np.ascontiguousarray(values, dtype="<f8").reshape(-1)
     head = b"".join((CDR_LE, b"\x00\x00", _LE32.pack(len(dims)),
-                     *(_label(label.encode()) + struct.pack("<II", size, stride)
+                     *(cdr_string(label.encode()) + struct.pack("<II", size, stride)
                        for label, size, stride in dims),
                      _LE32.pack(0), _LE32.pack(flat.size)))
     if not flat.size:

@@ -32,7 +32,7 @@ from pathlib import Path
 from typing import Any
 
 import rclpy
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -43,6 +43,7 @@ from hexapod_vibration import cli
 from hexapod_vibration.analysis.bag_format import ACCEL_TOPIC, RUN_RECORD_KEY, STORAGE_PLUGINS
 from hexapod_vibration.analysis.bag_recording import FLUSH_PERIOD_S, BagRecording, RecordingError
 from hexapod_vibration.analysis.bag_writer import qos_from_rclpy
+from hexapod_vibration.diagnostics_cdr import OK, WARN, encode_diagnostics_cdr
 from hexapod_vibration.parameter_specs import PPH_RECORDER
 from hexapod_vibration.ros.diagnostics import publish_status_periodically
 from hexapod_vibration.ros.executors import loop_meter
@@ -145,10 +146,10 @@ class BagRecorder(Node):
         """Messages written so far, all topics."""
         return self.recording.total
 
-    def status(self) -> DiagnosticStatus:
+    def status_values(self) -> dict[str, object]:
         """Health of the recording: per topic, messages written and publishers matched."""
         rec = self.recording
-        values = {}
+        values: dict[str, object] = {}
         for name, subscription in self._subscriptions_by_topic.items():
             values[f"{name} messages"] = rec.counts[name]
             values[f"{name} publishers"] = subscription.get_publisher_count()
@@ -158,18 +159,17 @@ class BagRecorder(Node):
         if rec.open:
             values["flushed messages"] = rec.flushed
         values.update(self.meter.report())
-        return DiagnosticStatus(
-            level=DiagnosticStatus.OK if rec.open else DiagnosticStatus.WARN,
-            name=f"{self.get_name()}: bag", hardware_id=str(self.bag_path),
-            message=f"{'recording' if rec.open else 'closed'} {rec.total} messages into "
-                    f"{self.bag_path}",
-            values=[KeyValue(key=k, value=str(v)) for k, v in values.items()])
+        return values
 
     def _publish_status(self) -> None:
-        """Publish :meth:`status` on ``/diagnostics`` (every second of wall time)."""
-        array = DiagnosticArray(status=[self.status()])
-        array.header.stamp = self.get_clock().now().to_msg()
-        self._status_publisher.publish(array)
+        """Publish the recording's status on ``/diagnostics`` (every second of wall time)."""
+        rec = self.recording
+        sec, nanosec = divmod(self._now_ns(), 1_000_000_000)
+        state = "recording" if rec.open else "closed"
+        message = f"{state} {rec.total} messages into {self.bag_path}"
+        self._status_publisher.publish(encode_diagnostics_cdr(
+            OK if rec.open else WARN, f"{self.get_name()}: bag", message, str(self.bag_path),
+            self.status_values(), sec, nanosec))
 
     def close_bag(self) -> None:
         """Close the bag (writes metadata.yaml) and log the message counts; idempotent."""

@@ -5,15 +5,15 @@ The driver's ``/clock`` bytes are :func:`hexapod_vibration.cdr.clock_cdr`.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 
 from builtin_interfaces.msg import Time
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.timer import Timer
 
 from hexapod_vibration.contract import SAMPLE_RATE_HZ, sample_sim_time
+from hexapod_vibration.diagnostics_cdr import OK, WARN, encode_diagnostics_cdr
 
 HARDWARE_ID = "pph_sim"
 STATUS_PERIOD_S = 1.0
@@ -27,23 +27,15 @@ def sample_time(sample: int, sample_rate_hz: float = SAMPLE_RATE_HZ) -> Time:
     return Time(sec=sec, nanosec=nanosec)
 
 
-def format_value(value: object) -> str:
-    """Diagnostics value text: floats with 6 significant digits, bools lower case."""
-    if isinstance(value, float):
-        return f"{value:.6g}"
-    return str(value).lower() if isinstance(value, bool) else str(value)
+def diagnostic_array(name: str, warn: bool, message: str, values: Mapping[str, object],
+                     sample: int) -> bytes:
+    """One status (OK or WARN) with ``values`` as key/value pairs, stamped at ``sample``.
 
-
-def diagnostic_array(name: str, warn: bool, message: str, values: dict[str, object],
-                     sample: int) -> DiagnosticArray:
-    """One status (OK or WARN) with ``values`` as key/value pairs, stamped at ``sample``."""
-    status = DiagnosticStatus(level=DiagnosticStatus.WARN if warn else DiagnosticStatus.OK,
-                              name=name, message=message, hardware_id=HARDWARE_ID,
-                              values=[KeyValue(key=k, value=format_value(v))
-                                      for k, v in values.items()])
-    msg = DiagnosticArray(status=[status])
-    msg.header.stamp = sample_time(sample)
-    return msg
+    The serialized ``diagnostic_msgs/DiagnosticArray`` (``diagnostics_cdr``), published
+    as is: a publisher of DiagnosticArray takes the bytes.
+    """
+    return encode_diagnostics_cdr(WARN if warn else OK, name, message, HARDWARE_ID, values,
+                                  *sample_sim_time(sample))
 
 
 def publish_status_periodically(node: Node, publish: Callable[[], None],
