@@ -6,8 +6,9 @@ pair, its fields checked as they are set) and serialized by rclpy, that took abo
 warm and 0.5-0.7 ms of the driver's CPU in the realtime graph, in the sample after which
 the driver publishes it: on two cores without real-time priority the samples that followed
 missed their commands more often than the others. :func:`encode_diagnostics_cdr` writes the
-same bytes rclpy would (tested against ``rclpy.serialization.serialize_message``) in one
-pass over the pairs; the node publishes them as a serialized message.
+message in one pass over the pairs, its fields where rclpy puts them (tested: rclpy reads
+the bytes back as the message it builds, and its own serialization has the same length;
+its padding bytes are uninitialised, these are zero); the node publishes them serialized.
 
 Plain CDR (XCDR1), little endian: the encapsulation header, then the header's stamp and
 frame id, the status count, and per status its level byte (padded to 4), name, message,
