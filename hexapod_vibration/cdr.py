@@ -209,17 +209,25 @@ def weights_data(weights: np.ndarray) -> np.ndarray:
     return np.stack([weights.real, -weights.imag], axis=-1).ravel()
 
 
-_CLOCK_CDR = struct.Struct("<4siI")     # encapsulation (LE CDR), sec (int32), nanosec
+_STAMP_CDR = struct.Struct("<4siI")     # encapsulation (LE CDR), sec (int32), nanosec
+
+
+def stamp_cdr(sec: int, nanosec: int) -> bytes:
+    """The encapsulation and a ``builtin_interfaces/Time`` (``sec`` s, ``nanosec`` ns).
+
+    A whole /clock message, and the start of one whose first field is a stamp (a
+    ``std_msgs/Header``'s: ``diagnostics_cdr``).
+    """
+    return _STAMP_CDR.pack(CDR_LE + b"\x00\x00", sec, nanosec)
 
 
 def clock_cdr(sample: int, sample_rate_hz: float = SAMPLE_RATE_HZ) -> bytes:
     """``rosgraph_msgs/Clock`` at the sim time of loop sample ``sample`` as CDR bytes.
 
-    What rclpy serializes from ``Clock(clock=sample_time(sample))`` (tested), built without
-    the Python message: the driver publishes it every sample.
+    What rclpy serializes from a ``Clock`` at ``sample_sim_time(sample)`` (tested), built
+    without the Python message: the driver publishes it every sample.
     """
-    sec, nanosec = sample_sim_time(sample, sample_rate_hz)
-    return _CLOCK_CDR.pack(CDR_LE + b"\x00\x00", sec, nanosec)
+    return stamp_cdr(*sample_sim_time(sample, sample_rate_hz))
 
 
 # ---------------------------------------------------------------------------- reading

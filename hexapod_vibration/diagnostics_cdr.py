@@ -21,15 +21,14 @@ from __future__ import annotations
 import struct
 from collections.abc import Mapping
 
-from hexapod_vibration.cdr import CDR_LE, cdr_string
+from hexapod_vibration.cdr import cdr_string, stamp_cdr
 
 OK, WARN, ERROR, STALE = 0, 1, 2, 3
 """``diagnostic_msgs/DiagnosticStatus`` levels."""
 
-_HEAD = struct.Struct("<2s2xiI")          # encapsulation, options, stamp sec, nanosec
-_ONE_STATUS = struct.pack("<I", 1)        # the status sequence's length
+_COUNT = struct.Struct("<I")               # a sequence's length
+_ONE_STATUS = _COUNT.pack(1)
 _LEVEL = {level: struct.pack("<B3x", level) for level in (OK, WARN, ERROR, STALE)}
-_COUNT = struct.Struct("<I")
 _EMPTY_FRAME_ID = cdr_string(b"")
 
 
@@ -53,18 +52,13 @@ def encode_diagnostics_cdr(level: int, name: str, message: str, hardware_id: str
         sec: The header's stamp, whole seconds (s).
         nanosec: The stamp's rest (ns, below 1e9); the frame id is empty.
     """
-    parts = [_HEAD.pack(CDR_LE, sec, nanosec), _EMPTY_FRAME_ID, _ONE_STATUS, _LEVEL[level],
+    parts = [stamp_cdr(sec, nanosec), _EMPTY_FRAME_ID, _ONE_STATUS, _LEVEL[level],
              cdr_string(name.encode()), cdr_string(message.encode()),
              cdr_string(hardware_id.encode()), _COUNT.pack(len(values))]
     for key, value in values.items():
-        parts.append(cdr_string(key.encode()))
-        parts.append(cdr_string(format_value(value).encode()))
+        text = format_value(value).encode()
+        parts += (cdr_string(key.encode()), cdr_string(text))
     raw = b"".join(parts)
-    return raw[:len(raw) - _trailing_padding(parts[-1])]
-
-
-def _trailing_padding(last: bytes) -> int:
-    """Padding after the message's last field: a string ends at its NUL (as rclpy's do)."""
-    if len(last) == _COUNT.size:         # no pairs: the message ends with their count
-        return 0
-    return len(last) - _COUNT.size - _COUNT.unpack_from(last)[0]
+    if not values:                     # the message ends with the pairs' count
+        return raw
+    return raw[:len(raw) - (-(len(text) + 1) % 4)]   # at the last string's NUL, as rclpy's

@@ -9,6 +9,7 @@ import struct
 
 import numpy as np
 import pytest
+from builtin_interfaces.msg import Time
 from node_graph import float64_array
 from rclpy.serialization import deserialize_message, serialize_message
 from rosgraph_msgs.msg import Clock
@@ -34,8 +35,8 @@ from hexapod_vibration.contract import (
     MAX_SAMPLE_INDEX,
     InvalidStrutMessage,
     sample_label,
+    sample_sim_time,
 )
-from hexapod_vibration.ros.diagnostics import sample_time
 from hexapod_vibration.ros.messages import (
     make_strut_array,
     make_vector_array,
@@ -176,7 +177,8 @@ def test_encode_cdr_rejects_bad_input(values, index, run):
 
 @pytest.mark.parametrize("sample", [0, 1, 999, 1000, 1001, 123456789, 2**40])
 def test_clock_bytes_are_what_rclpy_serializes(sample):
-    expected = Clock(clock=sample_time(sample))
+    sec, nanosec = sample_sim_time(sample)
+    expected = Clock(clock=Time(sec=sec, nanosec=nanosec))
     raw = clock_cdr(sample)
     assert raw == serialize_message(expected)
     assert deserialize_message(raw, Clock) == expected

@@ -1,4 +1,4 @@
-"""``/diagnostics`` messages and sim-time stamps shared by the nodes.
+"""``/diagnostics`` messages shared by the nodes.
 
 The driver's ``/clock`` bytes are :func:`hexapod_vibration.cdr.clock_cdr`.
 """
@@ -7,24 +7,17 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping
 
-from builtin_interfaces.msg import Time
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.timer import Timer
 
-from hexapod_vibration.contract import SAMPLE_RATE_HZ, sample_sim_time
+from hexapod_vibration.contract import sample_sim_time
 from hexapod_vibration.diagnostics_cdr import OK, WARN, encode_diagnostics_cdr
 
 HARDWARE_ID = "pph_sim"
 STATUS_PERIOD_S = 1.0
 """Period (s, wall time) at which every node re-publishes its status on ``/diagnostics``,
 as ``diagnostic_updater`` does (1 Hz), whether or not its loop moves."""
-
-
-def sample_time(sample: int, sample_rate_hz: float = SAMPLE_RATE_HZ) -> Time:
-    """Sim time of loop sample ``sample`` (n / fs s), as ``builtin_interfaces/Time``."""
-    sec, nanosec = sample_sim_time(sample, sample_rate_hz)
-    return Time(sec=sec, nanosec=nanosec)
 
 
 def diagnostic_array(name: str, warn: bool, message: str, values: Mapping[str, object],
